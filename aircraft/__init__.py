@@ -1,0 +1,1 @@
+"""JSBSim aircraft data (XML), installed as `uavxai.aircraft`; see uavxai.paths.aircraft_dir()."""

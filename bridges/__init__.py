@@ -1,0 +1,1 @@
+"""MAVLink side of the co-simulation, installed as `uavxai.bridges`."""

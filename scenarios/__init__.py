@@ -1,0 +1,1 @@
+"""Shipped scenario files, installed as `uavxai.scenarios`; see uavxai.paths.scenarios_dir()."""

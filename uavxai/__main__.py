@@ -1,0 +1,5 @@
+import sys
+
+from uavxai.cli import main
+
+sys.exit(main())

@@ -1,0 +1,350 @@
+"""The `uavxai` command line (SPEC §2).
+
+Each sub-command parses its flags, loads and validates the scenario, prepares the output folder
+and hands over to the module that does the work. Bad input exits 2 with a message and no
+traceback; internal errors exit 1 (set UAVXAI_DEBUG=1 to see the traceback).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any, NoReturn
+
+from uavxai.errors import UserError
+
+EXIT_OK, EXIT_INTERNAL, EXIT_BAD_INPUT = 0, 1, 2
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, but a bad flag is a `UserError` (exit 2, one paragraph, no usage dump)."""
+
+    def error(self, message: str) -> NoReturn:
+        raise UserError(f"{self.prog}: {message}. See `{self.prog} --help`.")
+
+
+def _csv_list(kind: type, what: str, allowed: Sequence[str] | None = None):
+    def parse(text: str) -> list:
+        items = [t.strip() for t in text.split(",") if t.strip()]
+        if not items:
+            raise argparse.ArgumentTypeError(f"{what}: give a comma-separated list") from None
+        out = []
+        for item in items:
+            try:
+                value = kind(item)
+            except ValueError:
+                raise argparse.ArgumentTypeError(
+                    f"{what}: '{item}' is not a {kind.__name__}"
+                ) from None
+            if allowed is not None and value not in allowed:
+                raise argparse.ArgumentTypeError(
+                    f"{what}: '{item}' is not one of {', '.join(allowed)}"
+                )
+            if kind is int and value < 0:
+                raise argparse.ArgumentTypeError(f"{what}: '{item}' must be >= 0") from None
+            out.append(value)
+        return out
+
+    return parse
+
+
+def _positive_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is not an integer") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"'{text}' must be >= 1") from None
+    return v
+
+
+def _seed(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is not an integer seed") from None
+    if not 0 <= v < 2**31:
+        raise argparse.ArgumentTypeError(f"seed {v} must be in [0, 2^31)") from None
+    return v
+
+
+def _positive_float(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is not a number") from None
+    if not v > 0:
+        raise argparse.ArgumentTypeError(f"'{text}' must be > 0") from None
+    return v
+
+
+def _mavlink_url(text: str) -> str:
+    from uavxai.scenario import check_mavlink_url
+
+    try:
+        return check_mavlink_url(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+AVOIDANCE_METHODS = ("mcts", "mcts_fast", "exhaustive", "dqn", "safe_dqn", "none")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = _Parser(
+        prog="uavxai",
+        description="Interpretable, collision-safe UAV-assisted communication: D3QN service "
+        "point, MCTS collision avoidance, JSBSim co-simulation over MAVLink, rerun recordings.",
+    )
+    p.add_argument("--version", action="version", version=f"uavxai {_version()}")
+    sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+
+    r = sub.add_parser("run", help="service point, then the flight to it among intruders (JSBSim)")
+    r.add_argument("scenario", metavar="SCENARIO.yaml")
+    r.add_argument("--out", type=Path, help="output folder (default runs/<scenario name>)")
+    r.add_argument("--seed", type=_seed, help="override the scenario's seed")
+    r.add_argument(
+        "--episodes", type=_positive_int, default=1, help="seeded runs (seed, seed+1, ...)"
+    )
+    g = r.add_mutually_exclusive_group()
+    g.add_argument(
+        "--rerun",
+        type=Path,
+        metavar="FILE.rrd",
+        help="write the recording here (default OUT/run.rrd)",
+    )
+    g.add_argument("--spawn", action="store_true", help="open the rerun viewer live")
+    r.add_argument(
+        "--mavlink",
+        type=_mavlink_url,
+        metavar="URL",
+        help="telemetry/commands link, e.g. udpout:127.0.0.1:14550",
+    )
+    r.add_argument(
+        "--realtime",
+        type=_positive_float,
+        metavar="X",
+        help="pace simulated time at X times the wall clock (default: flat out)",
+    )
+    r.add_argument("--force", action="store_true", help="overwrite an existing output folder")
+
+    t = sub.add_parser("train", help="train a learned planner (progress bar)")
+    t.add_argument("scenario", metavar="SCENARIO.yaml")
+    t.add_argument("--stage", choices=("service", "avoidance"), default="service")
+    t.add_argument(
+        "--algo",
+        required=True,
+        choices=("d3qn", "dqn", "safe_dqn"),
+        help="service: d3qn | dqn; avoidance: dqn | safe_dqn",
+    )
+    t.add_argument("--episodes", type=_positive_int, help="training episodes (default per algo)")
+    t.add_argument("--seed", type=_seed)
+    t.add_argument("--out", type=Path, help="output folder (default runs/train-<stage>-<algo>)")
+    t.add_argument("--force", action="store_true")
+
+    e = sub.add_parser("evaluate", help="Monte Carlo campaign of the avoidance stage")
+    e.add_argument("scenario", metavar="SCENARIO.yaml")
+    e.add_argument(
+        "--methods",
+        required=True,
+        type=_csv_list(str, "--methods", AVOIDANCE_METHODS),
+        help=f"comma-separated: {','.join(AVOIDANCE_METHODS)}",
+    )
+    e.add_argument(
+        "--intruders",
+        required=True,
+        type=_csv_list(int, "--intruders"),
+        help="comma-separated intruder counts, e.g. 5,10,20,40",
+    )
+    e.add_argument("--episodes", type=_positive_int, default=100)
+    e.add_argument("--dynamics", choices=("kinematic", "jsbsim"), default="kinematic")
+    e.add_argument("--workers", type=_positive_int, default=1, help="local worker processes")
+    e.add_argument(
+        "--ray", metavar="ADDRESS", help="run on a Ray cluster (`auto`, ray://host:port)"
+    )
+    e.add_argument("--seed", type=_seed)
+    e.add_argument("--out", type=Path)
+    e.add_argument("--force", action="store_true")
+
+    s = sub.add_parser("service", help="the service-point stage alone")
+    s.add_argument("scenario", metavar="SCENARIO.yaml")
+    s.add_argument("--planner", choices=("d3qn", "dqn", "random", "grid"))
+    s.add_argument("--seed", type=_seed)
+    s.add_argument("--out", type=Path)
+    s.add_argument("--force", action="store_true")
+
+    x = sub.add_parser("explain", help="explain a decision of a run in words")
+    x.add_argument("run_dir", metavar="RUN_DIR", type=Path)
+    x.add_argument(
+        "--decision",
+        type=int,
+        metavar="N",
+        help="decision index (default: all, briefly); negative counts from the end",
+    )
+
+    v = sub.add_parser("validate", help="check a scenario file and exit")
+    v.add_argument("scenario", metavar="SCENARIO.yaml")
+    return p
+
+
+def _version() -> str:
+    from uavxai import __version__
+
+    return __version__
+
+
+def prepare_out_dir(out: Path, force: bool) -> Path:
+    """Create an empty output folder; never overwrite one silently."""
+    if out.exists():
+        if not out.is_dir():
+            raise UserError(f"--out {out}: exists and is not a folder.")
+        if any(out.iterdir()):
+            if not force:
+                raise UserError(
+                    f"--out {out}: the folder exists and is not empty; choose another folder or "
+                    "pass --force to overwrite it."
+                )
+            shutil.rmtree(out)
+    out.mkdir(parents=True, exist_ok=True)
+    return out
+
+
+def _load(args: argparse.Namespace):
+    from uavxai.scenario import load_scenario
+
+    scenario = load_scenario(args.scenario)
+    if getattr(args, "seed", None) is not None:
+        scenario = scenario.with_seed(args.seed)
+    return scenario
+
+
+def _print_json(obj: Any) -> None:
+    print(json.dumps(obj, indent=2, default=float))
+
+
+def cmd_validate(args: argparse.Namespace) -> int:
+    sc = _load(args)
+    print(
+        f"{args.scenario}: valid scenario '{sc.name}' (seed {sc.seed}): {sc.comms.users.k} users, "
+        f"{sc.intruders.n} intruders, service planner {sc.service.planner}, avoidance planner "
+        f"{sc.avoidance.planner}."
+    )
+    return EXIT_OK
+
+
+def cmd_service(args: argparse.Namespace) -> int:
+    from uavxai.service.stage import run_service_stage
+
+    sc = _load(args)
+    out = prepare_out_dir(args.out or Path("runs") / f"{sc.name}-service", args.force)
+    summary = run_service_stage(sc, planner=args.planner)
+    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    _print_json(summary)
+    print(f"wrote {out / 'summary.json'}", file=sys.stderr)
+    return EXIT_OK
+
+
+def cmd_train(args: argparse.Namespace) -> int:
+    sc = _load(args)
+    allowed = {"service": ("d3qn", "dqn"), "avoidance": ("dqn", "safe_dqn")}[args.stage]
+    if args.algo not in allowed:
+        raise UserError(
+            f"--algo {args.algo} is not available for --stage {args.stage}; "
+            f"allowed: {', '.join(allowed)}."
+        )
+    out = prepare_out_dir(args.out or Path("runs") / f"train-{args.stage}-{args.algo}", args.force)
+    if args.stage == "service":
+        from uavxai.service.train import train_command
+    else:
+        from uavxai.avoidance.train import train_command
+    report = train_command(sc, algo=args.algo, episodes=args.episodes, out=out)
+    _print_json(report)
+    return EXIT_OK
+
+
+def cmd_evaluate(args: argparse.Namespace) -> int:
+    from uavxai.campaign import evaluate_command
+
+    sc = _load(args)
+    out = prepare_out_dir(args.out or Path("runs") / f"{sc.name}-evaluate", args.force)
+    evaluate_command(
+        sc,
+        methods=args.methods,
+        intruders=args.intruders,
+        episodes=args.episodes,
+        dynamics=args.dynamics,
+        workers=args.workers,
+        ray_address=args.ray,
+        out=out,
+    )
+    return EXIT_OK
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    from uavxai.pipeline import run_command
+
+    sc = _load(args)
+    out = prepare_out_dir(args.out or Path("runs") / sc.name, args.force)
+    run_command(
+        sc,
+        out=out,
+        episodes=args.episodes,
+        rerun_file=args.rerun,
+        spawn=args.spawn,
+        mavlink=args.mavlink,
+        realtime=args.realtime,
+    )
+    return EXIT_OK
+
+
+def cmd_explain(args: argparse.Namespace) -> int:
+    from uavxai.xai.explain import explain_command
+
+    print(explain_command(args.run_dir, args.decision))
+    return EXIT_OK
+
+
+COMMANDS = {
+    "run": cmd_run,
+    "train": cmd_train,
+    "evaluate": cmd_evaluate,
+    "service": cmd_service,
+    "explain": cmd_explain,
+    "validate": cmd_validate,
+}
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    os.environ.setdefault("JSBSIM_DEBUG", "0")
+    os.environ.setdefault("MAVLINK20", "1")
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+        if args.command is None:
+            parser.print_help()
+            return EXIT_BAD_INPUT
+        return COMMANDS[args.command](args)
+    except UserError as exc:
+        print(f"uavxai: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print("uavxai: interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:  # noqa: BLE001 - the last line of defence: no raw traceback
+        if os.environ.get("UAVXAI_DEBUG"):
+            raise
+        print(
+            f"uavxai: internal error: {type(exc).__name__}: {exc}\n"
+            "This is a bug in uavxai; rerun with UAVXAI_DEBUG=1 for the traceback and report it.",
+            file=sys.stderr,
+        )
+        return EXIT_INTERNAL
+
+
+if __name__ == "__main__":
+    sys.exit(main())

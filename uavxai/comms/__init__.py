@@ -1,0 +1,1 @@
+"""Air-to-ground channel model (paper eqs 1-7) and the service-point environment."""

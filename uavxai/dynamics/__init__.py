@@ -1,0 +1,1 @@
+"""Flight dynamics: the multi-aircraft JSBSim world and the local ENU frame."""

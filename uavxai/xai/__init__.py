@@ -1,0 +1,1 @@
+"""Explanations of avoidance decisions, read off the search tree."""
