@@ -1,0 +1,51 @@
+"""Initial conditions of the intruders, shared by the JSBSim world and the kinematic model so
+that the same scenario and seed give the same traffic in both."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from uavxai.scenario import IntruderSpec, Scenario
+
+
+def draw_intruders(
+    scenario: Scenario, rng: np.random.Generator, count: int | None = None
+) -> list[IntruderSpec]:
+    """The scenario's explicit `intruders.list`, or `count` random intruders.
+
+    Random intruders are uniform over the flight area, at least `min_start_distance_m`
+    (horizontally) from the ownship's start, with uniform heading, speed and altitude from
+    the scenario's ranges. Each keeps the scenario's default behaviour.
+    """
+    ic = scenario.intruders
+    if ic.list is not None and count is None:
+        return [
+            s if s.behaviour else s.model_copy(update={"behaviour": ic.behaviour}) for s in ic.list
+        ]
+    n = ic.n if count is None else count
+    w, start = scenario.world, scenario.ownship.start
+    specs: list[IntruderSpec] = []
+    for _ in range(n):
+        for _attempt in range(1000):
+            x = rng.uniform(*w.x)
+            y = rng.uniform(*w.y)
+            if math.hypot(x - start.x, y - start.y) >= ic.min_start_distance_m:
+                break
+        else:
+            raise ValueError(
+                "cannot place an intruder at least intruders.min_start_distance_m "
+                f"({ic.min_start_distance_m} m) from the ownship start inside the world"
+            )
+        specs.append(
+            IntruderSpec(
+                x=x,
+                y=y,
+                h=float(rng.uniform(*ic.altitude_m)),
+                heading_deg=float(rng.uniform(0.0, 360.0)),
+                speed_mps=float(rng.uniform(*ic.speed_mps)),
+                behaviour=ic.behaviour,
+            )
+        )
+    return specs
