@@ -238,10 +238,10 @@ def cmd_validate(args: argparse.Namespace) -> int:
 
 
 def cmd_service(args: argparse.Namespace) -> int:
-    from uavxai.service.stage import run_service_stage
-
     sc = _load(args)
     out = prepare_out_dir(args.out or Path("runs") / f"{sc.name}-service", args.force)
+    from uavxai.service.stage import run_service_stage
+
     summary = run_service_stage(sc, planner=args.planner)
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     _print_json(summary)
@@ -268,10 +268,10 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
-    from uavxai.campaign import evaluate_command
-
     sc = _load(args)
     out = prepare_out_dir(args.out or Path("runs") / f"{sc.name}-evaluate", args.force)
+    from uavxai.campaign import evaluate_command
+
     evaluate_command(
         sc,
         methods=args.methods,
@@ -286,10 +286,10 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from uavxai.pipeline import run_command
-
     sc = _load(args)
     out = prepare_out_dir(args.out or Path("runs") / sc.name, args.force)
+    from uavxai.pipeline import run_command
+
     run_command(
         sc,
         out=out,
