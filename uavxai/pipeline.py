@@ -423,6 +423,5 @@ def _report(summary: dict, out: Path, rerun_file: Path | None, spawn: bool) -> N
             rrd = out / "episode-000" / "run.rrd"
         if rrd.exists():
             console.print(f"recording: {rrd}  — open it with:  .venv/bin/rerun {rrd}")
-    console.print(
-        f"explain a decision:  uavxai explain {out if len(eps) == 1 else out / 'episode-000'} --decision 0"
-    )
+    first = out if len(eps) == 1 else out / "episode-000"
+    console.print(f"explain a decision:  uavxai explain {first} --decision 0")
