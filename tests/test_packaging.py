@@ -1,0 +1,49 @@
+"""The wheel carries the aircraft, scenarios and checkpoints, and claims only `uavxai`."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def wheel(tmp_path_factory: pytest.TempPathFactory) -> zipfile.ZipFile:
+    out = tmp_path_factory.mktemp("wheel")
+    subprocess.run(
+        [sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q",
+         "-w", str(out), str(REPO)],
+        check=True,
+        capture_output=True,
+    )
+    (whl,) = out.glob("uavxai-*.whl")
+    return zipfile.ZipFile(whl)
+
+
+def test_only_uavxai_top_level(wheel: zipfile.ZipFile) -> None:
+    tops = {n.split("/")[0] for n in wheel.namelist() if not n.split("/")[0].endswith(".dist-info")}
+    assert tops == {"uavxai"}, tops
+
+
+def test_data_travels_with_the_wheel(wheel: zipfile.ZipFile) -> None:
+    names = set(wheel.namelist())
+    assert "uavxai/aircraft/uav_fw/uav_fw.xml" in names
+    assert "uavxai/scenarios/demo.yaml" in names
+    assert "uavxai/bridges/__init__.py" in names
+    shipped = sorted(p.name for p in (REPO / "scenarios").glob("*.yaml"))
+    assert all(f"uavxai/scenarios/{s}" in names for s in shipped)
+    xml = sorted(str(p.relative_to(REPO / "aircraft")) for p in (REPO / "aircraft").rglob("*.xml"))
+    assert all(f"uavxai/aircraft/{x}" in names for x in xml)
+    for folder in ("uavxai/service/checkpoints", "uavxai/avoidance/checkpoints"):
+        local = sorted(p.name for p in (REPO / folder).glob("*.pt"))
+        assert all(f"{folder}/{p}" in names for p in local)
+
+
+def test_entry_point_declared(wheel: zipfile.ZipFile) -> None:
+    (ep,) = [n for n in wheel.namelist() if n.endswith("entry_points.txt")]
+    assert "uavxai = uavxai.cli:main" in wheel.read(ep).decode()
