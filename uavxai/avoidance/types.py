@@ -7,9 +7,16 @@ radians clockwise from north (aviation convention); positions ENU metres.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import numpy as np
+
+from uavxai.errors import UserError
+
+if TYPE_CHECKING:
+    from uavxai.scenario import Scenario
 
 # The 9 actions: index = 3 * bank_index + accel_index.
 BANK_CHOICES = (-1, 0, +1)  # left, hold, right: one bank_step_deg change of the bank command
@@ -38,6 +45,7 @@ class Ownship:
     speed: float  # m/s along the track
     heading: float  # rad, clockwise from north
     bank: float = 0.0  # rad, right wing down positive (the current bank command)
+    phi: float | None = None  # rad, the actual bank angle; None: settled at the command
 
 
 @dataclass(frozen=True)
@@ -71,7 +79,64 @@ class PlannerConfig:
     c: float = 1.0
     action_hold_s: float = 4.0
     roll_rate_limit_deg_s: float = 30.0  # matches the JSBSim autopilot's roll-rate limit
+    # The JSBSim autopilot holds the altitude target it is given (the goal's altitude) and
+    # climbs or descends towards it no faster than this.
+    climb_rate_mps: float = 2.5
+    # Longest sub-step of the encounter model. Collision checks are exact along each
+    # sub-step's chord, so this only bounds how far the chord strays from the true arc
+    # (at 20 m/s and 30 deg bank, 0.5 s gives 0.2 m).
+    substep_s: float = 0.5
     seed: int = 0
+
+    def __post_init__(self) -> None:
+        for name in ("x_bounds", "y_bounds", "h_bounds", "speed_mps"):
+            lo, hi = getattr(self, name)
+            if not lo < hi:
+                raise UserError(f"PlannerConfig.{name} must be (min, max) with min < max.")
+        positive = [
+            "d_min_m",
+            "goal_radius_m",
+            "decision_period_s",
+            "bank_limit_deg",
+            "bank_step_deg",
+            "action_hold_s",
+            "roll_rate_limit_deg_s",
+            "climb_rate_mps",
+            "substep_s",
+        ]
+        for name in positive:
+            if not getattr(self, name) > 0:
+                raise UserError(f"PlannerConfig.{name} must be > 0, got {getattr(self, name)}.")
+        for name in ("simulations", "depth", "max_steps"):
+            if int(getattr(self, name)) < 1:
+                raise UserError(f"PlannerConfig.{name} must be >= 1, got {getattr(self, name)}.")
+        if self.accel_mps2 < 0 or self.c < 0:
+            raise UserError("PlannerConfig.accel_mps2 and PlannerConfig.c must be >= 0.")
+
+    @classmethod
+    def from_scenario(cls, scenario: Scenario, **overrides: object) -> PlannerConfig:
+        """The planner settings of a scenario: its `avoidance` section, world bounds and seed."""
+        a, w = scenario.avoidance, scenario.world
+        fields = {
+            "x_bounds": tuple(w.x),
+            "y_bounds": tuple(w.y),
+            "h_bounds": tuple(w.h),
+            "d_min_m": a.d_min_m,
+            "goal_radius_m": a.goal_radius_m,
+            "decision_period_s": a.decision_period_s,
+            "max_steps": a.max_steps,
+            "bank_limit_deg": a.bank_limit_deg,
+            "bank_step_deg": a.bank_step_deg,
+            "accel_mps2": a.accel_mps2,
+            "speed_mps": tuple(a.speed_mps),
+            "simulations": a.mcts.simulations,
+            "depth": a.mcts.depth,
+            "c": a.mcts.c,
+            "action_hold_s": a.mcts.action_hold_s,
+            "seed": scenario.seed,
+        }
+        fields.update(overrides)
+        return cls(**fields)  # type: ignore[arg-type]
 
     @property
     def bank_limit_rad(self) -> float:
@@ -101,7 +166,8 @@ class ChildStats:
     q: float  # mean backed-up value
     predicted_min_separation_m: float  # along the best line below this action
     closest_intruder: int | str | None  # id of the intruder that comes closest on that line
-    time_to_closest_s: float | None = None
+    time_to_closest_s: float | None = None  # from the decision, s
+    outcome: str = ""  # how that line ends: goal, collision, out_of_bounds, timeout or "" (open)
 
 
 @dataclass
@@ -117,6 +183,7 @@ class SearchTree:
     closest: np.ndarray  # (M,) int, index (0-based, into the intruder list) of the closest one
     terminal: np.ndarray  # (M,) int8: 0 none, 1 goal, 2 collision, 3 out of bounds, 4 time-out
     pos: np.ndarray  # (M, 3) ownship position at the node, for drawing the tree in 3-D
+    t_closest: np.ndarray | None = None  # (M,) s from the decision to that closest approach
 
     @property
     def q(self) -> np.ndarray:
@@ -128,6 +195,31 @@ class SearchTree:
 
     def children_of(self, node: int) -> np.ndarray:
         return np.flatnonzero(self.parent == node)
+
+    def pruned(self, min_visits: int = 1) -> SearchTree:
+        """The nodes visited at least ``min_visits`` times (and the root), renumbered.
+
+        A search caches the states of children it never visits; drawing or storing the tree
+        usually wants only what the search actually looked at.
+        """
+        keep = self.visits >= min_visits
+        keep[0] = True
+        old = np.flatnonzero(keep)
+        new_index = np.full(self.size, -1)
+        new_index[old] = np.arange(old.size)
+        parent = self.parent[old]
+        return SearchTree(
+            parent=np.where(parent >= 0, new_index[np.maximum(parent, 0)], -1),
+            action=self.action[old],
+            depth=self.depth[old],
+            visits=self.visits[old],
+            value_sum=self.value_sum[old],
+            min_sep=self.min_sep[old],
+            closest=self.closest[old],
+            terminal=self.terminal[old],
+            pos=self.pos[old],
+            t_closest=None if self.t_closest is None else self.t_closest[old],
+        )
 
 
 @dataclass
@@ -143,11 +235,24 @@ class Decision:
     confidence: float = 0.0  # share of root visits that went to the chosen action
     ms: float = 0.0  # planner wall time
     counterfactual: str = ""  # why not the runner-up
+    # Minimum separation along the chosen branch's whole planned line (depth x action_hold_s),
+    # whereas predicted_min_separation_m covers only the next decision period: the chosen
+    # action held for decision_period_s, intruders at constant velocity. The latter is what the
+    # dynamics fly before the next decision, so it is the one to compare with them ("trust").
+    branch_min_separation_m: float = math.inf
+    planner: str = ""  # which planner decided (mcts, exhaustive, none, ...)
+    d_min_m: float = 50.0  # the collision distance the planner worked with
 
     def to_json(self) -> dict:
         """The per-decision fields of decisions.jsonl that come from the planner."""
         return {
-            "action": {"bank_cmd_rad": self.bank_cmd_rad, "accel_mps2": self.accel_mps2},
+            "planner": self.planner,
+            "action": {
+                "bank_cmd_rad": self.bank_cmd_rad,
+                "accel_mps2": self.accel_mps2,
+                "index": int(self.action),
+                "name": action_name(self.action),
+            },
             "children": [
                 {
                     "action": {
@@ -161,6 +266,7 @@ class Decision:
                     "predicted_min_separation_m": _finite(c.predicted_min_separation_m),
                     "closest_intruder": c.closest_intruder,
                     "time_to_closest_s": c.time_to_closest_s,
+                    "outcome": c.outcome,
                 }
                 for c in self.children
             ],
@@ -168,8 +274,33 @@ class Decision:
             "counterfactual": self.counterfactual,
             "confidence": self.confidence,
             "predicted_min_separation_m": _finite(self.predicted_min_separation_m),
+            "branch_min_separation_m": _finite(self.branch_min_separation_m),
+            "d_min_m": self.d_min_m,
             "ms": self.ms,
         }
+
+
+Goal = tuple[float, float, float]
+
+
+@runtime_checkable
+class Planner(Protocol):
+    """What every avoidance planner offers (MCTS, the baselines, the learned ones).
+
+    ``plan`` sees the world as it is now and returns one of the 9 actions as a Decision.
+    ``step`` is how many decisions the episode has already taken, so that a planner can see a
+    time-out (``max_steps``) coming; library users who do not count may leave it at 0.
+    ``reset`` re-seeds whatever randomness the planner uses: same seed, same decisions.
+    """
+
+    name: str
+    config: PlannerConfig
+
+    def plan(
+        self, own: Ownship, intruders: Sequence[Intruder], goal: Goal, *, step: int = 0
+    ) -> Decision: ...
+
+    def reset(self, seed: int) -> None: ...
 
 
 def _finite(x: float) -> float | None:

@@ -1,0 +1,391 @@
+"""MavlinkBridge: the ownship's MAVLink face. Commands in, telemetry out, on simulated time.
+
+Every flight command reaches the dynamics through `_dispatch`, whether its bytes came from the
+in-process planner (`feed`) or from a peer on the link (`poll`), so the planner's commands are
+real MAVLink frames that pass the same parsing, addressing and signing checks as anyone's.
+
+Signing policy (with a key): every outgoing frame is signed. Incoming frames must carry a valid
+signature, except HEARTBEAT, PARAM_REQUEST_LIST and PARAM_REQUEST_READ, which are accepted
+unsigned: they change nothing, a ground station without the key can still see the vehicle and
+its parameters (signing authenticates, it does not hide), and every command it sends is
+refused and counted.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from types import SimpleNamespace
+from typing import Protocol
+
+import numpy as np
+from pymavlink.dialects.v20 import common as mavlink
+
+from uavxai.dynamics.geodesy import LocalFrame
+from uavxai.dynamics.state import TrafficState
+
+from . import telemetry
+from .framing import FrameReader, Parsed
+from .link import Link
+from .params import ParamTable
+from .protocol import (
+    AUTOPILOT_COMPONENT,
+    SetpointError,
+    accel_from_position_target,
+    bank_from_attitude_target,
+    enable_signing,
+    new_codec,
+)
+from .watchdog import CommandWatchdog
+
+log = logging.getLogger(__name__)
+
+ACCEPTED_UNSIGNED = frozenset(
+    {
+        mavlink.MAVLINK_MSG_ID_HEARTBEAT,
+        mavlink.MAVLINK_MSG_ID_PARAM_REQUEST_LIST,
+        mavlink.MAVLINK_MSG_ID_PARAM_REQUEST_READ,
+    }
+)
+HOME_PERIOD_S = 5.0
+# Bound the work one poll() does, so a flooding peer cannot stall the simulation loop.
+_MAX_READS_PER_POLL = 1000
+_COUNTERS = (
+    "messages_in",  # decoded frames, whatever their fate
+    "messages_out",  # frames written to the link
+    "commands",  # setpoints and commands obeyed
+    "rejected_commands",  # addressed to us but unusable (bad values, unsupported frame)
+    "ignored_other_target",  # commands addressed to another system or component
+    "ignored_messages",  # valid messages the bridge has no use for
+    "malformed",  # runs of bytes that were not a valid frame
+    "unknown_messages",  # frames of message types outside the common dialect
+    "refused_unsigned",
+    "refused_bad_signature",
+    "param_requests",
+    "param_sets_refused",
+    "failsafe_events",
+)
+
+
+class CommandSink(Protocol):
+    """What the bridge commands: the ownship's autopilot setpoints (the JSBSim world)."""
+
+    def command_ownship(
+        self,
+        bank_cmd_rad: float | None = None,
+        accel_cmd_mps2: float | None = None,
+        speed_target_mps: float | None = None,
+        alt_target_m: float | None = None,
+    ) -> None: ...
+
+
+class MavlinkBridge:
+    """The ownship as MAVLink system `system_id`, component 1.
+
+    `frame` converts ENU to geodetic; `sink` receives obeyed setpoints; `link` is a pymavlink
+    connection string (None: no external peer, only `feed`). `signing_key` (32 bytes) turns on
+    MAVLink 2 signing both ways. `params` are extra read-only parameters for ground stations.
+    `home` is the home point (x, y, h) in the local frame; by default the ground point below the
+    ownship's first published position. Rates are in Hz of simulated time.
+    """
+
+    def __init__(
+        self,
+        system_id: int,
+        frame: LocalFrame,
+        sink: CommandSink,
+        link: str | None = None,
+        signing_key: bytes | None = None,
+        command_timeout_s: float = 3.0,
+        params: dict[str, float] | None = None,
+        home: tuple[float, float, float] | None = None,
+        telemetry_hz: float = 10.0,
+        adsb_hz: float = 2.0,
+    ) -> None:
+        if not 1 <= system_id <= 255:
+            raise ValueError(f"MAVLink system id must be 1..255, got {system_id}")
+        self.system_id = system_id
+        self.frame = frame
+        self.counters: dict[str, int] = dict.fromkeys(_COUNTERS, 0)
+        self._sink = sink
+        self._home_setting = home
+        self._home = home
+        self._refusal_reported = False
+        self._watchdog = CommandWatchdog(command_timeout_s)
+        own = {
+            "BRG_SYSID": float(system_id),
+            "BRG_CMD_TIMEOUT": float(command_timeout_s),
+            "BRG_TELEM_HZ": float(telemetry_hz),
+            "BRG_ADSB_HZ": float(adsb_hz),
+            "BRG_SIGNING": 1.0 if signing_key is not None else 0.0,
+        }
+        clash = sorted(set(own) & set(params or {}))
+        if clash:
+            raise ValueError(f"parameter names {clash} are the bridge's own")
+        self._params = ParamTable(own | dict(params or {}))
+        self._gates = {
+            "heartbeat": telemetry.RateGate(1.0),
+            "home": telemetry.RateGate(1.0 / HOME_PERIOD_S),
+            "vehicle": telemetry.RateGate(telemetry_hz),
+            "adsb": telemetry.RateGate(adsb_hz),
+        }
+        self._previous_attitude: tuple[float, np.ndarray] | None = None
+        self._now: float | None = None
+
+        self._link = Link(link, system_id) if link is not None else None
+        self._codec = new_codec(SimpleNamespace(write=self._write), system_id, AUTOPILOT_COMPONENT)
+        if signing_key is not None:
+            enable_signing(self._codec, signing_key, ACCEPTED_UNSIGNED.__contains__)
+        self._feed_reader = FrameReader(self._codec, stream=False)
+        self._link_reader = (
+            FrameReader(self._codec, stream=self._link.stream) if self._link else None
+        )
+        self._handlers = {
+            "SET_ATTITUDE_TARGET": self._on_attitude_target,
+            "SET_POSITION_TARGET_LOCAL_NED": self._on_position_target,
+            "COMMAND_LONG": self._on_command_long,
+            "PARAM_REQUEST_LIST": self._on_param_request_list,
+            "PARAM_REQUEST_READ": self._on_param_request_read,
+            "PARAM_SET": self._on_param_set,
+        }
+
+    # ------------------------------------------------------------------ input
+    def feed(self, data: bytes) -> int:
+        """Decode and obey MAVLink bytes handed over in-process (whole frames, like one
+        datagram); returns the number of commands obeyed."""
+        return self._handle(self._feed_reader.push(data))
+
+    def poll(self) -> int:
+        """Read and obey whatever the link has received, without blocking; returns the number
+        of commands obeyed."""
+        if self._link is None:
+            return 0
+        obeyed = 0
+        for _ in range(_MAX_READS_PER_POLL):
+            data = self._link.read()
+            if not data:
+                break
+            obeyed += self._handle(self._link_reader.push(data))
+        return obeyed
+
+    # ------------------------------------------------------------------ time and output
+    def tick(self, t: float) -> None:
+        """Advance simulated time to `t` (s) and run the command watchdog."""
+        if self._now is not None and t < self._now:
+            self._restart_clock()
+        self._now = t
+        if self._watchdog.advance(t):
+            self.counters["failsafe_events"] += 1
+            log.warning(
+                "no command for %.1f s: wings level, holding speed and altitude",
+                self._watchdog.timeout_s,
+            )
+            self._sink.command_ownship(bank_cmd_rad=0.0, accel_cmd_mps2=0.0)
+
+    def publish(self, state: TrafficState) -> None:
+        """Advance to `state.t` and send whatever telemetry is due (call every ~0.1 s)."""
+        self.tick(state.t)
+        if self._home is None:
+            self._home = (float(state.pos[0, 0]), float(state.pos[0, 1]), 0.0)
+        if self._link is None:
+            return
+        t, gates = state.t, self._gates
+        if gates["heartbeat"].due(t):
+            self._send(telemetry.heartbeat(self.failsafe_active))
+        if gates["home"].due(t):
+            self._send(telemetry.home_position(self.frame, self._home, t))
+        if gates["vehicle"].due(t):
+            self._send(telemetry.sys_status(self.counters["malformed"]))
+            self._send(telemetry.global_position_int(state, self.frame))
+            self._send(telemetry.attitude(state, self._body_rates(state)))
+            self._send(telemetry.vfr_hud(state, self.frame))
+        if gates["adsb"].due(t):
+            for msg in telemetry.adsb_vehicles(state, self.frame):
+                self._send(msg)
+
+    @property
+    def failsafe_active(self) -> bool:
+        return self._watchdog.tripped
+
+    def close(self) -> None:
+        if self._link is not None:
+            self._link.close()
+            self._link = None
+
+    def __enter__(self) -> MavlinkBridge:
+        return self
+
+    def __exit__(self, *_exc) -> None:
+        self.close()
+
+    # ------------------------------------------------------------------ internals
+    def _handle(self, parsed: Parsed) -> int:
+        c = self.counters
+        c["malformed"] += parsed.malformed
+        c["unknown_messages"] += parsed.unknown
+        c["refused_unsigned"] += parsed.refused_unsigned
+        c["refused_bad_signature"] += parsed.refused_bad_signature
+        if (parsed.refused_unsigned or parsed.refused_bad_signature) and not self._refusal_reported:
+            self._refusal_reported = True
+            log.warning(
+                "refused a MAVLink message that was unsigned or signed with another key: "
+                "signing is on, so commands need the bridge's key; further refusals are "
+                "only counted"
+            )
+        obeyed = 0
+        for msg in parsed.messages:
+            c["messages_in"] += 1
+            handler = self._handlers.get(msg.get_type())
+            if handler is None:
+                c["ignored_messages"] += 1
+            elif handler(msg):
+                obeyed += 1
+        return obeyed
+
+    def _send(self, msg) -> None:
+        self._codec.send(msg)
+
+    def _write(self, frame: bytes) -> None:
+        """Where the codec puts each outgoing frame."""
+        if self._link is not None:
+            self._link.write(frame)
+            self.counters["messages_out"] += 1
+
+    def _addressed_to_me(self, msg, allow_broadcast: bool = False) -> bool:
+        systems = (self.system_id, 0) if allow_broadcast else (self.system_id,)
+        if msg.target_system in systems and msg.target_component in (0, AUTOPILOT_COMPONENT):
+            return True
+        self.counters["ignored_other_target"] += 1
+        return False
+
+    def _obey(self, **setpoint: float) -> bool:
+        self._sink.command_ownship(**setpoint)
+        self.counters["commands"] += 1
+        silence = self._watchdog.note_command()
+        if silence is not None:
+            log.info("commands resumed after %.1f s of silence", silence)
+        return True
+
+    def _reject(self, why: str) -> bool:
+        self.counters["rejected_commands"] += 1
+        log.debug("command rejected: %s", why)
+        return False
+
+    def _on_attitude_target(self, msg) -> bool:
+        if not self._addressed_to_me(msg):
+            return False
+        try:
+            return self._obey(bank_cmd_rad=bank_from_attitude_target(msg))
+        except SetpointError as why:
+            return self._reject(str(why))
+
+    def _on_position_target(self, msg) -> bool:
+        if not self._addressed_to_me(msg):
+            return False
+        try:
+            return self._obey(accel_cmd_mps2=accel_from_position_target(msg))
+        except SetpointError as why:
+            return self._reject(str(why))
+
+    def _on_command_long(self, msg) -> bool:
+        if not self._addressed_to_me(msg):
+            return False
+        command = msg.command
+        if command == mavlink.MAV_CMD_DO_CHANGE_SPEED:
+            return self._change_speed(msg)
+        if command == mavlink.MAV_CMD_DO_CHANGE_ALTITUDE:
+            return self._change_altitude(msg)
+        reply = self._requested_message(msg)
+        if reply is None:
+            self._ack(msg, mavlink.MAV_RESULT_UNSUPPORTED)
+            self.counters["ignored_messages"] += 1
+            return False
+        self._ack(msg, mavlink.MAV_RESULT_ACCEPTED)
+        self._send(reply)
+        return False
+
+    def _change_speed(self, msg) -> bool:
+        # param1 speed type: 0 airspeed, 1 ground speed; both set the airspeed target, since
+        # the ownship's autopilot holds airspeed. param2 <= 0 (or -1) means "no change".
+        speed = msg.param2
+        if msg.param1 not in (0, 1) or not math.isfinite(speed) or speed <= 0:
+            self._ack(msg, mavlink.MAV_RESULT_DENIED)
+            return self._reject(f"DO_CHANGE_SPEED type {msg.param1} speed {speed}")
+        self._ack(msg, mavlink.MAV_RESULT_ACCEPTED)
+        return self._obey(speed_target_mps=float(speed))
+
+    def _change_altitude(self, msg) -> bool:
+        # param1 altitude (m), param2 its frame: MSL, or relative to the local origin (= h).
+        alt, frame = msg.param1, msg.param2
+        offsets = {
+            mavlink.MAV_FRAME_GLOBAL: -self.frame.alt0,
+            mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT: 0.0,
+        }
+        if frame not in offsets or not math.isfinite(alt):
+            self._ack(msg, mavlink.MAV_RESULT_DENIED)
+            return self._reject(f"DO_CHANGE_ALTITUDE {alt} in frame {frame}")
+        self._ack(msg, mavlink.MAV_RESULT_ACCEPTED)
+        return self._obey(alt_target_m=float(alt) + offsets[frame])
+
+    def _requested_message(self, msg):
+        """The reply to a request for a message this bridge can send on demand, or None."""
+        wanted = msg.command
+        if wanted == mavlink.MAV_CMD_REQUEST_MESSAGE:
+            wanted = int(msg.param1) if math.isfinite(msg.param1) else -1
+        if wanted in (mavlink.MAV_CMD_GET_HOME_POSITION, mavlink.MAVLINK_MSG_ID_HOME_POSITION):
+            if self._home is None:
+                return None
+            return telemetry.home_position(self.frame, self._home, self._now or 0.0)
+        if wanted in (
+            mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES,
+            mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION,
+        ):
+            return telemetry.autopilot_version()
+        return None
+
+    def _ack(self, msg, result: int) -> None:
+        self._send(
+            mavlink.MAVLink_command_ack_message(
+                msg.command, result, 0, 0, msg.get_srcSystem(), msg.get_srcComponent()
+            )
+        )
+
+    def _on_param_request_list(self, msg) -> bool:
+        if self._addressed_to_me(msg, allow_broadcast=True):
+            self.counters["param_requests"] += 1
+            for index in range(len(self._params)):
+                self._send(self._params.value_message(index))
+        return False
+
+    def _on_param_request_read(self, msg) -> bool:
+        if self._addressed_to_me(msg, allow_broadcast=True):
+            self.counters["param_requests"] += 1
+            index = self._params.find(msg.param_id, msg.param_index)
+            if index is not None:
+                self._send(self._params.value_message(index))
+        return False
+
+    def _on_param_set(self, msg) -> bool:
+        # Parameters mirror the scenario and are read-only. Echoing the unchanged value is how
+        # a vehicle tells a ground station that a set did not take.
+        if self._addressed_to_me(msg):
+            self.counters["param_sets_refused"] += 1
+            index = self._params.find(msg.param_id, -1)
+            if index is not None:
+                self._send(self._params.value_message(index))
+        return False
+
+    def _body_rates(self, state: TrafficState) -> np.ndarray:
+        previous, self._previous_attitude = self._previous_attitude, (state.t, state.att[0].copy())
+        if previous is None:
+            return np.zeros(3)
+        t0, att0 = previous
+        return telemetry.body_rates(att0, state.att[0], state.t - t0)
+
+    def _restart_clock(self) -> None:
+        """Simulated time went backwards: a new episode. Start rates and watchdog afresh."""
+        self._watchdog.restart()
+        for gate in self._gates.values():
+            gate.restart()
+        self._previous_attitude = None
+        self._home = self._home_setting

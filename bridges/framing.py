@@ -1,0 +1,121 @@
+"""Robust MAVLink framing: bytes in, decoded messages and an account of everything dropped.
+
+pymavlink's own parser, after a frame fails its CRC, discards the whole length the (possibly
+corrupted) header announced, and a truncated datagram leaves bytes in its buffer that corrupt
+the next one. Here a frame whose CRC fails costs only its first byte: scanning resumes at the
+next start marker, so one damaged frame never takes a good neighbour with it. pymavlink's
+``decode()`` still does the CRC, signature and payload work.
+
+Datagram sources (UDP, the planner's ``feed``) carry whole frames, so an incomplete frame at the
+end of a datagram is garbage. Stream sources (TCP) keep it until more bytes arrive.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from pymavlink.dialects.v20 import common as mavlink
+
+_MAGIC_V1 = mavlink.PROTOCOL_MARKER_V1
+_MAGIC_V2 = mavlink.PROTOCOL_MARKER_V2
+_HEADER_V1, _HEADER_V2, _CRC = 6, 10, 2
+_SIGNED = mavlink.MAVLINK_IFLAG_SIGNED
+_SIGNATURE = mavlink.MAVLINK_SIGNATURE_BLOCK_LEN
+MAX_FRAME_BYTES = _HEADER_V2 + 255 + _CRC + _SIGNATURE
+_NOT_A_FRAME = 0
+
+
+@dataclass
+class Parsed:
+    """What one chunk of bytes held."""
+
+    messages: list = field(default_factory=list)
+    malformed: int = 0  # runs of bytes that are not a frame (garbage, truncation, bad CRC)
+    unknown: int = 0  # frames of message types outside the dialect (cannot be checked)
+    refused_unsigned: int = 0  # refused by the signing policy: no signature
+    refused_bad_signature: int = 0  # refused by the signing policy: wrong key or replayed
+
+
+class FrameReader:
+    """Splits bytes from one source into frames and decodes them with `codec`."""
+
+    def __init__(self, codec: mavlink.MAVLink, stream: bool) -> None:
+        self._codec = codec
+        self._stream = stream
+        self._tail = b""
+
+    def push(self, data: bytes) -> Parsed:
+        buf = self._tail + bytes(data)
+        self._tail = b""
+        out = Parsed()
+        in_garbage = False
+        i, n = 0, len(buf)
+        while i < n:
+            start = _next_marker(buf, i)
+            if start != i:
+                in_garbage = True
+                if start < 0:
+                    break
+                i = start
+            length = _frame_length(buf, i)
+            if length == _NOT_A_FRAME:
+                in_garbage, i = True, i + 1
+                continue
+            if length is None or i + length > n:
+                if self._stream and n - i < MAX_FRAME_BYTES:
+                    self._tail = buf[i:]
+                    break
+                in_garbage, i = True, i + 1  # a frame never spans datagrams: a false marker
+                continue
+            frame = buf[i : i + length]
+            if not self._decode(frame, out):
+                in_garbage, i = True, i + 1
+                continue
+            if in_garbage:
+                out.malformed += 1
+                in_garbage = False
+            i += length
+        if in_garbage:
+            out.malformed += 1
+        return out
+
+    def _decode(self, frame: bytes, out: Parsed) -> bool:
+        """Decode one candidate frame into `out`; False if it is not a frame after all."""
+        refusals = self._codec.signing.reject_count
+        try:
+            msg = self._codec.decode(bytearray(frame))
+        except Exception:  # hostile bytes must never escape as an exception
+            if self._codec.signing.reject_count == refusals:
+                return False
+            # CRC passed (pymavlink checks it first), so this is a real frame the signing
+            # policy turned away.
+            if frame[0] == _MAGIC_V2 and frame[2] & _SIGNED:
+                out.refused_bad_signature += 1
+            else:
+                out.refused_unsigned += 1
+            return True
+        if isinstance(msg, mavlink.MAVLink_unknown):
+            out.unknown += 1
+        else:
+            out.messages.append(msg)
+        return True
+
+
+def _next_marker(buf: bytes, start: int) -> int:
+    v1, v2 = buf.find(_MAGIC_V1, start), buf.find(_MAGIC_V2, start)
+    if v1 < 0 or v2 < 0:
+        return max(v1, v2)
+    return min(v1, v2)
+
+
+def _frame_length(buf: bytes, i: int) -> int | None:
+    """Total length of the frame starting at `i` per its header: None while the header is
+    incomplete, _NOT_A_FRAME if no valid frame has this header."""
+    if buf[i] == _MAGIC_V1:
+        return _HEADER_V1 + buf[i + 1] + _CRC if i + 1 < len(buf) else None
+    if i + 2 >= len(buf):
+        return None
+    payload, incompat = buf[i + 1], buf[i + 2]
+    if incompat & ~_SIGNED:
+        return _NOT_A_FRAME  # unknown incompatibility flags: not a frame we can read
+    return _HEADER_V2 + payload + _CRC + (_SIGNATURE if incompat & _SIGNED else 0)

@@ -1,0 +1,251 @@
+"""Telemetry messages built from a TrafficState: the ownship as ground stations expect a vehicle,
+the intruders as ADS-B traffic. Pure functions; the bridge decides when to send them.
+
+SI and ENU come in, MAVLink units go out, and only here:
+
+* GLOBAL_POSITION_INT: lat/lon degE7, alt = MSL (mm), relative_alt = h above the local origin
+  (mm; the default home is on the ground below the start, so this is "above home"),
+  vx/vy/vz NED (cm/s), hdg = psi (cdeg).
+* ATTITUDE: roll = phi, pitch = theta, yaw = psi wrapped to [-pi, pi) (rad; NED yaw is
+  clockwise from north, the same convention as psi); body rates from the attitude change
+  between two published states.
+* VFR_HUD: airspeed = true airspeed, groundspeed (m/s), heading (deg), alt MSL (m), climb (m/s).
+* ADSB_VEHICLE: lat/lon degE7, geometric altitude MSL (mm), course over ground (cdeg),
+  horizontal speed (cm/s), vertical speed up (cm/s).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from pymavlink.dialects.v20 import common as mavlink
+
+from uavxai.dynamics.geodesy import LocalFrame
+from uavxai.dynamics.state import TrafficState
+
+from .protocol import boot_ms
+
+# Simulated intruders get addresses from one made-up block, numbered as intruder-N, so a ground
+# station can tell them apart and they are flagged ADSB_FLAGS_SIMULATED as well.
+ICAO_BLOCK = 0xF00000
+ADSB_FLAGS = (
+    mavlink.ADSB_FLAGS_VALID_COORDS
+    | mavlink.ADSB_FLAGS_VALID_ALTITUDE
+    | mavlink.ADSB_FLAGS_VALID_HEADING
+    | mavlink.ADSB_FLAGS_VALID_VELOCITY
+    | mavlink.ADSB_FLAGS_VALID_CALLSIGN
+    | mavlink.ADSB_FLAGS_VERTICAL_VELOCITY_VALID
+    | mavlink.ADSB_FLAGS_SIMULATED
+)
+_SENSORS = (
+    mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO
+    | mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL
+    | mavlink.MAV_SYS_STATUS_SENSOR_GPS
+    | mavlink.MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL
+    | mavlink.MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION
+    | mavlink.MAV_SYS_STATUS_SENSOR_Z_ALTITUDE_CONTROL
+    | mavlink.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL
+)
+CAPABILITIES = (
+    mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2
+    | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
+    | mavlink.MAV_PROTOCOL_CAPABILITY_SET_ATTITUDE_TARGET
+    | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
+)
+_UINT16_UNKNOWN = 0xFFFF
+# Below this ground speed the course is noise; ADS-B then reports the heading instead.
+_MIN_COURSE_SPEED_MPS = 0.5
+
+
+class RateGate:
+    """Opens at `rate_hz` of simulated time, phase-locked to its first opening, so rates hold
+    however often (and however evenly) the caller asks."""
+
+    _SLACK_S = 1e-6  # float noise in summed time steps must not skip a beat
+
+    def __init__(self, rate_hz: float) -> None:
+        if not rate_hz > 0:
+            raise ValueError(f"a message rate must be positive, got {rate_hz} Hz")
+        self.period_s = 1.0 / rate_hz
+        self._next: float | None = None
+
+    def due(self, t: float) -> bool:
+        if self._next is not None and t < self._next - self._SLACK_S:
+            return False
+        behind = self._next is None or t - self._next >= self.period_s
+        self._next = t + self.period_s if behind else self._next + self.period_s
+        return True
+
+    def restart(self) -> None:
+        self._next = None
+
+
+def heartbeat(failsafe: bool) -> mavlink.MAVLink_heartbeat_message:
+    return mavlink.MAVLink_heartbeat_message(
+        mavlink.MAV_TYPE_FIXED_WING,
+        mavlink.MAV_AUTOPILOT_GENERIC,
+        mavlink.MAV_MODE_FLAG_SAFETY_ARMED | mavlink.MAV_MODE_FLAG_GUIDED_ENABLED,
+        0,
+        mavlink.MAV_STATE_CRITICAL if failsafe else mavlink.MAV_STATE_ACTIVE,
+        3,
+    )
+
+
+def sys_status(errors_comm: int) -> mavlink.MAVLink_sys_status_message:
+    """Healthy sensors and controllers, no battery model, dropped input bytes as comm errors."""
+    return mavlink.MAVLink_sys_status_message(
+        _SENSORS,
+        _SENSORS,
+        _SENSORS,
+        0,
+        _UINT16_UNKNOWN,  # voltage_battery: not simulated
+        -1,  # current_battery: not simulated
+        -1,  # battery_remaining: not simulated
+        0,
+        min(errors_comm, 0xFFFF),
+        0,
+        0,
+        0,
+        0,
+    )
+
+
+def global_position_int(
+    state: TrafficState, frame: LocalFrame
+) -> mavlink.MAVLink_global_position_int_message:
+    x, y, h = state.pos[0]
+    ve, vn, vu = state.vel[0]
+    lat, lon, alt = frame.to_geodetic(x, y, h)
+    return mavlink.MAVLink_global_position_int_message(
+        boot_ms(state.t),
+        _deg_e7(lat),
+        _deg_e7(lon),
+        round(float(alt) * 1000.0),
+        round(float(h) * 1000.0),
+        _int16(vn * 100.0),
+        _int16(ve * 100.0),
+        _int16(-vu * 100.0),
+        _cdeg(state.att[0, 2]),
+    )
+
+
+def attitude(state: TrafficState, rates: np.ndarray) -> mavlink.MAVLink_attitude_message:
+    phi, theta, psi = state.att[0]
+    p, q, r = rates
+    return mavlink.MAVLink_attitude_message(boot_ms(state.t), phi, theta, _wrap_pi(psi), p, q, r)
+
+
+def vfr_hud(state: TrafficState, frame: LocalFrame) -> mavlink.MAVLink_vfr_hud_message:
+    _, _, alt = frame.to_geodetic(*state.pos[0])
+    heading_deg = round(math.degrees(state.att[0, 2])) % 360
+    return mavlink.MAVLink_vfr_hud_message(
+        state.airspeed[0],
+        state.ground_speed[0],
+        heading_deg,
+        0,  # throttle: not reported by the dynamics
+        float(alt),
+        state.vel[0, 2],
+    )
+
+
+def home_position(
+    frame: LocalFrame, home: tuple[float, float, float], t: float
+) -> mavlink.MAVLink_home_position_message:
+    x, y, h = home
+    lat, lon, alt = frame.to_geodetic(x, y, h)
+    return mavlink.MAVLink_home_position_message(
+        _deg_e7(lat),
+        _deg_e7(lon),
+        round(float(alt) * 1000.0),
+        y,  # local NED: north
+        x,  # east
+        -h,  # down
+        [1.0, 0.0, 0.0, 0.0],
+        0.0,
+        0.0,
+        0.0,
+        int(t * 1e6),
+    )
+
+
+def autopilot_version() -> mavlink.MAVLink_autopilot_version_message:
+    return mavlink.MAVLink_autopilot_version_message(
+        CAPABILITIES, 0, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, 0
+    )
+
+
+def adsb_vehicles(state: TrafficState, frame: LocalFrame) -> list:
+    """One ADSB_VEHICLE per intruder (rows 1..N)."""
+    if state.n < 2:
+        return []
+    pos, vel = state.pos[1:], state.vel[1:]
+    lat, lon, alt = frame.to_geodetic(pos[:, 0], pos[:, 1], pos[:, 2])
+    speed = state.ground_speed[1:]
+    course = np.where(
+        speed >= _MIN_COURSE_SPEED_MPS, np.arctan2(vel[:, 0], vel[:, 1]), state.att[1:, 2]
+    )
+    messages = []
+    for k, ident in enumerate(state.ids[1:]):
+        number = intruder_number(ident, k + 1)
+        messages.append(
+            mavlink.MAVLink_adsb_vehicle_message(
+                ICAO_BLOCK + number,
+                _deg_e7(lat[k]),
+                _deg_e7(lon[k]),
+                mavlink.ADSB_ALTITUDE_TYPE_GEOMETRIC,
+                round(float(alt[k]) * 1000.0),
+                _cdeg(course[k]),
+                min(round(float(speed[k]) * 100.0), 0xFFFF),
+                _int16(vel[k, 2] * 100.0),
+                callsign(number).encode("ascii"),
+                mavlink.ADSB_EMITTER_TYPE_UAV,
+                0,
+                ADSB_FLAGS,
+                0,
+            )
+        )
+    return messages
+
+
+def intruder_number(ident: str, fallback: int) -> int:
+    """N of "intruder-N" (the public id), else the row number."""
+    tail = ident.rsplit("-", 1)[-1]
+    return int(tail) if tail.isdigit() else fallback
+
+
+def callsign(number: int) -> str:
+    return f"INTR{number:02d}"[:8]
+
+
+def body_rates(att_before: np.ndarray, att_now: np.ndarray, dt: float) -> np.ndarray:
+    """Body rates p, q, r (rad/s) from two (phi, theta, psi) samples `dt` apart."""
+    if dt <= 0:
+        return np.zeros(3)
+    d = np.asarray(att_now, dtype=float) - np.asarray(att_before, dtype=float)
+    phi_dot, theta_dot, psi_dot = (_wrap_pi(a) / dt for a in d)
+    phi, theta, _ = att_now
+    sp, cp, ct = math.sin(phi), math.cos(phi), math.cos(theta)
+    return np.array(
+        [
+            phi_dot - psi_dot * math.sin(theta),
+            theta_dot * cp + psi_dot * sp * ct,
+            -theta_dot * sp + psi_dot * cp * ct,
+        ]
+    )
+
+
+def _deg_e7(deg) -> int:
+    return round(float(deg) * 1e7)
+
+
+def _cdeg(angle_rad) -> int:
+    return round(math.degrees(float(angle_rad)) * 100.0) % 36000
+
+
+def _int16(value) -> int:
+    return max(-32768, min(32767, round(float(value))))
+
+
+def _wrap_pi(angle) -> float:
+    return (float(angle) + math.pi) % (2.0 * math.pi) - math.pi

@@ -1,0 +1,109 @@
+"""The default viewer layout: the 3-D scene big on the left, the reasoning on the right.
+
+Left: the 3-D world over a row of metric plots. Right: the search tree of the current decision
+above the explanations. Trails are logged as short segments; a visible time range from the
+start of the run to the cursor makes the viewer draw them as one growing line.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+
+from uavxai.recording import entities as ent
+
+_METRIC_TITLES = {
+    "sum_rate_bps": "sum rate (bit/s)",
+    "min_separation_m": "min separation (m)",
+    "bank_deg": "bank (deg)",
+    "airspeed_mps": "airspeed (m/s)",
+    "decision_ms": "decision time (ms)",
+}
+
+
+def _history_so_far() -> rrb.VisibleTimeRanges:
+    """Everything from the start of the run up to the time cursor, on both timelines."""
+    start, end = rrb.TimeRangeBoundary.infinite(), rrb.TimeRangeBoundary.cursor_relative()
+    return rrb.VisibleTimeRanges(
+        [
+            rrb.VisibleTimeRange(ent.SIM_TIME, start=start, end=end),
+            rrb.VisibleTimeRange(ent.DECISION, start=start, end=end),
+        ]
+    )
+
+
+def _eye(bounds: dict[str, tuple[float, float]]) -> rrb.EyeControls3D:
+    """Look at the flight area from the south, above and a little west, all of it in view."""
+    (x0, x1), (y0, y1), (h0, _) = bounds["x"], bounds["y"], bounds["h"]
+    centre = np.array([(x0 + x1) / 2, (y0 + y1) / 2 + 0.05 * (y1 - y0), h0])
+    span = max(x1 - x0, y1 - y0)
+    return rrb.EyeControls3D(
+        kind="Orbital",
+        position=centre + span * np.array([-0.1, -0.95, 0.6]),
+        look_target=centre,
+        eye_up=(0.0, 0.0, 1.0),
+    )
+
+
+def _scene(bounds: dict[str, tuple[float, float]] | None) -> rrb.Spatial3DView:
+    def trails() -> list:
+        return [rr.LineStrips3D.from_fields().visualizer(), _history_so_far()]
+
+    return rrb.Spatial3DView(
+        name="world",
+        origin=ent.WORLD,
+        # 100 m cells: the default 1 m grid is solid grey at the scale of a flight area.
+        line_grid=rrb.LineGrid3D(visible=True, spacing=100.0),
+        overrides={ent.OWNSHIP_TRAIL: trails(), ent.INTRUDER_TRAILS: trails()},
+        eye_controls=_eye(bounds) if bounds is not None else None,
+    )
+
+
+def _tree() -> rrb.GraphView:
+    # Node positions come from our tree layout; the force simulation would scramble them.
+    off = {"enabled": False}
+    return rrb.GraphView(
+        name="search tree (this decision)",
+        origin=ent.TREE,
+        force_link=rrb.archetypes.ForceLink(**off),
+        force_many_body=rrb.archetypes.ForceManyBody(**off),
+        force_position=rrb.archetypes.ForcePosition(**off),
+        force_collision_radius=rrb.archetypes.ForceCollisionRadius(**off),
+        force_center=rrb.archetypes.ForceCenter(**off),
+    )
+
+
+def _metrics() -> rrb.Grid:
+    plots = [
+        rrb.TimeSeriesView(
+            name=_METRIC_TITLES.get(name, name),
+            origin=ent.metric_path(name),
+            plot_legend=rrb.PlotLegend(visible=False),
+        )
+        for name in ent.METRIC_NAMES
+    ]
+    return rrb.Grid(*plots, grid_columns=3)
+
+
+def _explanations() -> rrb.TextLogView:
+    return rrb.TextLogView(
+        name="explanation",
+        origin=ent.EXPLANATION,
+        columns=rrb.TextLogColumns(
+            timeline_columns=[rrb.components.TimelineColumn(ent.SIM_TIME)],
+            text_log_columns=["body"],  # one entity and one level: those columns say nothing
+        ),
+    )
+
+
+def default_blueprint(bounds: dict[str, tuple[float, float]] | None = None) -> rrb.Blueprint:
+    """The layout; with the flight-area ``bounds`` the 3-D camera starts framed on them."""
+    left = rrb.Vertical(_scene(bounds), _metrics(), row_shares=[2, 1])
+    right = rrb.Vertical(_tree(), _explanations(), row_shares=[3, 2])
+    return rrb.Blueprint(
+        rrb.Horizontal(left, right, column_shares=[3, 2]),
+        rrb.TimePanel(timeline=ent.SIM_TIME, state="collapsed"),
+        rrb.BlueprintPanel(state="collapsed"),
+        rrb.SelectionPanel(state="collapsed"),
+    )

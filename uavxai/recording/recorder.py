@@ -1,0 +1,269 @@
+"""RunRecorder: everything a run shows in rerun (SPEC §5), written cheaply.
+
+Per-frame traffic and metric series are buffered and sent as columns; writing to a file, they
+go out every ``FILE_FLUSH_S`` of simulated time (bounded memory, and a crash still leaves a
+readable recording); with a live viewer every ``LIVE_FLUSH_S`` so it keeps up. Decisions are
+rare (about 1 Hz) and are logged as they come.
+
+Each recorder owns its own ``rr.RecordingStream``, so several in one process stay apart.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import defaultdict
+from pathlib import Path
+from types import TracebackType
+
+import numpy as np
+import rerun as rr
+
+from uavxai.avoidance.types import Decision
+from uavxai.dynamics.state import TrafficState
+from uavxai.recording import entities as ent
+from uavxai.recording.aircraft_model import aircraft_mesh
+from uavxai.recording.blueprint import default_blueprint
+from uavxai.recording.traffic_log import TrafficLog, aircraft_paths
+from uavxai.recording.tree_graph import tree_graph
+
+FILE_FLUSH_S = 30.0
+LIVE_FLUSH_S = 0.5
+
+OWNSHIP_COLOR = (255, 165, 0)
+INTRUDER_COLOR = (220, 60, 60)
+PLAN_COLOR = (46, 204, 113)
+
+
+class RunRecorder:
+    """Write a run to ``path`` (an .rrd) and/or a spawned viewer; ``close()`` when done."""
+
+    def __init__(
+        self,
+        path: Path | None,
+        spawn: bool = False,
+        recording_name: str = "uavxai",
+        recording_id: str | None = None,
+    ) -> None:
+        self.path = Path(path) if path is not None else None
+        self.enabled = self.path is not None or spawn
+        self._stream = rr.RecordingStream(recording_name, recording_id=recording_id)
+        self._flush_period_s = LIVE_FLUSH_S if spawn else FILE_FLUSH_S
+        self._traffic = TrafficLog(self._stream)
+        self._metrics: dict[str, list[tuple[float, int, float]]] = defaultdict(list)
+        self._decision = 0
+        self._last_flush_t = -math.inf
+        self._closed = False
+        self._spawn = spawn
+        self._sinks_open = False
+        if self.enabled:
+            self._log_styles()
+
+    def _open_sinks(self, bounds: dict[str, tuple[float, float]] | None) -> None:
+        """Attach the file and/or viewer, with the blueprint framed on ``bounds``.
+
+        Deferred until the bounds are known; what was logged before waits in the stream's
+        buffer and goes out to the sinks when they are attached.
+        """
+        if self._sinks_open:
+            return
+        self._sinks_open = True
+        sinks: list[rr.FileSink | rr.GrpcSink] = []
+        if self._spawn:
+            self._stream.spawn(connect=False)
+            sinks.append(rr.GrpcSink())
+        if self.path is not None:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            sinks.append(rr.FileSink(self.path))
+        # The blueprint must go with the sinks: one given only at init is not written to files.
+        self._stream.set_sinks(*sinks, default_blueprint=default_blueprint(bounds))
+
+    def _log_styles(self) -> None:
+        log = self._stream.log
+        log(ent.WORLD, rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+        log(ent.OWNSHIP, _mesh(OWNSHIP_COLOR), static=True)
+        # The ownship trail sits below the ownship's transform in the entity tree (SPEC path)
+        # but is drawn in world coordinates, so it opts out of that transform.
+        log(ent.OWNSHIP_TRAIL, rr.CoordinateFrame(f"tf#/{ent.WORLD}"), static=True)
+        trail_radius = rr.Radius.ui_points(1.5)
+        log(ent.OWNSHIP_TRAIL, _line_style(OWNSHIP_COLOR, trail_radius), static=True)
+        log(ent.INTRUDER_TRAILS, _line_style((*INTRUDER_COLOR, 160), trail_radius), static=True)
+        log(ent.PLAN, _line_style(PLAN_COLOR, rr.Radius.ui_points(3.0)), static=True)
+        for name in ent.METRIC_NAMES:
+            log(ent.metric_path(name), rr.SeriesLines(names=name, widths=2.0), static=True)
+
+    # ---- the pipeline's calls -------------------------------------------------------------
+
+    def log_setup(
+        self,
+        bounds: dict[str, tuple[float, float]],
+        users: np.ndarray,
+        service_point: np.ndarray | None,
+        search_path: np.ndarray | None,
+        intruder_ids: list[str],
+        goal: np.ndarray,
+    ) -> None:
+        """The static scene: flight area, users, service point and its search, goal, models."""
+        if not self.enabled:
+            return
+        self._open_sinks(bounds)
+        log = self._stream.log
+        lo = np.array([bounds["x"][0], bounds["y"][0], bounds["h"][0]], dtype=np.float64)
+        hi = np.array([bounds["x"][1], bounds["y"][1], bounds["h"][1]], dtype=np.float64)
+        box = rr.Boxes3D(
+            mins=[lo],
+            sizes=[hi - lo],
+            colors=[(150, 150, 150)],
+            fill_mode="MajorWireframe",
+            radii=rr.Radius.ui_points(1.0),
+        )
+        log(ent.BOUNDS, box, static=True)
+        users = np.atleast_2d(np.asarray(users, dtype=np.float64))
+        labels = [f"user {i + 1}" for i in range(len(users))]
+        log(
+            ent.USERS,
+            rr.Points3D(users, radii=12.0, colors=(52, 152, 219), labels=labels, show_labels=False),
+            static=True,
+        )
+        if service_point is not None:
+            sp = np.asarray(service_point, dtype=np.float64).reshape(1, 3)
+            log(
+                ent.SERVICE_POINT,
+                rr.Points3D(sp, radii=18.0, colors=(155, 89, 182), labels="service point"),
+                static=True,
+            )
+        if search_path is not None and len(search_path) > 1:
+            strip = rr.LineStrips3D(
+                [np.asarray(search_path, dtype=np.float64)],
+                radii=rr.Radius.ui_points(1.0),
+                colors=(155, 89, 182, 140),
+            )
+            log(ent.SEARCH_PATH, strip, static=True)
+        g = np.asarray(goal, dtype=np.float64).reshape(1, 3)
+        log(ent.GOAL, rr.Points3D(g, radii=15.0, colors=(241, 196, 15), labels="goal"), static=True)
+        mesh = _mesh(INTRUDER_COLOR)
+        for path in aircraft_paths(("ownship", *intruder_ids))[1:]:
+            log(path, mesh, static=True)
+
+    def log_traffic(self, state: TrafficState) -> None:
+        """One frame of all aircraft; cheap (a copy), the sending happens in batches."""
+        if not self.enabled:
+            return
+        self._traffic.append(state, self._decision)
+        if self._last_flush_t == -math.inf:
+            self._last_flush_t = state.t
+        if state.t - self._last_flush_t >= self._flush_period_s:
+            self._flush()
+            self._last_flush_t = state.t
+
+    def log_decision(self, k: int, t: float, decision: Decision, intruder_ids: list[str]) -> None:
+        """Decision ``k`` at sim time ``t``: its search tree, planned path and explanation."""
+        if not self.enabled:
+            return
+        self._decision = k
+        stream = self._stream
+        stream.set_time(ent.SIM_TIME, duration=t)
+        stream.set_time(ent.DECISION, sequence=k)
+        graph = tree_graph(decision)
+        stream.log(
+            ent.TREE,
+            rr.GraphNodes(
+                graph.node_ids,
+                positions=graph.positions,
+                labels=graph.labels,
+                colors=graph.colors,
+                radii=graph.radii,
+            ),
+            rr.GraphEdges(graph.edges, graph_type="directed"),
+        )
+        plan = np.asarray(decision.plan, dtype=np.float64).reshape(-1, 3)
+        plan_label = _plan_label(decision, intruder_ids)
+        stream.log(ent.PLAN, rr.LineStrips3D([plan] if len(plan) > 1 else [], labels=plan_label))
+        stream.log(ent.EXPLANATION, rr.TextLog(f"#{k}: {decision.explanation}", level="INFO"))
+        if decision.counterfactual:
+            stream.log(ent.EXPLANATION, rr.TextLog(decision.counterfactual, level="DEBUG"))
+
+    def log_metrics(self, t: float, **scalars: float) -> None:
+        """Scalars at sim time ``t``, each to ``metrics/<name>``; inf/nan are kept as gaps."""
+        if not self.enabled:
+            return
+        for name, value in scalars.items():
+            v = float(value)
+            self._metrics[name].append(
+                (float(t), self._decision, v if math.isfinite(v) else math.nan)
+            )
+
+    def close(self) -> None:
+        """Send what is buffered and finish the file; safe to call twice."""
+        if self._closed:
+            return
+        self._closed = True
+        if self.enabled:
+            self._open_sinks(None)
+            self._flush()
+            self._stream.flush()
+            self._stream.disconnect()
+
+    def __enter__(self) -> RunRecorder:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    # ---- batching -------------------------------------------------------------------------
+
+    def _flush(self) -> None:
+        self._traffic.flush()
+        for name, rows in self._metrics.items():
+            if not rows:
+                continue
+            t, k, v = zip(*rows, strict=True)
+            self._stream.send_columns(
+                ent.metric_path(name),
+                indexes=[
+                    rr.TimeColumn(ent.SIM_TIME, duration=np.asarray(t)),
+                    rr.TimeColumn(ent.DECISION, sequence=np.asarray(k, dtype=np.int64)),
+                ],
+                columns=rr.Scalars.columns(scalars=np.asarray(v)),
+            )
+            rows.clear()
+
+
+def _mesh(color: tuple[int, int, int]) -> rr.Mesh3D:
+    vertices, normals, triangles = aircraft_mesh()
+    return rr.Mesh3D(
+        vertex_positions=vertices,
+        vertex_normals=normals,
+        triangle_indices=triangles,
+        albedo_factor=color,
+        face_rendering="DoubleSided",  # wings are single sheets, seen from above and below
+    )
+
+
+def _line_style(color: tuple[int, ...], radius) -> rr.LineStrips3D:
+    return rr.LineStrips3D.from_fields(colors=[color], radii=[radius])
+
+
+def _plan_label(decision: Decision, intruder_ids: list[str]) -> str:
+    """Short, as it floats in the scene: the predicted separation and from whom."""
+    sep = decision.predicted_min_separation_m
+    if not math.isfinite(sep):
+        return "plan"
+    closest = _closest_on_plan(decision, intruder_ids)
+    return f"plan: {sep:.0f} m from {closest}" if closest else f"plan: {sep:.0f} m clear"
+
+
+def _closest_on_plan(decision: Decision, intruder_ids: list[str]) -> str | None:
+    """Name of the intruder that comes closest along the chosen action's line."""
+    chosen = next((c for c in decision.children if c.action == decision.action), None)
+    if chosen is None or chosen.closest_intruder is None:
+        return None
+    who = chosen.closest_intruder
+    # The planner may give an index into the intruder list or the id itself.
+    if isinstance(who, (int, np.integer)) and 0 <= who < len(intruder_ids):
+        return intruder_ids[int(who)]
+    return str(who)

@@ -1,0 +1,315 @@
+"""Explanations of avoidance decisions in plain words, and `uavxai explain RUN_DIR`.
+
+Everything here is read off data the planner returned (the per-root-action statistics of its
+search: visits, Q, predicted minimum separation, closest intruder and when), so a sentence is
+never more confident than the search was. :func:`explain` turns a :class:`Decision` into the
+sentence and the counterfactual for the runner-up; :func:`decision_record` is the line written
+to ``decisions.jsonl``; :func:`explain_command` reads that file back and renders it.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+from typing import Any
+
+from uavxai.avoidance.types import ChildStats, Decision, Intruder, Ownship
+from uavxai.errors import UserError
+
+HOLD = 4  # hold bank, hold speed: "holding course", the natural reference
+_BANK = ("left", "holding", "right")
+_ACCEL = (" and faster", "", " and slower")
+_VERB = ("banked left", "held its bank", "banked right")
+_VERB_ACCEL = (" and sped up", "", " and slowed down")
+
+
+# ----------------------------------------------------------------------------- one decision
+def explain(decision: Decision) -> tuple[str, str]:
+    """(sentence, counterfactual) for a decision, e.g.
+
+    "banked right: holding course meets intruder 7 at 34 m in 9 s; right keeps 180 m;
+    71% of simulations agree" and "why not left: its best line meets intruder 3 at 41 m ...".
+    """
+    verb = _VERB[decision.action // 3] + _VERB_ACCEL[decision.action % 3]
+    by_action = {c.action: c for c in decision.children}
+    chosen = by_action.get(decision.action)
+    if chosen is None:  # a planner without a search behind it
+        return f"{verb} ({decision.planner or 'planner'} gives no reasons)", ""
+    parts: list[str] = []
+    hold = by_action.get(HOLD)
+    if hold is not None and decision.action != HOLD:
+        parts.append(_reference(hold, chosen, decision.d_min_m))
+    parts.append(f"{_short(decision.action)} {_keeps(chosen, decision.d_min_m)}")
+    parts.append(_support(decision))
+    sentence = f"{verb}: " + "; ".join(parts)
+    return sentence, counterfactual(decision)
+
+
+def counterfactual(decision: Decision) -> str:
+    """Why not the runner-up (the next most visited root action)."""
+    runner = runner_up(decision.children, decision.action)
+    chosen = next((c for c in decision.children if c.action == decision.action), None)
+    if runner is None or chosen is None:
+        return ""
+    head = f"why not {_short(runner.action)}"
+    if _conflict(runner, decision.d_min_m):
+        return f"{head}: it {_meets(runner)}, a collision"
+    reason = f"Q {runner.q:.2f} against {chosen.q:.2f}"
+    if runner.visits:
+        reason += f" ({runner.visits} simulations against {chosen.visits})"
+    if math.isfinite(runner.predicted_min_separation_m) and runner.closest_intruder is not None:
+        reason += (
+            f"; it passes {_name(runner.closest_intruder)} at "
+            f"{runner.predicted_min_separation_m:.0f} m"
+        )
+    if runner.outcome in ("out_of_bounds", "timeout"):
+        reason += f"; its best line ends {runner.outcome.replace('_', ' ')}"
+    return f"{head}: {reason}"
+
+
+def runner_up(children: Sequence[ChildStats], action: int) -> ChildStats | None:
+    others = [c for c in children if c.action != action]
+    if not others:
+        return None
+    return max(others, key=lambda c: (c.visits, c.q, -c.action))
+
+
+def is_avoidance(children: Sequence[ChildStats], action: int, d_min_m: float) -> bool:
+    """Did the decision steer away from something: some action's line conflicts, the chosen
+    one's does not."""
+    chosen = next((c for c in children if c.action == action), None)
+    if chosen is None or _conflict(chosen, d_min_m):
+        return False
+    return any(_conflict(c, d_min_m) for c in children)
+
+
+def _reference(hold: ChildStats, chosen: ChildStats, d_min: float) -> str:
+    if _conflict(hold, d_min):
+        return f"holding course {_meets(hold)}"
+    if hold.outcome in ("out_of_bounds", "timeout"):
+        return f"holding course ends {hold.outcome.replace('_', ' ')}"
+    return f"holding course scores lower (Q {hold.q:.2f} against {chosen.q:.2f})"
+
+
+def _keeps(c: ChildStats, d_min: float) -> str:
+    if _conflict(c, d_min):
+        return f"{_meets(c)} too (every option conflicts)"
+    if c.closest_intruder is None or not math.isfinite(c.predicted_min_separation_m):
+        text = "keeps clear of every intruder in reach"
+    else:
+        text = f"keeps {c.predicted_min_separation_m:.0f} m from {_name(c.closest_intruder)}"
+    if c.outcome == "goal":
+        text += " and reaches the goal"
+    return text
+
+
+def _support(decision: Decision) -> str:
+    if decision.planner == "exhaustive":
+        return "the best of every action sequence to the search depth"
+    return f"{100 * decision.confidence:.0f}% of simulations agree"
+
+
+def _conflict(c: ChildStats, d_min: float) -> bool:
+    return c.outcome == "collision" or c.predicted_min_separation_m < d_min
+
+
+def _meets(c: ChildStats) -> str:
+    who = _name(c.closest_intruder) if c.closest_intruder is not None else "an intruder"
+    when = f" in {c.time_to_closest_s:.0f} s" if c.time_to_closest_s is not None else ""
+    return f"meets {who} at {c.predicted_min_separation_m:.0f} m{when}"
+
+
+def _short(action: int) -> str:
+    bank, accel = _BANK[action // 3], _ACCEL[action % 3]
+    if action == HOLD:
+        return "holding course"
+    return bank + accel
+
+
+def _name(intruder_id: Any) -> str:
+    text = str(intruder_id)
+    if text.startswith("intruder-"):
+        text = text.removeprefix("intruder-")
+    return f"intruder {text}"
+
+
+# ------------------------------------------------------------------------ decisions.jsonl
+def decision_record(
+    t: float, own: Ownship, intruders: Iterable[Intruder], decision: Decision
+) -> dict[str, Any]:
+    """One line of decisions.jsonl (SPEC §4): time, what the planner saw, what it decided."""
+    state = {
+        "ownship": {
+            "x": own.x,
+            "y": own.y,
+            "h": own.h,
+            "speed": own.speed,
+            "heading": own.heading,
+            "bank": own.bank,
+        },
+        "intruders": [
+            {"id": i.id, "x": i.x, "y": i.y, "h": i.h, "vx": i.vx, "vy": i.vy, "vh": i.vh}
+            for i in intruders
+        ],
+    }
+    return {"t": float(t), "state": state, **decision.to_json()}
+
+
+def read_decisions(run_dir: Path) -> list[dict[str, Any]]:
+    """The records of RUN_DIR/decisions.jsonl; UserError naming the problem otherwise."""
+    run_dir = Path(run_dir)
+    if not run_dir.is_dir():
+        raise UserError(f"{run_dir}: no such run folder (give the --out folder of `uavxai run`).")
+    path = run_dir / "decisions.jsonl"
+    if not path.is_file():
+        raise UserError(f"{path}: not found; is {run_dir} the output folder of `uavxai run`?")
+    records = []
+    with path.open(encoding="utf-8") as f:
+        for number, line in enumerate(f, start=1):
+            if not line.strip():
+                continue
+            try:
+                record = json.loads(line)
+            except json.JSONDecodeError as exc:
+                raise UserError(
+                    f"{path}, line {number}: not valid JSON ({exc.msg}); the file is damaged."
+                ) from None
+            if not isinstance(record, dict) or "action" not in record:
+                raise UserError(
+                    f"{path}, line {number}: not a decision record (an object with `action`, "
+                    "`children`, `explanation`, ...)."
+                )
+            records.append(record)
+    return records
+
+
+def explain_command(run_dir: Path, decision: int | None = None) -> str:
+    """The text `uavxai explain RUN_DIR [--decision N]` prints.
+
+    ``decision`` indexes the decisions from 0 (negative: from the end); None gives an overview.
+    """
+    records = read_decisions(Path(run_dir))
+    if not records:
+        return f"{Path(run_dir) / 'decisions.jsonl'}: no decisions were recorded."
+    if decision is None:
+        return render_overview(records)
+    n = len(records)
+    if not -n <= decision < n:
+        raise UserError(
+            f"--decision {decision}: out of range; this run has {n} decisions, so N must be "
+            f"between 0 and {n - 1} (or -{n} to -1 from the end)."
+        )
+    index = decision % n
+    return render_record(records[index], index, n)
+
+
+def render_record(record: dict[str, Any], index: int, total: int) -> str:
+    """A readable multi-line account of one decisions.jsonl record."""
+    act = record.get("action", {})
+    planner = record.get("planner") or "planner"
+    t = record.get("t")
+    head = f"Decision {index} of {total}"
+    if isinstance(t, int | float):
+        head += f" at t = {t:.1f} s"
+    head += f" ({planner}, {_num(record.get('ms'), '.1f')} ms)"
+    lines = [head]
+    own = (record.get("state") or {}).get("ownship")
+    if isinstance(own, dict):
+        lines.append(
+            f"  ownship: x {_num(own.get('x'))} m, y {_num(own.get('y'))} m, "
+            f"h {_num(own.get('h'))} m, {_num(own.get('speed'), '.1f')} m/s, "
+            f"heading {_deg(own.get('heading'))}, bank command {_deg(own.get('bank'))}"
+        )
+    name = act.get("name") or "action"
+    lines.append(
+        f"  chose:   {name} -> bank command {_deg(act.get('bank_cmd_rad'))}, "
+        f"{_num(act.get('accel_mps2'), '+.1f')} m/s^2"
+    )
+    if record.get("explanation"):
+        lines.append(f"  why:     {record['explanation']}")
+    if record.get("counterfactual"):
+        lines.append(f"  why not: {record['counterfactual']}")
+    sep = record.get("predicted_min_separation_m")
+    if sep is not None:
+        lines.append(f"  predicted minimum separation over the next decision period: {sep:.0f} m")
+    children = record.get("children") or []
+    if children:
+        total_visits = sum(int(c.get("visits") or 0) for c in children) or 1
+        lines.append("  root actions:")
+        lines.append(
+            f"    {'action':<26}{'visits':>7}{'share':>7}{'Q':>7}{'min sep':>10}"
+            f"{'intruder':>10}{'in':>7}  line ends"
+        )
+        chosen_index = act.get("index")
+        for c in children:
+            a = c.get("action", {})
+            mark = "*" if a.get("index") == chosen_index else " "
+            visits = int(c.get("visits") or 0)
+            sep = c.get("predicted_min_separation_m")
+            when = c.get("time_to_closest_s")
+            lines.append(
+                f"  {mark} {a.get('name', '?'):<26}{visits:>7}{100 * visits / total_visits:>6.0f}%"
+                f"{_num(c.get('q'), '.3f'):>7}"
+                f"{(f'{sep:.0f} m' if sep is not None else 'clear'):>10}"
+                f"{str(c.get('closest_intruder') if c.get('closest_intruder') is not None else '-'):>10}"
+                f"{(f'{when:.1f} s' if when is not None else '-'):>7}  {c.get('outcome') or 'open'}"
+            )
+    return "\n".join(lines)
+
+
+def render_overview(records: Sequence[dict[str, Any]]) -> str:
+    """Count, how many decisions steered away from something, and the tightest one."""
+    n = len(records)
+    avoid = [i for i, r in enumerate(records) if _record_avoids(r)]
+    seps = [
+        (r["predicted_min_separation_m"], i)
+        for i, r in enumerate(records)
+        if isinstance(r.get("predicted_min_separation_m"), int | float)
+    ]
+    ms = [r["ms"] for r in records if isinstance(r.get("ms"), int | float)]
+    lines = [f"{n} decisions; {len(avoid)} steered away from a predicted conflict."]
+    if ms:
+        lines.append(f"Planner time: mean {sum(ms) / len(ms):.1f} ms, max {max(ms):.1f} ms.")
+    if seps:
+        sep, i = min(seps)
+        lines.append(
+            f"Tightest: decision {i}, predicted {sep:.0f} m over the next period: "
+            f"{records[i].get('explanation', '')}"
+        )
+    for i in avoid[:10]:
+        lines.append(f"  [{i}] {records[i].get('explanation', '')}")
+    if len(avoid) > 10:
+        lines.append(f"  ... and {len(avoid) - 10} more")
+    lines.append("Show one in full with `uavxai explain RUN_DIR --decision N`.")
+    return "\n".join(lines)
+
+
+def _record_avoids(record: dict[str, Any]) -> bool:
+    d_min = record.get("d_min_m") or 50.0
+    index = (record.get("action") or {}).get("index")
+    children = []
+    for c in record.get("children") or []:
+        sep = c.get("predicted_min_separation_m")
+        children.append(
+            ChildStats(
+                action=(c.get("action") or {}).get("index", -1),
+                bank_cmd_rad=0.0,
+                accel_mps2=0.0,
+                visits=int(c.get("visits") or 0),
+                q=float(c.get("q") or 0.0),
+                predicted_min_separation_m=math.inf if sep is None else float(sep),
+                closest_intruder=c.get("closest_intruder"),
+                outcome=c.get("outcome") or "",
+            )
+        )
+    return index is not None and is_avoidance(children, index, d_min)
+
+
+def _num(x: Any, fmt: str = ".0f") -> str:
+    return format(x, fmt) if isinstance(x, int | float) else "?"
+
+
+def _deg(x: Any) -> str:
+    return f"{math.degrees(x):.0f} deg" if isinstance(x, int | float) else "?"
