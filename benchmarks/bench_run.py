@@ -16,9 +16,10 @@ import tempfile
 import time
 from pathlib import Path
 
+from uavxai.service.stage import plan_service
+
 from uavxai.pipeline import run_episode
 from uavxai.scenario import default_scenario
-from uavxai.service.stage import plan_service
 
 
 def free_udp_port() -> int:
@@ -65,8 +66,10 @@ def main() -> None:
                         break
             best[name] = min(best.get(name, float("inf")), wall)
             sim_s[name] = summary["flight_time_s"]
-    print(f"uavxai run, {args.intruders} intruders, {args.steps} decisions "
-          f"({sim_s['bare']:.0f} s simulated), best of {args.repeats}")
+    print(
+        f"uavxai run, {args.intruders} intruders, {args.steps} decisions "
+        f"({sim_s['bare']:.0f} s simulated), best of {args.repeats}"
+    )
     print(f"{'variant':<16}{'wall s':>9}{'x real time':>13}{'overhead':>10}")
     for name in variants:
         rtf = sim_s[name] / best[name]

@@ -9,6 +9,7 @@ actions, Q in [0, 1], collisions where the predicted separation is small).
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 
@@ -136,3 +137,34 @@ def users(k: int = 10, seed: int = 0) -> np.ndarray:
     rng = np.random.default_rng(seed)
     xy = rng.uniform(750.0, 1250.0, size=(k, 2))
     return np.column_stack([xy, np.zeros(k)])
+
+
+def write_demo(path: Path, n_intruders: int = 20, duration_s: float = 120.0) -> None:
+    """A synthetic run recorded with RunRecorder, e.g. to look at the default layout."""
+    from uavxai.recording.recorder import RunRecorder  # the recorder is what is exercised
+
+    ids = [intruder_id(i + 1) for i in range(n_intruders)]
+    service_point = np.array([1000.0, 1000.0, 120.0])
+    search = service_point + np.cumsum(np.random.default_rng(1).normal(0, 10, (30, 3)), axis=0)
+    with RunRecorder(path, recording_name="uavxai-synthetic") as rec:
+        rec.log_setup(BOUNDS, users(), service_point, search, ids, GOAL)
+        for i, state in enumerate(traffic(n_intruders, duration_s)):
+            rec.log_traffic(state)
+            if i % 10 == 0:
+                k = i // 10
+                d = decision(state, k)
+                rec.log_decision(k, state.t, d, ids)
+                rec.log_metrics(
+                    state.t,
+                    sum_rate_bps=2.3e7,
+                    min_separation_m=state.min_separation(),
+                    bank_deg=math.degrees(state.att[0, 0]),
+                    airspeed_mps=float(state.airspeed[0]),
+                    decision_ms=d.ms,
+                )
+
+
+if __name__ == "__main__":
+    import sys
+
+    write_demo(Path(sys.argv[1] if len(sys.argv) > 1 else "synthetic.rrd"))

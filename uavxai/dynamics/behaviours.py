@@ -1,0 +1,96 @@
+"""How intruders fly: `straight`, `random_turns`, `goal_seeking`.
+
+A pilot turns the intruder's situation into autopilot commands (bank angle, airspeed); the
+altitude drawn for it is held by the autopilot. Nothing here depends on the dynamics, so
+the JSBSim world and the kinematic encounter model of the campaigns fly the same pilots, and
+a scenario + seed gives the same traffic in both (see :func:`make_pilots`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from uavxai.scenario import IntruderSpec, Scenario
+
+BEHAVIOURS = ("straight", "random_turns", "goal_seeking")
+
+# random_turns: hold each bank command this long, s
+TURN_HOLD_S = (5.0, 20.0)
+# random_turns: share of the segments flown wings level
+LEVEL_SHARE = 0.3
+# goal_seeking: bank per radian of heading error, and the distance at which a goal counts as
+# reached and the next one is drawn
+HEADING_GAIN = 1.0
+GOAL_REACHED_M = 100.0
+
+
+def _wrap(angle: float) -> float:
+    """Angle in (-pi, pi]."""
+    return math.atan2(math.sin(angle), math.cos(angle))
+
+
+class IntruderPilot:
+    """The pilot of one intruder. ``command`` is meant to be called about once a second."""
+
+    def __init__(self, spec: IntruderSpec, rng: np.random.Generator, scenario: Scenario) -> None:
+        behaviour = spec.behaviour or scenario.intruders.behaviour
+        if behaviour not in BEHAVIOURS:
+            raise ValueError(f"unknown intruder behaviour '{behaviour}'; known: {BEHAVIOURS}")
+        self.behaviour = behaviour
+        self.speed_mps = spec.speed_mps
+        self.bank_limit_rad = math.radians(scenario.avoidance.bank_limit_deg)
+        self._rng = rng
+        self._world = scenario.world
+        self._bank = 0.0
+        self._next_change_t = 0.0
+        self.goal: tuple[float, float] | None = None
+        if behaviour == "goal_seeking":
+            self.goal = self._draw_goal()
+
+    def command(
+        self, t: float, pos: Sequence[float], vel: Sequence[float], psi: float
+    ) -> tuple[float, float]:
+        """(bank_cmd_rad, speed_target_mps) at time t for an intruder at ``pos`` (x, y, h),
+        moving with ``vel`` (vx, vy, vh), heading ``psi`` (rad, clockwise from north)."""
+        if self.behaviour == "random_turns":
+            return self._random_turns(t), self.speed_mps
+        if self.behaviour == "goal_seeking":
+            return self._goal_seeking(pos, psi), self.speed_mps
+        return 0.0, self.speed_mps
+
+    def _random_turns(self, t: float) -> float:
+        if t >= self._next_change_t:
+            if self._rng.random() < LEVEL_SHARE:
+                self._bank = 0.0
+            else:
+                self._bank = float(self._rng.uniform(-1.0, 1.0)) * self.bank_limit_rad
+            self._next_change_t = t + float(self._rng.uniform(*TURN_HOLD_S))
+        return self._bank
+
+    def _goal_seeking(self, pos: Sequence[float], psi: float) -> float:
+        assert self.goal is not None
+        dx, dy = self.goal[0] - pos[0], self.goal[1] - pos[1]
+        if math.hypot(dx, dy) < GOAL_REACHED_M:
+            self.goal = self._draw_goal()
+            dx, dy = self.goal[0] - pos[0], self.goal[1] - pos[1]
+        bearing = math.atan2(dx, dy)  # clockwise from north
+        bank = HEADING_GAIN * _wrap(bearing - psi)
+        return max(-self.bank_limit_rad, min(self.bank_limit_rad, bank))
+
+    def _draw_goal(self) -> tuple[float, float]:
+        return float(self._rng.uniform(*self._world.x)), float(self._rng.uniform(*self._world.y))
+
+
+def make_pilots(
+    scenario: Scenario, specs: Sequence[IntruderSpec], seed: int
+) -> list[IntruderPilot]:
+    """One pilot per intruder, each with its own random stream derived from ``seed``
+    (independent of the stream that drew the intruders)."""
+    streams = np.random.SeedSequence(seed).spawn(len(specs))
+    return [
+        IntruderPilot(spec, np.random.default_rng(stream), scenario)
+        for spec, stream in zip(specs, streams, strict=True)
+    ]
