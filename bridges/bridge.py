@@ -48,6 +48,11 @@ ACCEPTED_UNSIGNED = frozenset(
     }
 )
 HOME_PERIOD_S = 5.0
+# Commands that predate MAV_CMD_REQUEST_MESSAGE, and the message each one asks for.
+_LEGACY_REQUESTS = {
+    mavlink.MAV_CMD_GET_HOME_POSITION: mavlink.MAVLINK_MSG_ID_HOME_POSITION,
+    mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION,
+}
 # Bound the work one poll() does, so a flooding peer cannot stall the simulation loop.
 _MAX_READS_PER_POLL = 1000
 _COUNTERS = (
@@ -306,7 +311,8 @@ class MavlinkBridge:
 
     def _change_speed(self, msg) -> bool:
         # param1 speed type: 0 airspeed, 1 ground speed; both set the airspeed target, since
-        # the ownship's autopilot holds airspeed. param2 <= 0 (or -1) means "no change".
+        # the ownship's autopilot holds airspeed. param2 = -1 ("no change") would leave only a
+        # throttle change, which this autopilot does not take: denied like any speed <= 0.
         speed = msg.param2
         if msg.param1 not in (0, 1) or not math.isfinite(speed) or speed <= 0:
             self._ack(msg, mavlink.MAV_RESULT_DENIED)
@@ -329,17 +335,13 @@ class MavlinkBridge:
 
     def _requested_message(self, msg):
         """The reply to a request for a message this bridge can send on demand, or None."""
-        wanted = msg.command
-        if wanted == mavlink.MAV_CMD_REQUEST_MESSAGE:
-            wanted = int(msg.param1) if math.isfinite(msg.param1) else -1
-        if wanted in (mavlink.MAV_CMD_GET_HOME_POSITION, mavlink.MAVLINK_MSG_ID_HOME_POSITION):
-            if self._home is None:
-                return None
+        if msg.command == mavlink.MAV_CMD_REQUEST_MESSAGE:
+            wanted = int(msg.param1) if math.isfinite(msg.param1) else None
+        else:
+            wanted = _LEGACY_REQUESTS.get(msg.command)
+        if wanted == mavlink.MAVLINK_MSG_ID_HOME_POSITION and self._home is not None:
             return telemetry.home_position(self.frame, self._home, self._now or 0.0)
-        if wanted in (
-            mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES,
-            mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION,
-        ):
+        if wanted == mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
             return telemetry.autopilot_version()
         return None
 

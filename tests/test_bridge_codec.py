@@ -275,3 +275,30 @@ def test_time_running_backwards_starts_a_new_episode():
     bridge.tick(3.1)
     assert bridge.counters["failsafe_events"] == 2
     assert len(sink.calls) == 2
+
+
+def _command(command: int, *params: float):
+    params = (list(params) + [0.0] * 7)[:7]
+    return mavlink.MAVLink_command_long_message(1, 1, command, 0, *params)
+
+
+def test_altitude_commands_in_msl_or_relative_frames():
+    bridge, sink = make_bridge()
+    change = mavlink.MAV_CMD_DO_CHANGE_ALTITUDE
+    bridge.feed(_pack(_command(change, 530.0, mavlink.MAV_FRAME_GLOBAL)))
+    bridge.feed(_pack(_command(change, 150.0, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT)))
+    bridge.feed(_pack(_command(change, 150.0, mavlink.MAV_FRAME_LOCAL_NED)))
+    assert sink.calls == [
+        {"alt_target_m": pytest.approx(130.0)},
+        {"alt_target_m": pytest.approx(150.0)},
+    ]
+    assert bridge.counters["rejected_commands"] == 1
+
+
+def test_only_known_requests_are_answered_and_nothing_is_flown():
+    bridge, sink = make_bridge()
+    # Command 242 is not a request, even though 242 is HOME_POSITION's message id.
+    for command in (mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES, 242, 31000):
+        bridge.feed(_pack(_command(command, mavlink.MAVLINK_MSG_ID_HOME_POSITION)))
+    assert sink.calls == []
+    assert bridge.counters["ignored_messages"] == 2

@@ -252,6 +252,24 @@ def test_change_speed_is_acknowledged_and_obeyed():
     gcs.close()
 
 
+def test_requested_messages_are_sent_on_demand():
+    bridge, _, gcs, _ = connected_pair()
+    bridge.publish(traffic(0.0))
+    receive(gcs)
+    request = mavlink.MAV_CMD_REQUEST_MESSAGE
+    gcs.mav.command_long_send(1, 1, request, 0, mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION, *[0] * 6)
+    assert poll_and_ack(bridge, gcs).result == mavlink.MAV_RESULT_ACCEPTED
+    version = gcs.recv_match(type="AUTOPILOT_VERSION", blocking=True, timeout=2.0)
+    assert version.capabilities & mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2
+    assert version.capabilities & mavlink.MAV_PROTOCOL_CAPABILITY_SET_ATTITUDE_TARGET
+    gcs.mav.command_long_send(1, 1, mavlink.MAV_CMD_GET_HOME_POSITION, 0, *[0] * 7)
+    assert poll_and_ack(bridge, gcs).result == mavlink.MAV_RESULT_ACCEPTED
+    home = gcs.recv_match(type="HOME_POSITION", blocking=True, timeout=2.0)
+    assert home.altitude == 400_000
+    bridge.close()
+    gcs.close()
+
+
 def poll_and_ack(bridge: MavlinkBridge, gcs):
     deadline = time.monotonic() + 2.0
     while time.monotonic() < deadline:

@@ -311,7 +311,9 @@ class _Builder:
         if (d + 1) * self.hold_s >= self.time_left_s - 1e-9:
             code = np.where(code == NONE, TIMEOUT, code).astype(np.int8)
         leaf_depth = d + 1 == self.depth_limit
-        value = np.where(code == NONE, self.model.leaf_value(seg.end, self.goal), _VALUE_OF[code])
+        value = _VALUE_OF[code]  # nan for open nodes: only leaves are ever evaluated
+        if leaf_depth:
+            value = np.where(code == NONE, self.model.leaf_value(seg.end, self.goal), value)
         first = len(self.parent)
         self.first_child[node] = first
         self.parent.extend([node] * N_ACTIONS)

@@ -214,7 +214,7 @@ class EncounterModel:
         n = self._check(duration, track)
         body = self._body(states[:, V], states[:, PHI], states[:, PHI_CMD], actions, duration, n)
         x, y, h, psi = (states[:, k, None] for k in (X, Y, H, PSI))
-        end = self._end(x[:, 0], y[:, 0], h[:, 0], psi[:, 0], body, goal[2], duration)
+        end = self._end(x, y, h, psi, body, goal[2], duration)
         samples = self._samples(x, y, h, psi, body, goal[2], duration, n)
         start = states[:, :3]
         reach = self.reach(float(states[:, V].max()), duration)
@@ -306,16 +306,21 @@ class EncounterModel:
         v_end = np.clip(v0 + accel * duration, vmin, vmax)
         return _BodyMotion(fwd, right, psi[:, -1], v_end, phi_end, phi_cmd)
 
-    # The start (x, y, h, psi) is either Python floats (one state for all rows) or arrays that
-    # broadcast against the body motion's rows.
+    # The start (x, y, h, psi) is either Python floats (one state for every row) or (B, 1)
+    # arrays; the float case is the tree search's hot path, hence math rather than numpy.
     def _end(self, x, y, h, psi, body: _BodyMotion, goal_h: float, duration: float):
-        s, c = np.sin(psi), np.cos(psi)
-        f, r = body.fwd[:, -1], body.right[:, -1]
         climb = self.config.climb_rate_mps * duration
+        f, r = body.fwd[:, -1], body.right[:, -1]
         end = np.empty((len(f), STATE_DIM))
+        if isinstance(psi, float):
+            s, c = math.sin(psi), math.cos(psi)
+            end[:, H] = h + min(max(goal_h - h, -climb), climb)
+        else:
+            x, y, h, psi = x[:, 0], y[:, 0], h[:, 0], psi[:, 0]
+            s, c = np.sin(psi), np.cos(psi)
+            end[:, H] = h + np.clip(goal_h - h, -climb, climb)
         end[:, X] = x + f * s + r * c
         end[:, Y] = y + f * c - r * s
-        end[:, H] = h + np.clip(goal_h - h, -climb, climb)
         end[:, V] = body.v_end
         end[:, PSI] = np.mod(psi + body.dpsi, 2.0 * np.pi)
         end[:, PHI] = body.phi_end
@@ -323,7 +328,8 @@ class EncounterModel:
         return end
 
     def _samples(self, x, y, h, psi, body: _BodyMotion, goal_h: float, duration: float, n: int):
-        s, c = np.sin(psi), np.cos(psi)
+        trig = math if isinstance(psi, float) else np
+        s, c = trig.sin(psi), trig.cos(psi)
         samples = np.empty((len(body.fwd), n + 1, 3))
         samples[:, :, 0] = x + body.fwd * s + body.right * c
         samples[:, :, 1] = y + body.fwd * c - body.right * s
@@ -346,24 +352,36 @@ class EncounterModel:
         cfg = self.config
         B, n = samples.shape[0], samples.shape[1] - 1
         rows = np.arange(B)
-        never = np.full(B, n)
-
-        k_goal = never
+        if near.size:
+            d2, s = _closest_on_chords(samples[:, :, None, :] - track.pos[:, near][None])
+            k = near.size
+            flat = d2.reshape(B, n * k).argmin(axis=1)  # the closest approach: sub-step, who
+            d2_min = d2.reshape(B, n * k)[rows, flat]
+            k_min, j_min = np.divmod(flat, k)
+            if not (near_goal or near_wall) and d2_min.min() >= cfg.d_min_m**2:
+                # The common case: nothing happens, so the whole segment counts.
+                quiet = self._quiet
+                return Segment(
+                    end=end,
+                    samples=samples,
+                    min_sep=np.sqrt(d2_min),
+                    closest=near[j_min],
+                    t_closest=(k_min + s[rows, k_min, j_min]) * dt,
+                    event=quiet[3] if B == N_ACTIONS else np.zeros(B, dtype=np.int8),
+                    t_event=quiet[4] if B == N_ACTIONS else np.full(B, np.nan),
+                )
+            d2_step = d2.min(axis=2)  # (B, n): closest intruder on each sub-step
+            k_hit = _first_true(d2_step < cfg.d_min_m**2)
+        else:
+            k_hit = np.full(B, n)
+        k_goal = k_out = np.full(B, n)
         if near_goal:
             g_d2, _ = _closest_on_chords(samples - goal)
             k_goal = _first_true(g_d2 < cfg.goal_radius_m**2)
-        k_out = never
         if near_wall:
             # The box is convex: a chord between two samples inside it stays inside.
             outside = (samples[:, 1:] < self._lo) | (samples[:, 1:] > self._hi)
             k_out = _first_true(np.any(outside, axis=2))
-        if near.size:
-            d2, s = _closest_on_chords(samples[:, :, None, :] - track.pos[None][:, :, near])
-            who = np.argmin(d2, axis=2)  # (B, n): closest intruder on each sub-step
-            d2_step = np.take_along_axis(d2, who[..., None], axis=2)[..., 0]
-            k_hit = _first_true(d2_step < cfg.d_min_m**2)
-        else:
-            k_hit = never
 
         # The first event wins; at equal sub-steps collision beats leaving the map beats the
         # goal (the conservative reading of a sub-step that holds two of them).
@@ -373,18 +391,18 @@ class EncounterModel:
         happened = k_event < n
         event = np.where(happened, _EVENT_CODES[kind], NONE).astype(np.int8)
         t_event = np.where(happened, k_event * dt, np.nan)
-
         if not near.size:
             inf = np.full(B, np.inf)
             return Segment(end, samples, inf, np.full(B, -1), np.zeros(B), event, t_event)
+
         # Separation counts only up to (and including) the event's sub-step.
-        d2_step = np.where(np.arange(n)[None, :] > k_event[:, None], np.inf, d2_step)
-        k_min = np.argmin(d2_step, axis=1)
-        j_min = who[rows, k_min]
+        d2 = np.where((np.arange(n)[None, :] > k_event[:, None])[..., None], np.inf, d2)
+        flat = d2.reshape(B, n * k).argmin(axis=1)
+        k_min, j_min = np.divmod(flat, k)
         return Segment(
             end=end,
             samples=samples,
-            min_sep=np.sqrt(d2_step[rows, k_min]),
+            min_sep=np.sqrt(d2[rows, k_min, j_min]),
             closest=near[j_min],
             t_closest=(k_min + s[rows, k_min, j_min]) * dt,
             event=event,
@@ -400,11 +418,20 @@ def _closest_on_chords(rel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """
     r0 = rel[:, :-1]
     dr = rel[:, 1:] - r0
-    a = np.sum(dr * dr, axis=-1)
-    b = np.sum(r0 * dr, axis=-1)
-    c = np.sum(r0 * r0, axis=-1)
-    s = np.clip(-b / np.maximum(a, 1e-12), 0.0, 1.0)
-    return np.maximum(c + s * (2.0 * b + s * a), 0.0), s
+    a = np.einsum("...i,...i->...", dr, dr)
+    b = np.einsum("...i,...i->...", r0, dr)
+    c = np.einsum("...i,...i->...", r0, r0)
+    s = np.maximum(a, 1e-12)
+    np.divide(b, s, out=s)
+    np.negative(s, out=s)
+    np.maximum(s, 0.0, out=s)
+    np.minimum(s, 1.0, out=s)
+    # |r0 + s dr|^2 = c + s (2 b + s a), never below 0 despite rounding
+    d2 = s * a
+    d2 += 2.0 * b
+    d2 *= s
+    d2 += c
+    return np.maximum(d2, 0.0, out=d2), s
 
 
 def _first_true(mask: np.ndarray) -> np.ndarray:

@@ -112,8 +112,7 @@ class Aircraft:
                 h,
             )
         f.set_sim_time(0.0)
-        self.command(bank_cmd_rad=0.0, accel_cmd_mps2=0.0, speed_target_mps=speed_mps)
-        self.command(alt_target_m=h)
+        self.command(bank_cmd_rad=0.0, accel_cmd_mps2=0.0, speed_target_mps=speed_mps, alt_target_m=h)
         f[ENGAGED] = 1.0
         return self.trimmed
 

@@ -1,6 +1,6 @@
 """The default viewer layout: the 3-D scene big on the left, the reasoning on the right.
 
-Left: the 3-D world over a row of metric plots. Right: the search tree of the current decision
+Left: the 3-D world over a grid of metric plots. Right: the search tree of the current decision
 above the explanations. Trails are logged as short segments; a visible time range from the
 start of the run to the cursor makes the viewer draw them as one growing line.
 """

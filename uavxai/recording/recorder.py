@@ -200,7 +200,7 @@ class RunRecorder:
         if self.enabled:
             self._open_sinks(None)
             self._flush()
-            self._stream.flush()
+            self._stream.flush(timeout_sec=60.0)  # a vanished viewer must not hang the run
             self._stream.disconnect()
 
     def __enter__(self) -> RunRecorder:

@@ -46,7 +46,13 @@ class TreeGraph:
         return [(self.node_ids[p], self.node_ids[i]) for i, p in enumerate(self.parents) if p >= 0]
 
     def add(
-        self, node_id: str, label: str, color, visits: int, root_visits: int, parent: int
+        self,
+        node_id: str,
+        label: str,
+        color: tuple[int, int, int],
+        visits: int,
+        root_visits: int,
+        parent: int,
     ) -> int:
         self.node_ids.append(node_id)
         self.labels.append(label)

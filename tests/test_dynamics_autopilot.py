@@ -1,0 +1,95 @@
+"""Step responses of the uav_fw autopilot on the real JSBSim model (issue 3, "Must show").
+
+Each manoeuvre is flown in full (JSBSim runs at about 100x real time for one aircraft, so a
+60 s manoeuvre costs well under a second) at the slow, cruise and fast ends of the speed
+range used by the planner.
+"""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from uavxai.avoidance.types import PlannerConfig
+from uavxai.dynamics import manoeuvres as m
+
+SPEEDS = (12.0, 20.0, 30.0)
+
+
+@pytest.mark.parametrize("speed", SPEEDS)
+def test_bank_step_20deg_reached_within_3s_with_small_overshoot(speed: float) -> None:
+    cmd = math.radians(20)
+    rec = m.fly(m.flight_test_scenario(speed), duration_s=10, bank_cmd_rad=cmd)
+    res = m.bank_step_measures(rec, cmd)
+    assert rec.failure is None
+    assert res["rise_95_s"] <= 3.0
+    assert res["overshoot"] < 0.25
+    assert res["final_bank_rad"] == pytest.approx(cmd, abs=math.radians(0.5))
+
+
+def test_bank_reversal_rolls_at_the_planner_roll_rate_limit() -> None:
+    limit = math.radians(PlannerConfig().roll_rate_limit_deg_s)
+    bank = math.radians(30)
+    rec = m.fly(
+        m.flight_test_scenario(20.0),
+        duration_s=8,
+        lead_s=0.0,
+        schedule=lambda t: {"bank_cmd_rad": bank if t >= 4 else -bank},
+        bank_cmd_rad=-bank,
+    )
+    res = m.reversal_measures(rec, start_s=4.0)
+    assert rec.failure is None
+    assert res["mean_roll_rate_rad_s"] == pytest.approx(limit, rel=0.15)
+    assert res["peak_roll_rate_rad_s"] < 1.25 * limit
+
+
+@pytest.mark.parametrize("speed", SPEEDS)
+def test_steady_turn_rate_matches_coordinated_turn(speed: float) -> None:
+    rec = m.fly(m.flight_test_scenario(speed), duration_s=40, bank_cmd_rad=math.radians(20))
+    res = m.turn_measures(rec)
+    assert rec.failure is None
+    assert abs(res["turn_rate_error"]) < 0.10
+
+
+@pytest.mark.parametrize("speed", SPEEDS)
+def test_altitude_held_in_sustained_30deg_turn(speed: float) -> None:
+    rec = m.fly(m.flight_test_scenario(speed), duration_s=60, bank_cmd_rad=math.radians(30))
+    res = m.turn_measures(rec)
+    assert rec.failure is None
+    assert rec.bank[-1] == pytest.approx(math.radians(30), abs=math.radians(1))
+    assert res["height_error_m"] <= 10.0
+
+
+@pytest.mark.parametrize(("start", "accel"), [(16.0, 1.0), (28.0, -1.0), (20.0, -1.0)])
+def test_speed_tracks_acceleration_command(start: float, accel: float) -> None:
+    rec = m.fly(m.flight_test_scenario(start), duration_s=7, accel_cmd_mps2=accel)
+    res = m.speed_measures(rec)
+    assert rec.failure is None
+    assert res["speed_error_mps"] <= 1.0
+    assert res["speed_change_mps"] == pytest.approx(7 * accel, abs=1.0)
+
+
+def test_speed_target_stops_at_the_speed_limits() -> None:
+    sc = m.flight_test_scenario(27.0)
+    rec = m.fly(sc, duration_s=12, accel_cmd_mps2=1.0)
+    assert rec.speed_target.max() == pytest.approx(sc.avoidance.speed_mps[1])
+    assert rec.airspeed[-1] == pytest.approx(sc.avoidance.speed_mps[1], abs=0.5)
+
+
+@pytest.mark.parametrize("speed", SPEEDS)
+def test_wings_level_holds_heading_over_60s(speed: float) -> None:
+    rec = m.fly(m.flight_test_scenario(speed), duration_s=60, bank_cmd_rad=0.0)
+    assert rec.failure is None
+    assert m.heading_measures(rec)["heading_drift_rad"] <= math.radians(2.0)
+
+
+@pytest.mark.parametrize("dh", [50.0, -50.0])
+def test_height_change_at_the_planner_climb_rate(dh: float) -> None:
+    sc = m.flight_test_scenario(20.0)
+    target = sc.ownship.start.h + dh
+    rec = m.fly(sc, duration_s=40, alt_target_m=target)
+    res = m.climb_measures(rec, target)
+    rate = res["peak_climb_rate_mps"] if dh > 0 else res["peak_sink_rate_mps"]
+    assert rate == pytest.approx(2.5, rel=0.15)
+    assert abs(res["final_height_error_m"]) < 1.0

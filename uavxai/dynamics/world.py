@@ -1,0 +1,248 @@
+"""The multi-aircraft world: the ownship and every intruder as separate JSBSim executives,
+stepped in lockstep at the scenario's rate, with the intruders' pilots at about 1 Hz.
+
+The inner loop is nothing but ``FGFDMExec.run()`` calls; states are read only when asked
+for (the pipeline does so at about 10 Hz). A run that diverges is never an exception: the
+world stops advancing and :meth:`JSBSimWorld.failure` says what happened.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+
+import jsbsim
+import numpy as np
+
+from uavxai.dynamics.aircraft import FT, Aircraft, heading_rad
+from uavxai.dynamics.behaviours import make_pilots
+from uavxai.dynamics.geodesy import LocalFrame
+from uavxai.dynamics.state import OWNSHIP_ID, TrafficState, intruder_id
+from uavxai.dynamics.traffic import draw_intruders
+from uavxai.errors import UserError
+from uavxai.scenario import IntruderSpec, Scenario
+
+log = logging.getLogger(__name__)
+
+PILOT_PERIOD_S = 1.0  # how often intruder pilots decide
+
+# The end of a run. The ground: below this height the aircraft is on or in the terrain (its
+# wheels hang 0.22 m below the centre of gravity). The envelope: far outside anything the
+# autopilot flies (stall 10 m/s, bank limit 30 deg), i.e. the aircraft is out of control.
+GROUND_M = 1.0
+ENVELOPE_AIRSPEED_MPS = (6.0, 60.0)
+ENVELOPE_BANK_RAD = math.radians(80.0)
+ENVELOPE_PITCH_RAD = math.radians(60.0)
+
+# JSBSim's local velocities come as (east, north, down) feet/s
+_NED_FT_TO_ENU_M = np.array([FT, FT, -FT])
+
+_JSBSIM_STREAM = 0x4A5342  # spawn key of the JSBSim seeds, apart from the pilots' streams
+
+
+def jsbsim_seed(seed: int, index: int) -> int:
+    """`simulation/randomseed` of aircraft ``index`` (0 = ownship) in a run seeded ``seed``."""
+    state = np.random.SeedSequence(seed, spawn_key=(_JSBSIM_STREAM, index)).generate_state(1)
+    return int(state[0] & 0x7FFFFFFF)
+
+
+class JSBSimWorld:
+    """Ownship (row 0) and intruders (rows 1..N) flown by JSBSim.
+
+    ``intruders`` None draws them from the scenario with ``seed`` (default: the scenario's
+    seed), exactly as the kinematic model does.
+    """
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        intruders: list[IntruderSpec] | None = None,
+        seed: int | None = None,
+    ) -> None:
+        self.scenario = scenario
+        self.seed = scenario.seed if seed is None else int(seed)
+        self.dt = 1.0 / scenario.dynamics.rate_hz
+        self.origin = scenario.world.origin
+        self.frame = LocalFrame.from_origin(self.origin)
+        if intruders is None:
+            intruders = draw_intruders(scenario, np.random.default_rng(self.seed))
+        self.intruders = list(intruders)
+        self.ids = (OWNSHIP_ID, *(intruder_id(i + 1) for i in range(len(self.intruders))))
+        self._pilots = make_pilots(scenario, self.intruders, self.seed)
+        self._pilot_period = max(1, round(PILOT_PERIOD_S / self.dt))
+        self._steps = 0
+        self._cached: TrafficState | None = None
+        self._failure: str | None = None
+
+        self.aircraft: list[Aircraft] = []
+        self._runs: list = []
+        try:
+            self._build()
+        except BaseException:
+            self.close()
+            raise
+        self._runs = [a.run for a in self.aircraft]
+        self._fly_pilots()
+
+    def _build(self) -> None:
+        sc = self.scenario
+        avoid = sc.avoidance
+        start = sc.ownship.start
+        own = Aircraft(sc.ownship.aircraft, self.frame, self.dt, jsbsim_seed(self.seed, 0))
+        self.aircraft.append(own)
+        flyable = own.speed_range
+        self._check_speed("ownship.start.speed_mps", start.speed_mps, sc.ownship.aircraft, flyable)
+        own.set_limits(
+            bank_limit_rad=math.radians(avoid.bank_limit_deg),
+            speed_range=(max(flyable[0], avoid.speed_mps[0]), min(flyable[1], avoid.speed_mps[1])),
+        )
+        own.start(start.x, start.y, start.h, heading_rad(start.heading_deg), start.speed_mps)
+        for i, spec in enumerate(self.intruders, start=1):
+            a = Aircraft(sc.intruders.aircraft, self.frame, self.dt, jsbsim_seed(self.seed, i))
+            self.aircraft.append(a)
+            self._check_speed(
+                f"intruder {i} speed_mps", spec.speed_mps, sc.intruders.aircraft, a.speed_range
+            )
+            a.set_limits(bank_limit_rad=math.radians(avoid.bank_limit_deg))
+            a.start(spec.x, spec.y, spec.h, heading_rad(spec.heading_deg), spec.speed_mps)
+
+    @staticmethod
+    def _check_speed(field: str, speed: float, aircraft: str, flyable: tuple[float, float]) -> None:
+        if not flyable[0] <= speed <= flyable[1]:
+            raise UserError(
+                f"{field} = {speed:g} m/s: aircraft '{aircraft}' flies between "
+                f"{flyable[0]:g} and {flyable[1]:g} m/s"
+            )
+
+    # ------------------------------------------------------------------------------ time
+    @property
+    def t(self) -> float:
+        return self._steps * self.dt
+
+    @property
+    def n(self) -> int:
+        return len(self.aircraft)
+
+    @property
+    def trimmed(self) -> list[bool]:
+        """Whether each aircraft's start trim converged (ownship first)."""
+        return [a.trimmed for a in self.aircraft]
+
+    def step(self, n: int = 1) -> None:
+        """Advance every aircraft by ``n`` integration steps, in lockstep. Does nothing once
+        the run has failed (see :meth:`failure`)."""
+        runs = self._runs
+        left = int(n)
+        while left > 0 and self._failure is None:
+            chunk = min(left, self._pilot_period - self._steps % self._pilot_period)
+            try:
+                for _ in range(chunk):
+                    for run in runs:
+                        run()
+            except jsbsim.BaseError as exc:  # JSBSim gives up on a diverged state
+                self._failure = f"JSBSim stopped: {exc}"
+                log.warning("%s at t = %.2f s", self._failure, self.t)
+                return
+            self._steps += chunk
+            left -= chunk
+            self._cached = None
+            if self._steps % self._pilot_period == 0:
+                self._fly_pilots()
+
+    def advance(self, seconds: float) -> None:
+        self.step(round(seconds / self.dt))
+
+    def _fly_pilots(self) -> None:
+        # The pilots see the state every second; the same read tells whether anyone diverged.
+        s = self.state()
+        if self._check(s):
+            return
+        for i, pilot in enumerate(self._pilots, start=1):
+            bank, speed = pilot.command(s.t, s.pos[i], s.vel[i], float(s.att[i, 2]))
+            self.aircraft[i].command(bank_cmd_rad=bank, speed_target_mps=speed)
+
+    # ----------------------------------------------------------------------------- state
+    def state(self) -> TrafficState:
+        """All aircraft now, SI, local ENU (see :class:`TrafficState`)."""
+        if self._cached is None:
+            raw = np.array([a.raw_state() for a in self.aircraft])
+            pos = np.empty((len(raw), 3))
+            pos[:, 0], pos[:, 1], _ = self.frame.to_local(raw[:, 0], raw[:, 1], 0.0)
+            pos[:, 2] = raw[:, 2] * FT
+            self._cached = TrafficState(
+                t=self.t,
+                ids=self.ids,
+                pos=pos,
+                vel=raw[:, 3:6] * _NED_FT_TO_ENU_M,
+                att=raw[:, 6:9].copy(),
+                airspeed=raw[:, 9] * FT,
+            )
+        return self._cached
+
+    # -------------------------------------------------------------------------- commands
+    def command_ownship(
+        self,
+        bank_cmd_rad: float | None = None,
+        accel_cmd_mps2: float | None = None,
+        speed_target_mps: float | None = None,
+        alt_target_m: float | None = None,
+    ) -> None:
+        """Write the ownship's autopilot inputs; None leaves one unchanged. The bank command
+        is limited to the scenario's bank limit and the speed target to its speed range
+        by the autopilot itself; ``alt_target_m`` is a height above ground (local h)."""
+        given = {
+            "bank_cmd_rad": bank_cmd_rad,
+            "accel_cmd_mps2": accel_cmd_mps2,
+            "speed_target_mps": speed_target_mps,
+            "alt_target_m": alt_target_m,
+        }
+        for key, value in given.items():
+            if value is not None and not math.isfinite(value):
+                raise UserError(f"command_ownship: {key} must be a finite number, got {value}")
+        self.aircraft[0].command(**given)
+
+    def ownship_command(self) -> dict[str, float]:
+        """The ownship's current bank command, acceleration command, speed and height targets
+        (the speed target moves while an acceleration is commanded)."""
+        return self.aircraft[0].read_command()
+
+    # --------------------------------------------------------------------------- failure
+    def failure(self) -> str | None:
+        """Why the run cannot go on (NaN, ground, out of the flight envelope), or None."""
+        if self._failure is None:
+            self._check(self.state())
+        return self._failure
+
+    def _check(self, s: TrafficState) -> bool:
+        if self._failure is not None:
+            return True
+        bad = ~np.all(np.isfinite(np.column_stack((s.pos, s.vel, s.att, s.airspeed))), axis=1)
+        reason = None
+        for i, who in enumerate(s.ids):
+            if bad[i]:
+                reason = f"NaN in {who} state"
+            elif s.pos[i, 2] < GROUND_M:
+                reason = f"{who} hit the ground"
+            elif not ENVELOPE_AIRSPEED_MPS[0] <= s.airspeed[i] <= ENVELOPE_AIRSPEED_MPS[1]:
+                reason = f"{who} left the flight envelope (airspeed {s.airspeed[i]:.1f} m/s)"
+            elif abs(s.att[i, 0]) > ENVELOPE_BANK_RAD:
+                reason = f"{who} left the flight envelope (bank {math.degrees(s.att[i, 0]):.0f} deg)"
+            elif abs(s.att[i, 1]) > ENVELOPE_PITCH_RAD:
+                reason = f"{who} left the flight envelope (pitch {math.degrees(s.att[i, 1]):.0f} deg)"
+            if reason:
+                self._failure = f"{reason} at t = {s.t:.2f} s"
+                log.warning("%s", self._failure)
+                return True
+        return False
+
+    def close(self) -> None:
+        for a in self.aircraft:
+            a.close()
+        self.aircraft = []
+        self._runs = []
+
+    def __enter__(self) -> JSBSimWorld:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
