@@ -61,7 +61,7 @@ BROKEN: list[tuple[str, tuple[str, ...]]] = [
     ("name: x\nownship: {start: {x: 5000}}\n", ("ownship.start", "outside the world")),
     ("name: x\nownship: {aircraft: cessna}\n", ("aircraft 'cessna'", "known")),
     ("name: x\nbridge: {signing_key_hex: abc}\n", ("signing_key_hex", "64 hexadecimal")),
-    ("name: x\nbridge: {mavlink: 'http://x'}\n", ("bridge.mavlink", "udpout:127.0.0.1")),
+    ("name: x\nbridge: {mavlink: 'http://x'}\n", ("bridge.mavlink", "udpout:HOST:PORT")),
     ("name: x\ncomms: {users: {count: 3, positions: [[1, 2]]}}\n", ("comms.users", "count is 3")),
     ("name: x\ncomms: {users: {region: {x: [0, 5000]}}}\n", ("region", "inside the world")),
     ("name: x\nintruders: {list: [{x: 1, y: 2}]}\n", ("intruders.list.0.h", "required")),

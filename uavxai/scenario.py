@@ -21,7 +21,7 @@ from pydantic import (
     model_validator,
 )
 
-from uavxai.errors import ScenarioError
+from uavxai.errors import ScenarioError, UserError
 from uavxai.paths import aircraft_dir
 
 PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
@@ -299,20 +299,14 @@ class Scenario(_Model):
 
 
 # ----------------------------------------------------------------------------------- loading
-MAVLINK_URL_PREFIXES = ("udpout:", "udpin:", "udp:", "tcp:", "tcpin:", "udpbcast:")
-
-
 def check_mavlink_url(url: str) -> str:
-    """Refuse connection strings pymavlink would not understand, and any non-loopback target
-    is left to the user (we only check the form)."""
-    if not url.startswith(MAVLINK_URL_PREFIXES) or url.count(":") < 2:
-        raise ValueError(
-            f"'{url}' is not a MAVLink connection string; use e.g. udpout:127.0.0.1:14550, "
-            "udpin:0.0.0.0:14550 or tcp:127.0.0.1:5760"
-        )
-    port = url.rsplit(":", 1)[1]
-    if not port.isdigit() or not 0 < int(port) < 65536:
-        raise ValueError(f"'{url}': the port must be a number between 1 and 65535")
+    """Check the form of a pymavlink connection string (the bridge's rule, one place)."""
+    from uavxai.bridges.link import check_link
+
+    try:
+        check_link(url)
+    except UserError as exc:
+        raise ValueError(str(exc)) from None
     return url
 
 

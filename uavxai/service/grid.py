@@ -28,7 +28,6 @@ import numpy as np
 from uavxai.comms.channel import Channel
 from uavxai.comms.service_env import SearchSpace, levels_to_power
 
-LAMBDA_CAP = 3  # QoS-failure counts tracked one by one; more are lumped (an upper bound)
 BATCH = 96  # positions per vectorised DP call (memory ~ BATCH * 80 kB per array)
 INITIAL_BOX = 8  # lattice points per side of the first boxes
 
@@ -57,65 +56,52 @@ def level_rates(
 
 
 def _knapsack(
-    rates: np.ndarray, fails: np.ndarray, lam_cap: int, keep_choices: bool = False
-) -> tuple[np.ndarray, np.ndarray, tuple[int, int] | None, list[np.ndarray]]:
-    """Exact DP over users. Returns the best objective per position ``(N,)``, whether it is
-    exact (``lam_cap`` failures were enough), and for N = 1 with ``keep_choices`` the best
-    ``(S index, lambda)`` and the per-user choice tables for backtracking."""
+    rates: np.ndarray, fails: np.ndarray, keep_choices: bool = False
+) -> tuple[np.ndarray, tuple[int, int] | None, list[np.ndarray]]:
+    """Exact DP over users: the best objective per position ``(N,)``; with ``keep_choices``
+    (N = 1) also the best ``(S index, lambda)`` and the per-user choice tables to backtrack."""
     N, nS, K, L = rates.shape
     s_max = K * (L - 1)
-    n_lam = lam_cap + 1
     # value[n, S, s, lam]: the best sum rate of the users so far, with levels adding up to s
     # and lam of them below QoS, knowing that all K users will add up to S.
-    value = np.full((N, nS, s_max + 1, n_lam), -np.inf)
+    value = np.full((N, nS, s_max + 1, K + 1), -np.inf)
     value[:, :, 0, 0] = 0.0
     choices: list[np.ndarray] = []
-    neg = np.full((N, nS, s_max + 1, 1), -np.inf)
     for j in range(K):
-        reach = j * (L - 1)  # highest level sum after j users
+        reach = j * (L - 1)  # after j users: level sum <= reach, failures <= j
+        src_all = value[:, :, : reach + 1, : j + 1]
         new = np.full_like(value, -np.inf)
         choice = np.zeros(value.shape, dtype=np.int8) if keep_choices else None
         for level in range(L):
-            src = value[:, :, : reach + 1, :] + rates[:, :, j, level, None, None]
-            # A failure moves one bucket up; the last bucket absorbs the overflow.
-            failed = np.concatenate([neg[:, :, : reach + 1], src[..., :-1]], axis=-1)
-            failed[..., -1] = np.maximum(failed[..., -1], src[..., -1])
-            cand = np.where(fails[:, :, j, level, None, None], failed, src)
-            dst = new[:, :, level : level + reach + 1, :]
-            if choice is not None:
-                choice[:, :, level : level + reach + 1, :][cand > dst] = level
-            np.maximum(dst, cand, out=dst)
+            src = src_all + rates[:, :, j, level, None, None]
+            fail = fails[:, :, j, level, None, None]
+            for lam_shift, keep in ((0, ~fail), (1, fail)):
+                cand = np.where(keep, src, -np.inf)
+                dst = new[:, :, level : level + reach + 1, lam_shift : lam_shift + j + 1]
+                if choice is not None:
+                    better = cand > dst
+                    choice[:, :, level : level + reach + 1, lam_shift : lam_shift + j + 1][
+                        better
+                    ] = level
+                np.maximum(dst, cand, out=dst)
         value = new
         if choice is not None:
             choices.append(choice)
-    final = value[:, np.arange(nS), np.arange(1, nS + 1), :]  # (N, nS, n_lam)
-    objective = final / 2.0 ** np.arange(n_lam)
-    flat = objective.reshape(N, -1).argmax(axis=1)
-    best = objective.reshape(N, -1)[np.arange(N), flat]
-    lam = flat % n_lam
-    exact = (lam < lam_cap) | (lam_cap >= K)
-    where = (int(flat[0] // n_lam), int(lam[0])) if keep_choices else None
-    return best, exact, where, choices
+    final = value[:, np.arange(nS), np.arange(1, nS + 1), :]  # (N, nS, K + 1)
+    objective = (final / 2.0 ** np.arange(K + 1)).reshape(N, -1)
+    flat = objective.argmax(axis=1)
+    best = objective[np.arange(N), flat]
+    where = divmod(int(flat[0]), K + 1) if keep_choices else None
+    return best, where, choices
 
 
-def optimal_objective(
-    channel: Channel, gain: np.ndarray, power_levels: int, exact: bool | np.ndarray = True
-) -> np.ndarray:
-    """The best objective over all discrete power levels for each row of ``gain (N, K)``.
-
-    Rows where ``exact`` is False may get an upper bound instead (cheaper: failures beyond
-    ``LAMBDA_CAP`` are lumped together and only halve the sum rate ``LAMBDA_CAP`` times).
-    """
+def optimal_objective(channel: Channel, gain: np.ndarray, power_levels: int) -> np.ndarray:
+    """The best objective over all discrete power levels for each row of ``gain (N, K)``."""
     gain = np.atleast_2d(gain)
-    need = np.broadcast_to(np.asarray(exact, dtype=bool), len(gain))
     out = np.empty(len(gain))
     for i in range(0, len(gain), BATCH):
         rates, fails = level_rates(channel, gain[i : i + BATCH], power_levels)
-        best, is_exact, _, _ = _knapsack(rates, fails, LAMBDA_CAP)
-        redo = np.flatnonzero(~is_exact & need[i : i + BATCH])
-        if redo.size:  # the winner had more than LAMBDA_CAP failures
-            best[redo] = _knapsack(rates[redo], fails[redo], channel.k)[0]
-        out[i : i + BATCH] = best
+        out[i : i + BATCH] = _knapsack(rates, fails)[0]
     return out
 
 
@@ -124,7 +110,7 @@ def optimal_levels(
 ) -> tuple[np.ndarray, float]:
     """The optimal integer levels ``(K,)`` for one position's gains ``(K,)`` and the objective."""
     rates, fails = level_rates(channel, np.asarray(gain, float)[None, :], power_levels)
-    best, _, (s_index, lam), choices = _knapsack(rates, fails, channel.k, keep_choices=True)
+    best, (s_index, lam), choices = _knapsack(rates, fails, keep_choices=True)
     levels = np.zeros(channel.k, dtype=np.int64)
     s = s_index + 1
     for j in reversed(range(channel.k)):
@@ -171,10 +157,7 @@ def solve_grid(channel: Channel, space: SearchSpace, power_levels: int) -> GridR
 
     frontier = boxes
     while frontier:
-        singles = np.array([size(b) == 1 for b in frontier])
-        bounds = optimal_objective(
-            channel, np.array([bound(b) for b in frontier]), power_levels, exact=singles
-        )
+        bounds = optimal_objective(channel, np.array([bound(b) for b in frontier]), power_levels)
         evaluations += len(frontier)
         children: list[tuple[slice, slice, slice]] = []
         order = np.argsort(-bounds, kind="stable")
