@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 
 from uavxai.avoidance.types import PlannerConfig
@@ -93,3 +94,29 @@ def test_height_change_at_the_planner_climb_rate(dh: float) -> None:
     rate = res["peak_climb_rate_mps"] if dh > 0 else res["peak_sink_rate_mps"]
     assert rate == pytest.approx(2.5, rel=0.15)
     assert abs(res["final_height_error_m"]) < 1.0
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", range(5))
+def test_random_command_sequences_never_lose_control(seed: int) -> None:
+    """Ten minutes of random planner-like commands (bank steps up to the limit, +-1 m/s^2,
+    height changes) among random-turning intruders: nobody stalls, spins or crashes."""
+    from uavxai.dynamics.world import JSBSimWorld
+    from uavxai.scenario import default_scenario
+
+    rng = np.random.default_rng(seed)
+    sc = default_scenario("stress", seed=seed, intruders={"count": 10, "behaviour": "random_turns"})
+    lowest_speed = np.inf
+    with JSBSimWorld(sc) as w:
+        for k in range(600):
+            if k % 4 == 0:
+                w.command_ownship(
+                    bank_cmd_rad=math.radians(float(rng.choice([-30, -20, -10, 0, 10, 20, 30]))),
+                    accel_cmd_mps2=float(rng.choice([-1.0, 0.0, 1.0])),
+                )
+            if k % 60 == 0:
+                w.command_ownship(alt_target_m=float(rng.uniform(60, 250)))
+            w.advance(1.0)
+            lowest_speed = min(lowest_speed, w.state().airspeed.min())
+        assert w.failure() is None
+    assert lowest_speed > 9.0  # 1 g stall speed is about 10 m/s; brief dips only

@@ -4,6 +4,9 @@ The planner API (SPEC §7) works without JSBSim, MAVLink or rerun::
 
     from uavxai.avoidance import MCTSPlanner, PlannerConfig, Ownship, Intruder
     decision = MCTSPlanner(PlannerConfig()).plan(own, intruders, goal)
+
+``make_planner(name, config)`` builds any of them by name (mcts, mcts_fast, exhaustive, none,
+and the learned dqn / safe_dqn).
 """
 
 from uavxai.avoidance.types import (  # noqa: I001  (types first: the planners import them)
@@ -16,8 +19,10 @@ from uavxai.avoidance.types import (  # noqa: I001  (types first: the planners i
     SearchTree,
 )
 from uavxai.avoidance.mcts import MCTSPlanner
+from uavxai.avoidance.planners import PLANNERS, make_planner
 
 __all__ = [
+    "PLANNERS",
     "ChildStats",
     "Decision",
     "Intruder",
@@ -26,4 +31,5 @@ __all__ = [
     "Planner",
     "PlannerConfig",
     "SearchTree",
+    "make_planner",
 ]

@@ -3,17 +3,17 @@
 :func:`search` is the algorithm: it takes the encounter model as an argument and returns the
 whole tree as data (:class:`SearchTree`), so that explanation, drawing and testing read the
 same arrays the search decided from. :class:`MCTSPlanner` wraps it in the planner API of
-SPEC §7: it predicts the intruders once per decision, searches, picks the most visited root
+SPEC §7: it predicts the intruders once per decision, searches, takes the most visited root
 action and explains it.
 
-One simulation walks from the root to the search depth (or to a terminal state): at every node
-it takes the child with the best UCT score ``Q + 2C sqrt(2 ln n / n_j)``, children never
-visited first, ties broken at random; a node met for the first time is expanded (its 9
-children computed at once, vectorised). The value at the end of the walk is 1 for the goal,
-0 for a collision or leaving the map, 0.1 for a time-out and ``1 - d(o, g) / d_max`` otherwise
-(eqs 13/14); it is backed up along the walk. Each tree level holds its action for
-``action_hold_s``. Child states are deterministic, so they are computed once, at expansion,
-and reused by every later simulation.
+One simulation walks from the root down to the search depth (or to a terminal state): at
+every node it takes the child with the best UCT score ``Q + 2C sqrt(2 ln n / n_j)``, children
+never visited first, ties broken at random. A node met for the first time is expanded: its 9
+children are computed at once, vectorised, and kept (child states are deterministic, so every
+later simulation reuses them). The value at the end of the walk is 1 for the goal, 0 for a
+collision or leaving the map, 0.1 for a time-out and ``1 - d(o, g) / d_max`` otherwise (eqs
+13/14); it is backed up along the walk. Each tree level holds its action for
+``action_hold_s``.
 """
 
 from __future__ import annotations
@@ -69,13 +69,14 @@ def search(
     Node 0 is the root; the children of a node are 9 consecutive nodes in action order.
     """
     depth_limit = len(tracks)
-    tree = _Builder(model, root, goal, tracks, hold_s, time_left_s)
+    tree = TreeBuilder(model, root, goal, tracks, hold_s, time_left_s)
     visits, value_sum, first_child = tree.visits, tree.value_sum, tree.first_child
     is_leaf, value = tree.is_leaf, tree.value
     explore = 2.0 * c * math.sqrt(2.0)  # 2C sqrt(2 ln n / n_j) = explore sqrt(ln n) / sqrt(n_j)
     draws = rng.random(simulations * depth_limit).tolist()  # tie-breaks, one per step
     draw = 0
     path = [0] * (depth_limit + 1)
+    actions = range(N_ACTIONS)
     for _ in range(simulations):
         node, length = 0, 1
         while not is_leaf[node]:
@@ -84,15 +85,13 @@ def search(
                 first = tree.expand(node)
             kids = visits[first : first + N_ACTIONS]
             if 0 in kids:
-                best = [j for j in range(N_ACTIONS) if kids[j] == 0]
+                best = [j for j in actions if kids[j] == 0]
             else:
                 e = explore * math.sqrt(math.log(visits[node]))
-                scores = [
-                    value_sum[first + j] / kids[j] + e / math.sqrt(kids[j])
-                    for j in range(N_ACTIONS)
-                ]
+                sums = value_sum[first : first + N_ACTIONS]
+                scores = [sums[j] / kids[j] + e / math.sqrt(kids[j]) for j in actions]
                 top = max(scores)
-                best = [j for j in range(N_ACTIONS) if scores[j] == top]
+                best = [j for j in actions if scores[j] == top]
             pick = best[0] if len(best) == 1 else best[int(draws[draw] * len(best))]
             draw += 1
             node = first + pick
@@ -106,27 +105,16 @@ def search(
     return tree.finish()
 
 
-def best_child(tree: SearchTree, node: int) -> int | None:
-    """The most visited child of ``node`` (ties: higher Q, then lower action), or None."""
-    kids = tree.children_of(node)
-    kids = kids[tree.visits[kids] > 0]
-    if kids.size == 0:
-        return None
-    q = tree.q[kids]
-    order = np.lexsort((tree.action[kids], -q, -tree.visits[kids]))
-    return int(kids[order[0]])
-
-
-def best_line(tree: SearchTree, node: int) -> list[int]:
-    """``node`` and the most visited path below it: what the search expects to follow."""
-    line = [node]
-    while (nxt := best_child(tree, line[-1])) is not None:
-        line.append(nxt)
-    return line
+def chosen_action(tree: SearchTree) -> int:
+    """The root action with the most visits (ties: higher Q, then lower index)."""
+    child = tree.best_child(0)
+    if child is None:
+        raise ValueError("the search visited no root action (simulations must be >= 1)")
+    return int(tree.action[child])
 
 
 class MCTSPlanner:
-    """The MCTS avoidance planner (SPEC §7). Same seed and inputs, same decision."""
+    """The MCTS avoidance planner (SPEC §7). Same seed, same inputs: same decision."""
 
     def __init__(self, config: PlannerConfig | None = None, *, name: str = "mcts") -> None:
         self.config = config or PlannerConfig()
@@ -142,27 +130,21 @@ class MCTSPlanner:
     ) -> Decision:
         t_start = time.perf_counter()
         cfg, model = self.config, self.model
-        root = ownship_state(own)
         goal_xyz = np.asarray(goal, dtype=float)
-        pos, vel = intruder_arrays(intruders)
-        hold = cfg.action_hold_s
-        tracks = [model.predict(pos, vel, hold, t0=d * hold) for d in range(cfg.depth)]
+        tracks = predict_levels(model, intruders, cfg.depth, cfg.action_hold_s)
         tree = search(
             model,
-            root,
+            ownship_state(own),
             goal_xyz,
             tracks,
             simulations=cfg.simulations,
             c=cfg.c,
-            hold_s=hold,
+            hold_s=cfg.action_hold_s,
             rng=self._rng,
             time_left_s=(cfg.max_steps - step) * cfg.decision_period_s,
         )
-        root_child = best_child(tree, 0)
-        assert root_child is not None  # simulations >= 1 visits a root child
-        action = int(tree.action[root_child])
         decision = decision_from_tree(
-            tree, action, own, intruders, goal_xyz, tracks, model, name=self.name
+            tree, chosen_action(tree), own, intruders, goal_xyz, tracks, model, name=self.name
         )
         decision.ms = 1000.0 * (time.perf_counter() - t_start)
         return decision
@@ -174,6 +156,14 @@ def intruder_arrays(intruders: Sequence[Intruder]) -> tuple[np.ndarray, np.ndarr
         return np.zeros((0, 3)), np.zeros((0, 3))
     a = np.array([(i.x, i.y, i.h, i.vx, i.vy, i.vh) for i in intruders], dtype=float)
     return a[:, :3], a[:, 3:]
+
+
+def predict_levels(
+    model: EncounterModel, intruders: Sequence[Intruder], depth: int, hold_s: float
+) -> list[Track]:
+    """Constant-velocity tracks for each tree level, computed once per decision."""
+    pos, vel = intruder_arrays(intruders)
+    return [model.predict(pos, vel, hold_s, t0=d * hold_s) for d in range(depth)]
 
 
 def decision_from_tree(
@@ -189,29 +179,39 @@ def decision_from_tree(
 ) -> Decision:
     """Everything a tree says about a decision: per-root-action stats, plan, explanation.
 
+    The best line under every root action is re-flown exactly against every intruder (the
+    search itself may skip far ones), and those numbers are written back into the tree.
     Shared by the tree planners (MCTS and exhaustive).
     """
     from uavxai.xai.explain import explain  # xai reads planner types; import late, no cycle
 
     cfg = model.config
     ids = [i.id for i in intruders]
-    root = ownship_state(own)
-    children: list[ChildStats] = []
-    chosen_line: list[int] = []
-    for node in tree.children_of(0):
-        a = int(tree.action[node])
-        line = best_line(tree, int(node))
-        if a == action:
-            chosen_line = line
-        children.append(_child_stats(tree, a, line, root, cfg, ids))
+    root_children = tree.children_of(0)
+    lines = {int(tree.action[ch]): tree.best_line(int(ch)) for ch in root_children}
+    samples = _remeasure(model, tree, [n for line in lines.values() for n in line], goal, tracks)
+    children = [_child_stats(tree, a, line, own, cfg, ids) for a, line in lines.items()]
 
-    # The trust figure: the chosen action held for one decision period, every intruder.
+    chosen_line = lines[action]
+    plan = [np.array([[own.x, own.y, own.h]])]
+    for node in chosen_line:
+        plan.append(samples[node][1:])
+        if tree.terminal[node] != NONE:
+            break
+
+    # The trust figure: the chosen action held for one decision period, against every
+    # intruder, exactly; the dynamics then fly that period before the next decision.
     period = cfg.decision_period_s
     pos, vel = intruder_arrays(intruders)
     next_seg = model.fly(
-        root[None], np.array([action]), goal, period, model.predict(pos, vel, period), cull=False
+        ownship_state(own)[None],
+        np.array([action]),
+        goal,
+        period,
+        model.predict(pos, vel, period),
+        cull=False,
+        exact=True,
     )
-    branch_sep = float(np.min(tree.min_sep[chosen_line])) if chosen_line else math.inf
     visits_root = int(tree.visits[0])
     chosen = next(ch for ch in children if ch.action == action)
     decision = Decision(
@@ -221,10 +221,10 @@ def decision_from_tree(
         children=children,
         explanation="",
         tree=tree,
-        plan=_plan_path(model, tree, chosen_line, goal, tracks, root),
+        plan=np.concatenate(plan),
         predicted_min_separation_m=float(next_seg.min_sep[0]),
         confidence=chosen.visits / visits_root if visits_root else 0.0,
-        branch_min_separation_m=branch_sep,
+        branch_min_separation_m=chosen.predicted_min_separation_m,
         planner=name,
         d_min_m=cfg.d_min_m,
     )
@@ -232,57 +232,72 @@ def decision_from_tree(
     return decision
 
 
-def _child_stats(
+def _remeasure(
+    model: EncounterModel,
     tree: SearchTree,
-    action: int,
-    line: list[int],
-    root: np.ndarray,
-    cfg: PlannerConfig,
-    ids: list,
+    nodes: list[int],
+    goal: np.ndarray,
+    tracks: Sequence[Track],
+) -> dict[int, np.ndarray]:
+    """Re-fly the edges into ``nodes`` exactly, against every intruder; one call per level.
+
+    Updates the tree's min_sep, closest and t_closest of those nodes; returns each node's
+    (n+1, 3) sub-step positions.
+    """
+    assert tree.state is not None and tree.t_closest is not None
+    hold = model.config.action_hold_s
+    nodes_arr = np.array(nodes, dtype=int)
+    samples: dict[int, np.ndarray] = {}
+    for d in range(len(tracks)):
+        group = nodes_arr[tree.depth[nodes_arr] == d + 1]
+        if group.size == 0:
+            continue
+        seg = model.fly(
+            tree.state[tree.parent[group]],
+            tree.action[group],
+            goal,
+            hold,
+            tracks[d],
+            cull=False,
+            exact=True,
+        )
+        tree.min_sep[group] = seg.min_sep
+        tree.closest[group] = seg.closest
+        tree.t_closest[group] = seg.t_closest + d * hold
+        for node, points in zip(group.tolist(), seg.samples, strict=True):
+            samples[node] = points
+    return samples
+
+
+def _child_stats(
+    tree: SearchTree, action: int, line: list[int], own: Ownship, cfg: PlannerConfig, ids: list
 ) -> ChildStats:
+    assert tree.t_closest is not None
     seps = tree.min_sep[line]
     k = int(np.argmin(seps))
     closest = int(tree.closest[line[k]])
-    finite = bool(np.isfinite(seps[k]))
-    t_closest = tree.t_closest[line[k]] if tree.t_closest is not None else math.nan
+    known = bool(np.isfinite(seps[k])) and closest >= 0
     return ChildStats(
         action=action,
-        bank_cmd_rad=float(bank_command(root[6], action, cfg)),
+        bank_cmd_rad=float(bank_command(own.bank, action, cfg)),
         accel_mps2=float(accel_command(action, cfg)),
         visits=int(tree.visits[line[0]]),
         q=float(tree.q[line[0]]),
         predicted_min_separation_m=float(seps[k]),
-        closest_intruder=ids[closest] if finite and closest >= 0 else None,
-        time_to_closest_s=float(t_closest) if finite else None,
+        closest_intruder=ids[closest] if known else None,
+        time_to_closest_s=float(tree.t_closest[line[k]]) if known else None,
         outcome=OUTCOME_NAMES[int(tree.terminal[line[-1]])],
     )
 
 
-def _plan_path(
-    model: EncounterModel,
-    tree: SearchTree,
-    line: list[int],
-    goal: np.ndarray,
-    tracks: Sequence[Track],
-    root: np.ndarray,
-) -> np.ndarray:
-    """(P, 3) sub-step positions along the chosen line, from now to its end."""
-    points = [root[None, :3]]
-    state = root
-    for d, node in enumerate(line):
-        seg = model.fly(
-            state[None], tree.action[node : node + 1], goal, model.config.action_hold_s, tracks[d]
-        )
-        points.append(seg.samples[0, 1:])
-        state = seg.end[0]
-        if seg.event[0] != NONE:
-            break
-    return np.concatenate(points)
+class TreeBuilder:
+    """A growing search tree over the encounter model (MCTS grows it, exhaustive fills it).
 
-
-class _Builder:
-    """The growing tree: hot statistics in Python lists (cheap to touch one element at a time
-    from the simulation loop), per-child arrays appended a block of 9 at a time."""
+    Node 0 is the root; :meth:`expand` appends a node's 9 children as one block. Hot
+    statistics are Python lists (cheap to touch one element at a time from the simulation
+    loop); per-child arrays are appended a block at a time. ``value`` holds what a walk that
+    ends at the node scores: the terminal value, or eq 13 at the depth limit (nan otherwise).
+    """
 
     def __init__(self, model, root, goal, tracks, hold_s: float, time_left_s: float) -> None:
         self.model, self.goal, self.tracks = model, goal, tracks
@@ -297,7 +312,7 @@ class _Builder:
         self.terminal = [NONE]
         self.is_leaf = [False]
         self.value = [math.nan]
-        self.states = [root[None]]
+        self.states = [np.asarray(root, dtype=float)[None]]
         self.min_sep = [np.array([np.inf])]
         self.closest = [np.array([-1])]
         self.t_closest = [np.array([math.nan])]
@@ -305,13 +320,14 @@ class _Builder:
     def expand(self, node: int) -> int:
         """Compute the 9 children of ``node``; returns the index of the first."""
         d = self.depth[node]
+        # Blocks: [root], then 9 children per expansion, in node order.
         state = self.states[(node + 8) // 9][(node - 1) % 9] if node else self.states[0][0]
         seg = self.model.fly_all_actions(state, self.goal, self.hold_s, self.tracks[d])
         code = seg.event
         if (d + 1) * self.hold_s >= self.time_left_s - 1e-9:
             code = np.where(code == NONE, TIMEOUT, code).astype(np.int8)
         leaf_depth = d + 1 == self.depth_limit
-        value = _VALUE_OF[code]  # nan for open nodes: only leaves are ever evaluated
+        value = _VALUE_OF[code]  # nan for open nodes: only where a walk ends is evaluated
         if leaf_depth:
             value = np.where(code == NONE, self.model.leaf_value(seg.end, self.goal), value)
         first = len(self.parent)
@@ -345,4 +361,5 @@ class _Builder:
             terminal=np.array(self.terminal, dtype=np.int8),
             pos=states[:, :3].copy(),
             t_closest=np.concatenate(self.t_closest),
+            state=states,
         )

@@ -10,23 +10,30 @@ the commanded acceleration within the speed limits; the altitude moves towards t
 altitude (the target the JSBSim autopilot holds) at a bounded climb rate. Everything is in
 closed form over a grid of sub-steps, so a segment costs a fixed number of numpy calls.
 
-Intruders are given as a :class:`Track`: their positions at the segment's sub-step instants
-(constant velocity when predicted). Collision is a 3-D separation below ``d_min`` at *any*
-instant: within one sub-step both aircraft move on straight lines (the ownship on the exact
-chord of its arc), so the closest approach on every sub-step is solved in closed form and a
-pass-through between samples is caught.
+Intruders come as a :class:`Track`: their positions at the segment's sub-step instants
+(constant velocity when predicted). Within one sub-step both aircraft move on straight lines
+(the ownship on the exact chord of its arc), so separation is known at *every* instant:
 
-Speed (a tree search calls this hundreds of times per decision): the ownship's motion relative
-to its start, in its own body frame, depends only on (speed, bank, bank command) and the
-action, so :meth:`EncounterModel.fly_all_actions` memoises it; and intruders, the goal and
-walls that cannot be reached within the segment are skipped before the closed-form checks.
-Both are exact: they change the cost, never the answer.
+* collision (3-D separation below ``d_min`` anywhere, a pass-through between samples
+  included) is always decided exactly: either the closest approach on every sub-step is
+  solved in closed form, or the sampled distances prove there is none (no point of a chord is
+  farther than half its length from an end);
+* ``min_sep`` is exact whenever it is within ``d_min + `` one relative sub-step of a conflict,
+  or when asked for (``exact=True``); otherwise it is the minimum over the sub-step instants,
+  which overstates the true minimum ``d`` by at most ``L^2 / (8 d)`` for a relative sub-step
+  ``L``: under 2 m with the defaults (0.5 s sub-steps, 30 m/s aircraft, d > 65 m).
+
+Speed (a tree search calls this hundreds of times per decision): the ownship's motion
+relative to its start, in its body frame, depends only on (speed, bank, bank command) and the
+action, so :meth:`EncounterModel.fly_all_actions` memoises it together with a ball bounding
+all nine paths; intruders, goal and walls outside that ball's reach are skipped. Horizontal
+positions are complex numbers ``x + iy`` so that a rotation is one multiplication.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -78,26 +85,38 @@ def accel_command(action, cfg: PlannerConfig):
     return _ACCEL_SIGN[action] * cfg.accel_mps2
 
 
+# ---------------------------------------------------------------------------------- intruders
 @dataclass(frozen=True)
 class Track:
     """Intruder positions at a segment's sub-step instants, and a ball bounding each path.
 
     Between two instants an intruder moves in a straight line, so the ball around its samples
-    holds its whole path: an ownship that cannot get within ``d_min`` of the ball is safe from
-    it for the segment.
+    holds its whole path.
     """
 
     pos: np.ndarray  # (n+1, N, 3)
-    centre: np.ndarray  # (N, 3)
-    radius: np.ndarray  # (N,)
+    xy: np.ndarray = field(repr=False)  # (n+1, N) complex x + iy
+    h: np.ndarray = field(repr=False)  # (n+1, N)
+    centre: np.ndarray = field(repr=False)  # (N, 3)
+    radius: np.ndarray = field(repr=False)  # (N,)
+    step_max: float = 0.0  # longest straight piece of any path (one sub-step), m
 
     @classmethod
     def of(cls, pos: np.ndarray) -> Track:
-        if pos.ndim != 3 or pos.shape[2] != 3:
-            raise ValueError(f"intruder positions must be (n+1, N, 3), got {pos.shape}")
+        pos = np.asarray(pos, dtype=float)
+        if pos.ndim != 3 or pos.shape[2] != 3 or pos.shape[0] < 2:
+            raise ValueError(f"intruder positions must be (n+1, N, 3) with n >= 1, got {pos.shape}")
         centre = 0.5 * (pos.min(axis=0) + pos.max(axis=0))
         radius = np.sqrt(np.max(np.sum((pos - centre) ** 2, axis=2), axis=0))
-        return cls(pos, centre, radius)
+        steps = np.sqrt(np.sum(np.diff(pos, axis=0) ** 2, axis=2))
+        return cls(
+            pos=pos,
+            xy=pos[:, :, 0] + 1j * pos[:, :, 1],
+            h=np.ascontiguousarray(pos[:, :, 2]),
+            centre=centre,
+            radius=radius,
+            step_max=float(steps.max()) if steps.size else 0.0,
+        )
 
     @property
     def n(self) -> int:
@@ -108,46 +127,55 @@ class Track:
     def count(self) -> int:
         return self.pos.shape[1]
 
-    def near(self, point: np.ndarray, distance: float) -> np.ndarray:
-        """Indices of intruders whose path may come within ``distance`` of ``point`` (3,)."""
-        d2 = np.sum((self.centre - point) ** 2, axis=1)
-        return np.flatnonzero(d2 <= (distance + self.radius) ** 2)
-
-    def near_any(self, points: np.ndarray, distance: float) -> np.ndarray:
-        """As :meth:`near`, for any of the ``points`` (B, 3)."""
-        d2 = np.sum((self.centre[None] - points[:, None]) ** 2, axis=2).min(axis=0)
-        return np.flatnonzero(d2 <= (distance + self.radius) ** 2)
+    def near(self, centre: np.ndarray, distance: float) -> np.ndarray:
+        """Indices of intruders whose path may come within ``distance`` of ``centre`` (3,)."""
+        d = self.centre - centre
+        return np.flatnonzero(np.einsum("ij,ij->i", d, d) <= (distance + self.radius) ** 2)
 
 
+# ----------------------------------------------------------------------------------- segments
 @dataclass(frozen=True)
 class Segment:
     """A batch of ownship states, each flying one action for the same duration.
 
     ``min_sep``, ``closest`` and ``t_closest`` count the segment only up to its event: after
     reaching the goal (or colliding) nothing more is flown. Intruders that cannot come within
-    ``d_min`` are skipped unless the segment was flown with ``cull=False``, so a segment with
-    none in reach reports ``min_sep`` inf and ``closest`` -1.
+    ``d_min`` are skipped unless flown with ``cull=False``; a segment with none in reach
+    reports ``min_sep`` inf and ``closest`` -1.
     """
 
     end: np.ndarray  # (B, 7) states at the end
-    samples: np.ndarray | None  # (B, n+1, 3) positions at the sub-step instants (see fly_all)
-    min_sep: np.ndarray  # (B,) smallest 3-D distance to an intruder, m
+    min_sep: np.ndarray  # (B,) smallest 3-D distance to an intruder, m (see module docstring)
     closest: np.ndarray  # (B,) index of that intruder
     t_closest: np.ndarray  # (B,) seconds from the segment's start to that closest approach
     event: np.ndarray  # (B,) int8 terminal code, NONE when nothing happened
     t_event: np.ndarray  # (B,) seconds from the start to the start of the event's sub-step
+    xy: np.ndarray = field(repr=False)  # (B, n+1) complex positions at the sub-step instants
+    hs: np.ndarray = field(repr=False)  # (B or 1, n+1) altitudes at the sub-step instants
+
+    @property
+    def samples(self) -> np.ndarray:
+        """(B, n+1, 3) positions at the sub-step instants."""
+        h = np.broadcast_to(self.hs, self.xy.shape)
+        return np.stack([self.xy.real, self.xy.imag, h], axis=-1)
 
 
 @dataclass(frozen=True)
 class _BodyMotion:
-    """Motion relative to the start, in the start's body frame (forward, right)."""
+    """Motion relative to the start, in the start's body frame: ``right + i forward``."""
 
-    fwd: np.ndarray  # (B, n+1) m
-    right: np.ndarray  # (B, n+1) m
+    z: np.ndarray  # (B, n+1) complex
     dpsi: np.ndarray  # (B,) heading change, rad
     v_end: np.ndarray  # (B,)
     phi_end: np.ndarray  # (B,)
     phi_cmd: np.ndarray  # (B,)
+    ball: complex = 0j  # centre of a circle holding every row's path (body frame) ...
+    ball_r: float = 0.0  # ... and its radius
+    step_max: float = 0.0  # longest horizontal sub-step chord of any row
+
+
+# Where a batch of paths stays: (centre (3,), horizontal radius, half-height).
+_Cylinder = tuple[np.ndarray, float, float]
 
 
 def _frozen(a: np.ndarray) -> np.ndarray:
@@ -160,8 +188,6 @@ class EncounterModel:
 
     def __init__(self, config: PlannerConfig) -> None:
         self.config = config
-        self._lo = np.array([config.x_bounds[0], config.y_bounds[0], config.h_bounds[0]])
-        self._hi = np.array([config.x_bounds[1], config.y_bounds[1], config.h_bounds[1]])
         self._roll = math.radians(config.roll_rate_limit_deg_s)
         self._memo: dict[tuple[float, float, float, float], _BodyMotion] = {}
         # What a segment with nothing in reach reports, shared and read-only.
@@ -189,11 +215,6 @@ class EncounterModel:
         d = np.sqrt(np.sum((positions[..., :3] - goal) ** 2, axis=-1))
         return 1.0 - d / self.config.d_max
 
-    def reach(self, speed: float, duration: float) -> float:
-        """How far (3-D) the ownship can get from its start within ``duration``."""
-        v_top = max(self.config.speed_mps[1], speed)
-        return math.hypot(v_top, self.config.climb_rate_mps) * duration
-
     # -------------------------------------------------------------------------------- flying
     def fly(
         self,
@@ -204,35 +225,42 @@ class EncounterModel:
         track: Track,
         *,
         cull: bool = True,
+        exact: bool = False,
     ) -> Segment:
         """Fly ``actions`` (B,) from ``states`` (B, 7) for ``duration`` seconds.
 
         ``track`` holds the intruders at this segment's sub-step instants (``predict`` makes
-        it). ``cull=False`` measures the separation to every intruder, in reach or not.
+        it). ``cull=False`` measures every intruder, in reach or not; ``exact=True`` solves
+        the closest approach on every sub-step even when nothing comes near.
         """
-        cfg = self.config
         n = self._check(duration, track)
+        states = np.asarray(states, dtype=float)
         body = self._body(states[:, V], states[:, PHI], states[:, PHI_CMD], actions, duration, n)
-        x, y, h, psi = (states[:, k, None] for k in (X, Y, H, PSI))
-        end = self._end(x, y, h, psi, body, goal[2], duration)
-        samples = self._samples(x, y, h, psi, body, goal[2], duration, n)
-        start = states[:, :3]
-        reach = self.reach(float(states[:, V].max()), duration)
-        near_goal = np.min(np.sum((start - goal) ** 2, axis=1)) <= (reach + cfg.goal_radius_m) ** 2
-        climb = cfg.climb_rate_mps * duration
-        span = np.array([reach, reach, climb])
-        near_wall = bool(np.any(start - span < self._lo) or np.any(start + span > self._hi))
-        near = track.near_any(start, reach + cfg.d_min_m) if cull else np.arange(track.count)
-        return self._events(end, samples, goal, track, near, near_goal, near_wall, duration / n)
+        p = states[:, X, None] + 1j * states[:, Y, None]
+        rot = np.exp(-1j * states[:, PSI, None])
+        xy = p + body.z * rot
+        h0 = states[:, H, None]
+        hs = h0 + np.clip(goal[2] - h0, *self._climb_window(duration, n))
+        end = self._end(xy[:, -1], hs[:, -1], states[:, PSI], body)
+
+        # A cylinder around every row's samples: centred on their box, radius r_xy to the
+        # farthest, half-height r_h.
+        lo = np.array([xy.real.min(), xy.imag.min(), hs.min()])
+        hi = np.array([xy.real.max(), xy.imag.max(), hs.max()])
+        centre = 0.5 * (lo + hi)
+        r_xy = float(np.abs(xy - complex(centre[0], centre[1])).max())
+        r_h = 0.5 * float(hi[2] - lo[2])
+        reach = math.hypot(r_xy, r_h) + self.config.d_min_m
+        near = track.near(centre, reach) if cull else np.arange(track.count)
+        own_step = self._own_step(body, duration / n)
+        return self._events(
+            end, xy, hs, goal, track, near, (centre, r_xy, r_h), duration / n, own_step, exact
+        )
 
     def fly_all_actions(
         self, state: np.ndarray, goal: np.ndarray, duration: float, track: Track
     ) -> Segment:
-        """The 9 children of one state, in action order: ``fly`` with every action, memoised.
-
-        The answer equals ``fly``'s, except that ``samples`` is None when nothing (intruder,
-        goal or wall) was within reach, since then no sample was needed.
-        """
+        """The 9 children of one state, in action order: ``fly`` with every action, memoised."""
         cfg = self.config
         n = self._check(duration, track)
         x, y, h, v, psi, phi, cmd = state.tolist()
@@ -246,24 +274,41 @@ class EncounterModel:
                 self._memo.clear()
             v_, phi_, cmd_ = (np.full(N_ACTIONS, k) for k in key[:3])
             body = self._memo[key] = self._body(v_, phi_, cmd_, ALL_ACTIONS, duration, n)
-        end = self._end(x, y, h, psi, body, goal[2], duration)
-
-        reach = self.reach(v, duration)
+        rot = complex(math.cos(psi), -math.sin(psi))
+        xy = complex(x, y) + body.z * rot
         climb = cfg.climb_rate_mps * duration
-        near_goal = math.dist((x, y, h), goal) <= reach + cfg.goal_radius_m
-        near_wall = not (
-            cfg.x_bounds[0] <= x - reach
-            and x + reach <= cfg.x_bounds[1]
-            and cfg.y_bounds[0] <= y - reach
-            and y + reach <= cfg.y_bounds[1]
-            and cfg.h_bounds[0] <= h - climb
-            and h + climb <= cfg.h_bounds[1]
+        h_end = h + min(max(goal[2] - h, -climb), climb)
+        if h_end == h:
+            hs = np.full((1, n + 1), h)
+        else:
+            hs = h + np.clip(goal[2] - h, *self._climb_window(duration, n))[None]
+        end = self._end(xy[:, -1], h_end, psi, body)
+
+        c = complex(x, y) + body.ball * rot
+        centre = np.array([c.real, c.imag, 0.5 * (h + h_end)])
+        box = (centre, body.ball_r, 0.5 * abs(h_end - h))
+        near = track.near(centre, math.hypot(box[1], box[2]) + cfg.d_min_m)
+        if not near.size and not self._near_goal_or_wall(box, goal):
+            return Segment(end, *self._quiet, xy=xy, hs=hs)
+        own_step = self._own_step(body, duration / n)
+        return self._events(end, xy, hs, goal, track, near, box, duration / n, own_step, False)
+
+    def fly_commanded(
+        self, states: np.ndarray, bank_cmd: np.ndarray, duration: float
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Fly ``states`` (B, 7) for ``duration`` with the bank commanded straight to
+        ``bank_cmd`` (B,) (clamped to the limit), speed and altitude held: how the other
+        aircraft fly. Returns the (n+1, B, 3) positions at the sub-step instants (a Track's
+        layout) and the (B, 7) end states. No event checks."""
+        n = self.substeps(duration)
+        hold = np.full(len(states), 4)  # hold bank, hold speed: the command is bank_cmd itself
+        body = self._body(states[:, V], states[:, PHI], bank_cmd, hold, duration, n)
+        xy = (states[:, X, None] + 1j * states[:, Y, None]) + body.z * np.exp(
+            -1j * states[:, PSI, None]
         )
-        near = track.near(state[:3], reach + cfg.d_min_m)
-        if not (near.size or near_goal or near_wall):
-            return Segment(end, None, *self._quiet)
-        samples = self._samples(x, y, h, psi, body, goal[2], duration, n)
-        return self._events(end, samples, goal, track, near, near_goal, near_wall, duration / n)
+        end = self._end(xy[:, -1], states[:, H], states[:, PSI], body)
+        pos = np.stack([xy.real.T, xy.imag.T, np.broadcast_to(states[:, H], xy.T.shape)], axis=-1)
+        return pos, end
 
     def _check(self, duration: float, track: Track) -> int:
         n = self.substeps(duration)
@@ -272,6 +317,30 @@ class EncounterModel:
                 f"the intruder track has {track.n} sub-steps, a {duration} s segment has {n}"
             )
         return n
+
+    def _own_step(self, body: _BodyMotion, dt: float) -> float:
+        """Longest 3-D straight piece of the ownship's sampled path."""
+        return math.hypot(body.step_max, self.config.climb_rate_mps * dt)
+
+    def _climb_window(self, duration: float, n: int) -> tuple[np.ndarray, np.ndarray]:
+        climb = self.config.climb_rate_mps * (duration / n) * np.arange(n + 1)
+        return -climb, climb
+
+    def _near_goal_or_wall(self, box: _Cylinder, goal: np.ndarray) -> bool:
+        """Could a path inside ``box`` reach the goal or leave the flight area?"""
+        cfg = self.config
+        centre, r_xy, r_h = box
+        x, y, h = centre.tolist()
+        if math.dist((x, y, h), goal) <= math.hypot(r_xy, r_h) + cfg.goal_radius_m:
+            return True
+        return not (
+            cfg.x_bounds[0] <= x - r_xy
+            and x + r_xy <= cfg.x_bounds[1]
+            and cfg.y_bounds[0] <= y - r_xy
+            and y + r_xy <= cfg.y_bounds[1]
+            and cfg.h_bounds[0] <= h - r_h
+            and h + r_h <= cfg.h_bounds[1]
+        )
 
     def _body(self, v0, phi0, cmd0, actions, duration: float, n: int) -> _BodyMotion:
         cfg = self.config
@@ -292,10 +361,8 @@ class EncounterModel:
         psi = np.cumsum(dpsi, axis=1)
         chord = v_m * dt * np.sinc(dpsi / (2.0 * np.pi))
         rel_heading = psi - 0.5 * dpsi  # mid-sub-step heading relative to the start
-        fwd = np.zeros((len(v0), n + 1))
-        right = np.zeros((len(v0), n + 1))
-        np.cumsum(chord * np.cos(rel_heading), axis=1, out=fwd[:, 1:])
-        np.cumsum(chord * np.sin(rel_heading), axis=1, out=right[:, 1:])
+        z = np.zeros((len(v0), n + 1), dtype=complex)
+        np.cumsum(chord * np.exp(1j * (0.5 * np.pi - rel_heading)), axis=1, out=z[:, 1:])
 
         # End values land exactly on the command / limit once reached, so lattice states
         # (and their memo keys) repeat.
@@ -304,84 +371,97 @@ class EncounterModel:
             np.abs(dphi[:, 0]) <= roll_reach, phi_cmd, phi0 + np.sign(dphi[:, 0]) * roll_reach
         )
         v_end = np.clip(v0 + accel * duration, vmin, vmax)
-        return _BodyMotion(fwd, right, psi[:, -1], v_end, phi_end, phi_cmd)
+        lo = complex(z.real.min(), z.imag.min())
+        hi = complex(z.real.max(), z.imag.max())
+        ball = 0.5 * (lo + hi)
+        return _BodyMotion(
+            z=z,
+            dpsi=psi[:, -1],
+            v_end=v_end,
+            phi_end=phi_end,
+            phi_cmd=phi_cmd,
+            ball=ball,
+            ball_r=float(np.abs(z - ball).max()),
+            step_max=float(chord.max()),
+        )
 
-    # The start (x, y, h, psi) is either Python floats (one state for every row) or (B, 1)
-    # arrays; the float case is the tree search's hot path, hence math rather than numpy.
-    def _end(self, x, y, h, psi, body: _BodyMotion, goal_h: float, duration: float):
-        climb = self.config.climb_rate_mps * duration
-        f, r = body.fwd[:, -1], body.right[:, -1]
-        end = np.empty((len(f), STATE_DIM))
-        if isinstance(psi, float):
-            s, c = math.sin(psi), math.cos(psi)
-            end[:, H] = h + min(max(goal_h - h, -climb), climb)
-        else:
-            x, y, h, psi = x[:, 0], y[:, 0], h[:, 0], psi[:, 0]
-            s, c = np.sin(psi), np.cos(psi)
-            end[:, H] = h + np.clip(goal_h - h, -climb, climb)
-        end[:, X] = x + f * s + r * c
-        end[:, Y] = y + f * c - r * s
+    def _end(self, xy_end, h_end, psi, body: _BodyMotion) -> np.ndarray:
+        end = np.empty((len(body.dpsi), STATE_DIM))
+        end[:, X] = xy_end.real
+        end[:, Y] = xy_end.imag
+        end[:, H] = h_end
         end[:, V] = body.v_end
         end[:, PSI] = np.mod(psi + body.dpsi, 2.0 * np.pi)
         end[:, PHI] = body.phi_end
         end[:, PHI_CMD] = body.phi_cmd
         return end
 
-    def _samples(self, x, y, h, psi, body: _BodyMotion, goal_h: float, duration: float, n: int):
-        trig = math if isinstance(psi, float) else np
-        s, c = trig.sin(psi), trig.cos(psi)
-        samples = np.empty((len(body.fwd), n + 1, 3))
-        samples[:, :, 0] = x + body.fwd * s + body.right * c
-        samples[:, :, 1] = y + body.fwd * c - body.right * s
-        climb = self.config.climb_rate_mps * (duration / n) * np.arange(n + 1)
-        samples[:, :, 2] = h + np.clip(goal_h - h, -climb, climb)
-        return samples
-
     # -------------------------------------------------------------------------------- events
     def _events(
         self,
         end: np.ndarray,
-        samples: np.ndarray,
+        xy: np.ndarray,
+        hs: np.ndarray,
         goal: np.ndarray,
         track: Track,
         near: np.ndarray,
-        near_goal: bool,
-        near_wall: bool,
+        box: _Cylinder,
         dt: float,
+        own_step: float,
+        exact: bool,
     ) -> Segment:
         cfg = self.config
-        B, n = samples.shape[0], samples.shape[1] - 1
+        B, n = xy.shape[0], xy.shape[1] - 1
         rows = np.arange(B)
-        if near.size:
-            d2, s = _closest_on_chords(samples[:, :, None, :] - track.pos[:, near][None])
-            k = near.size
-            flat = d2.reshape(B, n * k).argmin(axis=1)  # the closest approach: sub-step, who
-            d2_min = d2.reshape(B, n * k)[rows, flat]
+        k = near.size
+        goal_or_wall = self._near_goal_or_wall(box, goal)
+        if k:
+            rel_xy = xy[:, :, None] - track.xy[:, near][None]  # (B, n+1, k)
+            rel_h = hs[:, :, None] - track.h[:, near][None]  # (B or 1, n+1, k)
+            d2 = rel_xy.real**2
+            d2 += rel_xy.imag**2
+            d2 += rel_h**2
+            flat = d2.reshape(B, (n + 1) * k).argmin(axis=1)
             k_min, j_min = np.divmod(flat, k)
-            if not (near_goal or near_wall) and d2_min.min() >= cfg.d_min_m**2:
-                # The common case: nothing happens, so the whole segment counts.
-                quiet = self._quiet
+            d2_min = d2[rows, k_min, j_min]
+            # No point of a sub-step's relative chord is farther than half its length from
+            # an end; so if every sampled distance clears d_min by that much, none can
+            # conflict and the sampled minimum is within L^2 / (8 d) of the true one.
+            slack = 0.5 * (own_step + track.step_max) + 1e-6
+            quiet = not (exact or goal_or_wall)
+            if quiet and d2_min.min() >= (cfg.d_min_m + slack) ** 2:
                 return Segment(
                     end=end,
-                    samples=samples,
                     min_sep=np.sqrt(d2_min),
                     closest=near[j_min],
-                    t_closest=(k_min + s[rows, k_min, j_min]) * dt,
-                    event=quiet[3] if B == N_ACTIONS else np.zeros(B, dtype=np.int8),
-                    t_event=quiet[4] if B == N_ACTIONS else np.full(B, np.nan),
+                    t_closest=k_min * dt,
+                    event=np.zeros(B, dtype=np.int8),
+                    t_event=np.full(B, np.nan),
+                    xy=xy,
+                    hs=hs,
                 )
-            d2_step = d2.min(axis=2)  # (B, n): closest intruder on each sub-step
-            k_hit = _first_true(d2_step < cfg.d_min_m**2)
+            chord_d2, s = _closest_on_chords(rel_xy, rel_h, d2)  # (B, n, k)
+            k_hit = _first_true(chord_d2.min(axis=2) < cfg.d_min_m**2)
         else:
             k_hit = np.full(B, n)
+
         k_goal = k_out = np.full(B, n)
-        if near_goal:
-            g_d2, _ = _closest_on_chords(samples - goal)
+        if goal_or_wall:
+            g_xy = xy - complex(goal[0], goal[1])
+            g_h = np.broadcast_to(hs - goal[2], xy.shape)
+            g_d2, _ = _closest_on_chords(g_xy, g_h, g_xy.real**2 + g_xy.imag**2 + g_h**2)
             k_goal = _first_true(g_d2 < cfg.goal_radius_m**2)
-        if near_wall:
             # The box is convex: a chord between two samples inside it stays inside.
-            outside = (samples[:, 1:] < self._lo) | (samples[:, 1:] > self._hi)
-            k_out = _first_true(np.any(outside, axis=2))
+            h_all = np.broadcast_to(hs, xy.shape)[:, 1:]
+            outside = (
+                (xy.real[:, 1:] < cfg.x_bounds[0])
+                | (xy.real[:, 1:] > cfg.x_bounds[1])
+                | (xy.imag[:, 1:] < cfg.y_bounds[0])
+                | (xy.imag[:, 1:] > cfg.y_bounds[1])
+                | (h_all < cfg.h_bounds[0])
+                | (h_all > cfg.h_bounds[1])
+            )
+            k_out = _first_true(outside)
 
         # The first event wins; at equal sub-steps collision beats leaving the map beats the
         # goal (the conservative reading of a sub-step that holds two of them).
@@ -391,47 +471,43 @@ class EncounterModel:
         happened = k_event < n
         event = np.where(happened, _EVENT_CODES[kind], NONE).astype(np.int8)
         t_event = np.where(happened, k_event * dt, np.nan)
-        if not near.size:
-            inf = np.full(B, np.inf)
-            return Segment(end, samples, inf, np.full(B, -1), np.zeros(B), event, t_event)
+        if not k:
+            return Segment(
+                end, np.full(B, np.inf), np.full(B, -1), np.zeros(B), event, t_event, xy, hs
+            )
 
         # Separation counts only up to (and including) the event's sub-step.
-        d2 = np.where((np.arange(n)[None, :] > k_event[:, None])[..., None], np.inf, d2)
-        flat = d2.reshape(B, n * k).argmin(axis=1)
+        after = (np.arange(n)[None, :] > k_event[:, None])[..., None]
+        chord_d2 = np.where(after, np.inf, chord_d2)
+        flat = chord_d2.reshape(B, n * k).argmin(axis=1)
         k_min, j_min = np.divmod(flat, k)
         return Segment(
             end=end,
-            samples=samples,
-            min_sep=np.sqrt(d2[rows, k_min, j_min]),
+            min_sep=np.sqrt(chord_d2[rows, k_min, j_min]),
             closest=near[j_min],
             t_closest=(k_min + s[rows, k_min, j_min]) * dt,
             event=event,
             t_event=t_event,
+            xy=xy,
+            hs=hs,
         )
 
 
-def _closest_on_chords(rel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Squared closest distance and its fraction ``s`` in [0, 1] on every sub-step.
+def _closest_on_chords(
+    rel_xy: np.ndarray, rel_h: np.ndarray, d2: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Squared closest distance, and its fraction ``s`` in [0, 1], on every sub-step.
 
-    ``rel`` (B, n+1, [N,] 3) holds relative positions at the sub-step instants; along axis 1
-    the relative motion is linear within each sub-step. Returns arrays of shape (B, n[, N]).
+    ``rel_xy`` (complex) and ``rel_h`` hold relative positions at the sub-step instants
+    (axis 1), ``d2`` their squared norms; within a sub-step the relative motion is linear.
     """
-    r0 = rel[:, :-1]
-    dr = rel[:, 1:] - r0
-    a = np.einsum("...i,...i->...", dr, dr)
-    b = np.einsum("...i,...i->...", r0, dr)
-    c = np.einsum("...i,...i->...", r0, r0)
-    s = np.maximum(a, 1e-12)
-    np.divide(b, s, out=s)
-    np.negative(s, out=s)
-    np.maximum(s, 0.0, out=s)
-    np.minimum(s, 1.0, out=s)
-    # |r0 + s dr|^2 = c + s (2 b + s a), never below 0 despite rounding
-    d2 = s * a
-    d2 += 2.0 * b
-    d2 *= s
-    d2 += c
-    return np.maximum(d2, 0.0, out=d2), s
+    dxy = np.diff(rel_xy, axis=1)
+    dh = np.diff(rel_h, axis=1)
+    a = dxy.real**2 + dxy.imag**2 + dh**2
+    b = (rel_xy[:, :-1].conj() * dxy).real + rel_h[:, :-1] * dh
+    s = np.clip(-b / np.maximum(a, 1e-12), 0.0, 1.0)
+    # |r0 + s dr|^2 = |r0|^2 + s (2 b + s a), never below 0 despite rounding
+    return np.maximum(d2[:, :-1] + s * (2.0 * b + s * a), 0.0), s
 
 
 def _first_true(mask: np.ndarray) -> np.ndarray:

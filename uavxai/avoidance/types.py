@@ -184,6 +184,7 @@ class SearchTree:
     terminal: np.ndarray  # (M,) int8: 0 none, 1 goal, 2 collision, 3 out of bounds, 4 time-out
     pos: np.ndarray  # (M, 3) ownship position at the node, for drawing the tree in 3-D
     t_closest: np.ndarray | None = None  # (M,) s from the decision to that closest approach
+    state: np.ndarray | None = None  # (M, 7) encounter-model state (x, y, h, V, psi, phi, cmd)
 
     @property
     def q(self) -> np.ndarray:
@@ -195,6 +196,22 @@ class SearchTree:
 
     def children_of(self, node: int) -> np.ndarray:
         return np.flatnonzero(self.parent == node)
+
+    def best_child(self, node: int) -> int | None:
+        """The most visited child of ``node`` (ties: higher Q, then lower action), or None."""
+        kids = self.children_of(node)
+        kids = kids[self.visits[kids] > 0]
+        if kids.size == 0:
+            return None
+        order = np.lexsort((self.action[kids], -self.q[kids], -self.visits[kids]))
+        return int(kids[order[0]])
+
+    def best_line(self, node: int) -> list[int]:
+        """``node`` and the most visited path below it: what the search expects to follow."""
+        line = [node]
+        while (nxt := self.best_child(line[-1])) is not None:
+            line.append(nxt)
+        return line
 
     def pruned(self, min_visits: int = 1) -> SearchTree:
         """The nodes visited at least ``min_visits`` times (and the root), renumbered.
@@ -219,6 +236,7 @@ class SearchTree:
             terminal=self.terminal[old],
             pos=self.pos[old],
             t_closest=None if self.t_closest is None else self.t_closest[old],
+            state=None if self.state is None else self.state[old],
         )
 
 

@@ -112,7 +112,9 @@ class Aircraft:
                 h,
             )
         f.set_sim_time(0.0)
-        self.command(bank_cmd_rad=0.0, accel_cmd_mps2=0.0, speed_target_mps=speed_mps, alt_target_m=h)
+        self.command(
+            bank_cmd_rad=0.0, accel_cmd_mps2=0.0, speed_target_mps=speed_mps, alt_target_m=h
+        )
         f[ENGAGED] = 1.0
         return self.trimmed
 
@@ -157,6 +159,6 @@ class Aircraft:
         self.fdm = None
 
 
-def heading_rad(heading_deg: float) -> float:
+def heading_from_deg(heading_deg: float) -> float:
     """Scenario heading (degrees, any sign) to radians in [0, 2 pi)."""
     return math.radians(heading_deg % 360.0)

@@ -12,7 +12,7 @@ import logging
 import os
 import threading
 
-os.environ["JSBSIM_DEBUG"] = "0"  # must precede the first FGFDMExec of the process
+os.environ.setdefault("JSBSIM_DEBUG", "0")  # before the first FGFDMExec; 1 for debugging
 
 import jsbsim  # noqa: E402
 

@@ -10,11 +10,12 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Callable
 
 import jsbsim
 import numpy as np
 
-from uavxai.dynamics.aircraft import FT, Aircraft, heading_rad
+from uavxai.dynamics.aircraft import FT, Aircraft, heading_from_deg
 from uavxai.dynamics.behaviours import make_pilots
 from uavxai.dynamics.geodesy import LocalFrame
 from uavxai.dynamics.state import OWNSHIP_ID, TrafficState, intruder_id
@@ -75,7 +76,7 @@ class JSBSimWorld:
         self._failure: str | None = None
 
         self.aircraft: list[Aircraft] = []
-        self._runs: list = []
+        self._runs: list[Callable[[], bool]] = []
         try:
             self._build()
         except BaseException:
@@ -92,11 +93,14 @@ class JSBSimWorld:
         self.aircraft.append(own)
         flyable = own.speed_range
         self._check_speed("ownship.start.speed_mps", start.speed_mps, sc.ownship.aircraft, flyable)
-        own.set_limits(
-            bank_limit_rad=math.radians(avoid.bank_limit_deg),
-            speed_range=(max(flyable[0], avoid.speed_mps[0]), min(flyable[1], avoid.speed_mps[1])),
-        )
-        own.start(start.x, start.y, start.h, heading_rad(start.heading_deg), start.speed_mps)
+        limits = (max(flyable[0], avoid.speed_mps[0]), min(flyable[1], avoid.speed_mps[1]))
+        if limits[0] >= limits[1]:
+            raise UserError(
+                f"avoidance.speed_mps = {list(avoid.speed_mps)}: aircraft "
+                f"'{sc.ownship.aircraft}' flies between {flyable[0]:g} and {flyable[1]:g} m/s"
+            )
+        own.set_limits(bank_limit_rad=math.radians(avoid.bank_limit_deg), speed_range=limits)
+        own.start(start.x, start.y, start.h, heading_from_deg(start.heading_deg), start.speed_mps)
         for i, spec in enumerate(self.intruders, start=1):
             a = Aircraft(sc.intruders.aircraft, self.frame, self.dt, jsbsim_seed(self.seed, i))
             self.aircraft.append(a)
@@ -104,7 +108,7 @@ class JSBSimWorld:
                 f"intruder {i} speed_mps", spec.speed_mps, sc.intruders.aircraft, a.speed_range
             )
             a.set_limits(bank_limit_rad=math.radians(avoid.bank_limit_deg))
-            a.start(spec.x, spec.y, spec.h, heading_rad(spec.heading_deg), spec.speed_mps)
+            a.start(spec.x, spec.y, spec.h, heading_from_deg(spec.heading_deg), spec.speed_mps)
 
     @staticmethod
     def _check_speed(field: str, speed: float, aircraft: str, flyable: tuple[float, float]) -> None:
@@ -214,26 +218,15 @@ class JSBSimWorld:
         return self._failure
 
     def _check(self, s: TrafficState) -> bool:
-        if self._failure is not None:
-            return True
-        bad = ~np.all(np.isfinite(np.column_stack((s.pos, s.vel, s.att, s.airspeed))), axis=1)
-        reason = None
-        for i, who in enumerate(s.ids):
-            if bad[i]:
-                reason = f"NaN in {who} state"
-            elif s.pos[i, 2] < GROUND_M:
-                reason = f"{who} hit the ground"
-            elif not ENVELOPE_AIRSPEED_MPS[0] <= s.airspeed[i] <= ENVELOPE_AIRSPEED_MPS[1]:
-                reason = f"{who} left the flight envelope (airspeed {s.airspeed[i]:.1f} m/s)"
-            elif abs(s.att[i, 0]) > ENVELOPE_BANK_RAD:
-                reason = f"{who} left the flight envelope (bank {math.degrees(s.att[i, 0]):.0f} deg)"
-            elif abs(s.att[i, 1]) > ENVELOPE_PITCH_RAD:
-                reason = f"{who} left the flight envelope (pitch {math.degrees(s.att[i, 1]):.0f} deg)"
-            if reason:
-                self._failure = f"{reason} at t = {s.t:.2f} s"
-                log.warning("%s", self._failure)
-                return True
-        return False
+        """Latch the first failure found in ``s``; True if the run has failed."""
+        if self._failure is None:
+            for i, who in enumerate(s.ids):
+                reason = _diagnose(who, s.pos[i], s.att[i], s.airspeed[i])
+                if reason:
+                    self._failure = f"{reason} at t = {s.t:.2f} s"
+                    log.info("run ends: %s", self._failure)
+                    break
+        return self._failure is not None
 
     def close(self) -> None:
         for a in self.aircraft:
@@ -246,3 +239,19 @@ class JSBSimWorld:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _diagnose(who: str, pos: np.ndarray, att: np.ndarray, airspeed: float) -> str | None:
+    """What is wrong with one aircraft's state, in words, or None."""
+    if not (np.all(np.isfinite(pos)) and np.all(np.isfinite(att)) and math.isfinite(airspeed)):
+        return f"NaN in {who} state"
+    if pos[2] < GROUND_M:
+        return f"{who} hit the ground"
+    lo, hi = ENVELOPE_AIRSPEED_MPS
+    if not lo <= airspeed <= hi:
+        return f"{who} left the flight envelope (airspeed {airspeed:.1f} m/s)"
+    if abs(att[0]) > ENVELOPE_BANK_RAD:
+        return f"{who} left the flight envelope (bank {math.degrees(att[0]):.0f} deg)"
+    if abs(att[1]) > ENVELOPE_PITCH_RAD:
+        return f"{who} left the flight envelope (pitch {math.degrees(att[1]):.0f} deg)"
+    return None

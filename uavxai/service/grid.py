@@ -28,7 +28,7 @@ import numpy as np
 from uavxai.comms.channel import Channel
 from uavxai.comms.service_env import SearchSpace, levels_to_power
 
-BATCH = 96  # positions per vectorised DP call (memory ~ BATCH * 80 kB per array)
+BATCH = 16  # positions per vectorised DP call: small enough to stay in cache
 INITIAL_BOX = 8  # lattice points per side of the first boxes
 
 
@@ -69,20 +69,22 @@ def _knapsack(
     choices: list[np.ndarray] = []
     for j in range(K):
         reach = j * (L - 1)  # after j users: level sum <= reach, failures <= j
-        src_all = value[:, :, : reach + 1, : j + 1]
+        src = value[:, :, : reach + 1, : j + 1]
+        cand = np.empty_like(src)
         new = np.full_like(value, -np.inf)
         choice = np.zeros(value.shape, dtype=np.int8) if keep_choices else None
         for level in range(L):
-            src = src_all + rates[:, :, j, level, None, None]
-            fail = fails[:, :, j, level, None, None]
-            for lam_shift, keep in ((0, ~fail), (1, fail)):
-                cand = np.where(keep, src, -np.inf)
+            rate, fail = rates[:, :, j, level], fails[:, :, j, level]
+            # A user that meets QoS keeps lam, one that misses it moves to lam + 1.
+            for lam_shift, bias in (
+                (0, np.where(fail, -np.inf, rate)),
+                (1, np.where(fail, rate, -np.inf)),
+            ):
+                np.add(src, bias[:, :, None, None], out=cand)
                 dst = new[:, :, level : level + reach + 1, lam_shift : lam_shift + j + 1]
                 if choice is not None:
-                    better = cand > dst
-                    choice[:, :, level : level + reach + 1, lam_shift : lam_shift + j + 1][
-                        better
-                    ] = level
+                    view = choice[:, :, level : level + reach + 1, lam_shift : lam_shift + j + 1]
+                    view[cand > dst] = level
                 np.maximum(dst, cand, out=dst)
         value = new
         if choice is not None:

@@ -247,15 +247,19 @@ def render_record(record: dict[str, Any], index: int, total: int) -> str:
             a = c.get("action", {})
             mark = "*" if a.get("index") == chosen_index else " "
             visits = int(c.get("visits") or 0)
-            sep = c.get("predicted_min_separation_m")
-            when = c.get("time_to_closest_s")
-            lines.append(
-                f"  {mark} {a.get('name', '?'):<26}{visits:>7}{100 * visits / total_visits:>6.0f}%"
-                f"{_num(c.get('q'), '.3f'):>7}"
-                f"{(f'{sep:.0f} m' if sep is not None else 'clear'):>10}"
-                f"{str(c.get('closest_intruder') if c.get('closest_intruder') is not None else '-'):>10}"
-                f"{(f'{when:.1f} s' if when is not None else '-'):>7}  {c.get('outcome') or 'open'}"
-            )
+            sep, when = c.get("predicted_min_separation_m"), c.get("time_to_closest_s")
+            who = c.get("closest_intruder")
+            cells = [
+                f"{a.get('name', '?'):<26}",
+                f"{visits:>7}",
+                f"{100 * visits / total_visits:>6.0f}%",
+                f"{_num(c.get('q'), '.3f'):>7}",
+                f"{_num(sep) + ' m' if sep is not None else 'clear':>10}",
+                f"{who if who is not None else '-':>10}",
+                f"{_num(when, '.1f') + ' s' if when is not None else '-':>7}",
+                f"  {c.get('outcome') or 'open'}",
+            ]
+            lines.append(f"  {mark} " + "".join(cells))
     return "\n".join(lines)
 
 

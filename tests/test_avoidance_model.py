@@ -1,0 +1,184 @@
+"""The encounter model: kinematics, and events anywhere along a segment."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from uavxai.avoidance.model import (
+    COLLISION,
+    G,
+    GOAL,
+    NONE,
+    OUT_OF_BOUNDS,
+    EncounterModel,
+    Track,
+    ownship_state,
+)
+from uavxai.avoidance.types import Ownship, PlannerConfig
+
+RIGHT_HOLD = 7  # bank right, hold speed
+HOLD = 4
+FASTER = 3  # bank left ... no: index 3 is "hold bank, speed up"
+
+
+def fly_one(model, own: Ownship, action: int, goal, duration, pos=None, vel=None, **kw):
+    pos = np.zeros((0, 3)) if pos is None else np.asarray(pos, dtype=float)
+    vel = np.zeros((0, 3)) if vel is None else np.asarray(vel, dtype=float)
+    track = model.predict(pos, vel, duration)
+    return model.fly(
+        ownship_state(own)[None], np.array([action]), np.asarray(goal, float), duration, track, **kw
+    )
+
+
+def test_pass_through_between_samples_is_a_collision():
+    # One 4 s sub-step: at both ends the intruder is 72 m away, but it crosses the ownship's
+    # track right where the ownship is at t = 2 s.
+    cfg = PlannerConfig(substep_s=4.0)
+    model = EncounterModel(cfg)
+    own = Ownship(1000.0, 1000.0, 120.0, 20.0, 0.0)  # north at 20 m/s
+    pos, vel = [[940.0, 1040.0, 120.0]], [[30.0, 0.0, 0.0]]  # east at 30 m/s
+    seg = fly_one(model, own, HOLD, (1000, 1900, 120), 4.0, pos, vel)
+    samples = seg.samples[0]
+    assert samples.shape == (2, 3)
+    ends = [np.linalg.norm(samples[k] - (np.array(pos[0]) + 4.0 * k * np.array(vel[0])))]
+    assert min(ends) > cfg.d_min_m and len(ends) == 1
+    at_end = np.linalg.norm(samples[1] - np.array([1060.0, 1040.0, 120.0]))
+    assert at_end > cfg.d_min_m
+    assert seg.event[0] == COLLISION
+    assert seg.min_sep[0] < 1.0
+    assert seg.t_closest[0] == pytest.approx(2.0, abs=0.01)
+
+
+def test_closest_approach_matches_dense_sampling():
+    cfg = PlannerConfig(x_bounds=(-5000, 5000), y_bounds=(-5000, 5000))
+    model = EncounterModel(cfg)
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        own = Ownship(0.0, 0.0, 120.0, rng.uniform(12, 30), rng.uniform(0, 2 * np.pi))
+        action = int(rng.integers(9))
+        pos = np.c_[rng.uniform(-150, 150, (3, 2)), rng.uniform(100, 140, 3)]
+        vel = np.c_[rng.uniform(-30, 30, (3, 2)), np.zeros(3)]
+        seg = fly_one(model, own, action, (4000, 4000, 120), 4.0, pos, vel, cull=False, exact=True)
+        if seg.event[0] != NONE:
+            continue  # the separation stops counting at the event
+        # Dense reference: the ownship's arc sampled every 5 ms by the same model.
+        fine = EncounterModel(PlannerConfig(**{**cfg.__dict__, "substep_s": 0.005}))
+        dense = fly_one(fine, own, action, (4000, 4000, 120), 4.0)
+        t = np.linspace(0.0, 4.0, dense.samples.shape[1])
+        intr = pos[None] + t[:, None, None] * vel[None]
+        d = np.linalg.norm(dense.samples[0][:, None] - intr, axis=2).min()
+        assert seg.min_sep[0] == pytest.approx(d, abs=0.25)
+
+
+def test_coordinated_turn_closes_a_circle():
+    cfg = PlannerConfig(
+        bank_step_deg=30.0,
+        roll_rate_limit_deg_s=1e6,
+        x_bounds=(-1e4, 1e4),
+        y_bounds=(-1e4, 1e4),
+    )
+    model = EncounterModel(cfg)
+    v = 20.0
+    radius = v**2 / (G * math.tan(math.radians(30.0)))
+    period = 2 * math.pi * radius / v
+    seg = fly_one(model, Ownship(0.0, 0.0, 120.0, v, 0.0), RIGHT_HOLD, (0, 0, 120), period)
+    xy = seg.samples[0, :, :2]
+    np.testing.assert_allclose(xy[-1], [0.0, 0.0], atol=1e-6)
+    # A right turn from north: centre at (radius, 0), every sample on the circle.
+    np.testing.assert_allclose(np.linalg.norm(xy - [radius, 0.0], axis=1), radius, rtol=1e-9)
+    assert seg.end[0, 4] == pytest.approx(0.0, abs=1e-9) or seg.end[0, 4] == pytest.approx(
+        2 * math.pi, abs=1e-9
+    )
+
+
+def test_roll_rate_limits_the_bank():
+    cfg = PlannerConfig(roll_rate_limit_deg_s=5.0)  # slow: a 10 deg step takes 2 s
+    model = EncounterModel(cfg)
+    seg = fly_one(model, Ownship(1000, 1000, 120, 20, 0.0), RIGHT_HOLD, (1000, 1900, 120), 1.0)
+    assert seg.end[0, 6] == pytest.approx(math.radians(10.0))  # the command moved a step
+    assert seg.end[0, 5] == pytest.approx(math.radians(5.0))  # the bank only half-way
+    later = fly_one(
+        model, Ownship(1000, 1000, 120, 20, 0.0), RIGHT_HOLD, (1000, 1900, 120), 4.0
+    )
+    assert later.end[0, 5] == later.end[0, 6] == pytest.approx(math.radians(10.0))
+
+
+def test_speed_limits_and_altitude_rate():
+    cfg = PlannerConfig(speed_mps=(12.0, 30.0), accel_mps2=1.0, climb_rate_mps=2.5)
+    model = EncounterModel(cfg)
+    seg = fly_one(model, Ownship(1000, 1000, 120, 28.5, 0.0), FASTER, (1000, 1900, 100), 4.0)
+    assert seg.end[0, 3] == pytest.approx(30.0)  # clamped at the top speed
+    assert seg.end[0, 2] == pytest.approx(110.0)  # 4 s at 2.5 m/s towards 100 m
+    slow = fly_one(model, Ownship(1000, 1000, 120, 13.0, 0.0), 5, (1000, 1900, 120), 4.0)
+    assert slow.end[0, 3] == pytest.approx(12.0)
+
+
+def test_leaving_the_area_and_reaching_the_goal_are_events():
+    model = EncounterModel(PlannerConfig())
+    out = fly_one(model, Ownship(1990, 1000, 120, 20, math.pi / 2), HOLD, (1000, 1000, 120), 4.0)
+    assert out.event[0] == OUT_OF_BOUNDS
+    assert out.t_event[0] == pytest.approx(0.0)
+    # The goal lies on the path, reached between samples and passed again.
+    goal = fly_one(model, Ownship(1000, 1000, 120, 20, 0.0), HOLD, (1000, 1045, 120), 4.0)
+    assert goal.event[0] == GOAL
+
+
+def test_culling_and_sampling_never_change_the_answer():
+    """fly_all_actions (memoised, culled, sampled when clear) against the exact reference."""
+    cfg = PlannerConfig()
+    model = EncounterModel(cfg)
+    rng = np.random.default_rng(11)
+    goal = np.array([1000.0, 1000.0, 100.0])
+    checked_close = 0
+    for _ in range(200):
+        n = 20
+        pos = np.c_[rng.uniform(0, 2000, (n, 2)), rng.uniform(100, 140, n)]
+        heading = rng.uniform(0, 2 * np.pi, n)
+        speed = rng.uniform(15, 30, n)
+        vel = np.c_[speed * np.sin(heading), speed * np.cos(heading), np.zeros(n)]
+        track = model.predict(pos, vel, 4.0)
+        own = Ownship(
+            *rng.uniform(100, 1900, 2), 120.0, rng.uniform(12, 30), rng.uniform(0, 2 * np.pi)
+        )
+        state = ownship_state(own)
+        fast = model.fly_all_actions(state, goal, 4.0, track)
+        exact = model.fly(
+            np.repeat(state[None], 9, 0), np.arange(9), goal, 4.0, track, cull=False, exact=True
+        )
+        np.testing.assert_array_equal(fast.event, exact.event)
+        np.testing.assert_allclose(fast.end, exact.end, rtol=0, atol=1e-5)  # memo keys: 1e-6 m/s
+        assert np.all(fast.min_sep >= exact.min_sep - 1e-9)
+        close = exact.min_sep < cfg.d_min_m + 30.0
+        np.testing.assert_allclose(fast.min_sep[close], exact.min_sep[close], atol=1e-6)
+        far = np.isfinite(fast.min_sep) & ~close
+        bound = 45.0**2 / (8 * exact.min_sep[far])  # L^2 / (8 d), L <= (30 + 30) * 0.5 + climb
+        assert np.all(fast.min_sep[far] - exact.min_sep[far] <= bound + 1e-9)
+        checked_close += int(close.sum())
+    assert checked_close > 0  # the sample did exercise near conflicts
+
+
+def test_memo_does_not_change_results():
+    cfg = PlannerConfig()
+    goal = np.array([1500.0, 1500.0, 120.0])
+    track = Track.of(np.zeros((9, 0, 3)))
+    state = ownship_state(Ownship(500.3, 700.1, 120.0, 19.37, 0.4, bank=0.1745, phi=0.05))
+    cold = EncounterModel(cfg).fly_all_actions(state, goal, 4.0, track)
+    warm_model = EncounterModel(cfg)
+    for v in (12.0, 19.37, 25.0):
+        warm_model.fly_all_actions(state * [1, 1, 1, 0, 1, 1, 1] + [0, 0, 0, v, 0, 0, 0], goal, 4.0, track)
+    warm = warm_model.fly_all_actions(state, goal, 4.0, track)
+    np.testing.assert_array_equal(cold.end, warm.end)
+
+
+def test_track_shape_is_checked():
+    model = EncounterModel(PlannerConfig())
+    with pytest.raises(ValueError, match="sub-steps"):
+        model.fly_all_actions(
+            ownship_state(Ownship(1000, 1000, 120, 20, 0.0)),
+            np.array([0.0, 0.0, 120.0]),
+            4.0,
+            Track.of(np.zeros((3, 1, 3))),
+        )

@@ -1,0 +1,95 @@
+"""The `exhaustive` planner: every action sequence to the search depth (the optimality
+reference for MCTS).
+
+It builds the same tree MCTS samples, but whole: all ``9^depth`` sequences, each level held
+``action_hold_s``, over the same encounter model, and scores each sequence as MCTS scores a
+walk (1 goal, 0 collision or out of bounds, 0.1 time-out, ``1 - d/d_max`` at the depth
+limit). Since the model is deterministic, the value of a node is the best value below it, and
+the action taken is the root action with the best value. In its :class:`SearchTree` every
+node is visited once and ``Q`` is that best value, so the explanation code reads it like an
+MCTS tree. Cost grows as ``9^depth``; that is the point of the comparison.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+
+import numpy as np
+
+from uavxai.avoidance.mcts import TreeBuilder, chosen_action, decision_from_tree, predict_levels
+from uavxai.avoidance.model import EncounterModel, Track, ownship_state
+from uavxai.avoidance.types import (
+    N_ACTIONS,
+    Decision,
+    Goal,
+    Intruder,
+    Ownship,
+    PlannerConfig,
+    SearchTree,
+)
+
+
+def exhaustive_search(
+    model: EncounterModel,
+    root: np.ndarray,
+    goal: np.ndarray,
+    tracks: Sequence[Track],
+    *,
+    hold_s: float,
+    time_left_s: float = math.inf,
+) -> SearchTree:
+    """The full tree to depth ``len(tracks)`` with best-value backups (see module docstring)."""
+    builder = TreeBuilder(model, root, goal, tracks, hold_s, time_left_s)
+    frontier = [0]
+    for _ in range(len(tracks)):
+        nxt: list[int] = []
+        for node in frontier:
+            if not builder.is_leaf[node]:
+                first = builder.expand(node)
+                nxt.extend(range(first, first + N_ACTIONS))
+        frontier = nxt
+    first_child = np.array(builder.first_child)
+    value = np.array(builder.value)
+    tree = builder.finish()
+    blocks = np.arange(N_ACTIONS)
+    for d in range(len(tracks) - 1, -1, -1):
+        inner = np.flatnonzero((tree.depth == d) & (first_child >= 0))
+        value[inner] = value[first_child[inner, None] + blocks].max(axis=1)
+    tree.visits = np.ones(tree.size, dtype=int)
+    tree.value_sum = value
+    return tree
+
+
+class ExhaustivePlanner:
+    """Exhaustive search over the planner API (SPEC §7); deterministic."""
+
+    def __init__(self, config: PlannerConfig | None = None, *, name: str = "exhaustive") -> None:
+        self.config = config or PlannerConfig()
+        self.name = name
+        self.model = EncounterModel(self.config)
+
+    def reset(self, seed: int) -> None:
+        """Nothing random to re-seed."""
+
+    def plan(
+        self, own: Ownship, intruders: Sequence[Intruder], goal: Goal, *, step: int = 0
+    ) -> Decision:
+        t_start = time.perf_counter()
+        cfg, model = self.config, self.model
+        goal_xyz = np.asarray(goal, dtype=float)
+        tracks = predict_levels(model, intruders, cfg.depth, cfg.action_hold_s)
+        tree = exhaustive_search(
+            model,
+            ownship_state(own),
+            goal_xyz,
+            tracks,
+            hold_s=cfg.action_hold_s,
+            time_left_s=(cfg.max_steps - step) * cfg.decision_period_s,
+        )
+        decision = decision_from_tree(
+            tree, chosen_action(tree), own, intruders, goal_xyz, tracks, model, name=self.name
+        )
+        decision.ms = 1000.0 * (time.perf_counter() - t_start)
+        return decision

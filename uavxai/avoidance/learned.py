@@ -1,0 +1,433 @@
+"""Learned avoidance baselines: DQN and Safe-DQN (the paper's learned comparisons).
+
+Both see the same intruder-count-independent observation (:func:`observe`): the ownship's own
+situation (goal bearing and distance, speed, bank, where it is in the flight area) and the
+``n_nearest`` intruders, nearest first, each as its position and velocity relative to the
+ownship in the ownship's heading frame plus its closest point of approach, normalised; absent
+slots are zeros with a ``present`` flag of 0, so 3 or 40 intruders give the same vector.
+
+- **DQN**: one Q-network over the 9 actions, trained on the sum of the goal and safety rewards
+  (see :mod:`uavxai.avoidance.train`); acts greedily.
+- **Safe-DQN** (after Wang et al. 2022, "Explainable and safe reinforcement learning for
+  autonomous air mobility"): two Q-networks, one for the goal reward (progress, arrival) and
+  one for the safety reward (separation loss, collision, leaving the area). It acts with the
+  best sum ``Q_goal + Q_safety`` among the actions whose ``Q_safety`` is at least the median
+  over the 9 actions, so an action the safety network distrusts is never taken for speed.
+
+Each decision reports, per action, the network's Q (Safe-DQN: the sum, with the parts in the
+explanation) and the minimum separation the encounter model predicts for that action held for
+``action_hold_s`` with the intruders at constant velocity, so that the learned planners'
+explanations can be checked against the same physics as the tree search's.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import nn
+
+from uavxai.avoidance.model import (
+    PHI_CMD,
+    EncounterModel,
+    accel_command,
+    bank_command,
+    ownship_state,
+)
+from uavxai.avoidance.observation import SCALE_M, observation_size
+from uavxai.avoidance.observation import observe as encounter_observation
+from uavxai.avoidance.types import (
+    N_ACTIONS,
+    ChildStats,
+    Decision,
+    Goal,
+    Intruder,
+    Ownship,
+    PlannerConfig,
+    action_name,
+)
+from uavxai.errors import CheckpointError
+from uavxai.paths import avoidance_checkpoints_dir
+
+ALGOS = ("dqn", "safe_dqn")
+CHECKPOINT_FORMAT = "uavxai-avoidance-qnet"
+N_NEAREST = 8
+CPA_FEATURES = 2  # per intruder slot: distance and time of the closest point of approach
+TCPA_SCALE_S = 30.0
+TCPA_MAX_S = 120.0
+
+
+def obs_dim(n_nearest: int = N_NEAREST) -> int:
+    return observation_size(n_nearest) + CPA_FEATURES * n_nearest
+
+
+# --------------------------------------------------------------------------------- observation
+def observe(
+    state: np.ndarray,
+    pos: np.ndarray,
+    vel: np.ndarray,
+    goal: np.ndarray,
+    config: PlannerConfig,
+    n_nearest: int = N_NEAREST,
+) -> np.ndarray:
+    """What the networks see (float32, ``obs_dim(n_nearest)``): the shared encounter
+    observation (:func:`uavxai.avoidance.observation.observe`) followed, for the same nearest
+    intruders in the same order, by the distance (over ``SCALE_M``) and time (over 30 s) of
+    the closest point of approach at the current relative velocity; zeros for absent slots.
+
+    The closest approach is a function of the relative position and velocity already in the
+    observation, but one an MLP learns slowly; handing it over makes the baselines better
+    at the one thing they are compared on, avoiding intruders.
+    """
+    base = encounter_observation(state, pos, vel, goal, config, n_nearest)
+    cpa = np.zeros((n_nearest, CPA_FEATURES), dtype=np.float32)
+    if len(pos) and n_nearest:
+        rel = np.asarray(pos, dtype=float) - state[:3]
+        nearest = np.argsort(np.sqrt(np.sum(rel**2, axis=1)), kind="stable")[:n_nearest]
+        v, psi = float(state[3]), float(state[4])
+        rel = rel[nearest]
+        rv = np.asarray(vel, dtype=float)[nearest] - (v * math.sin(psi), v * math.cos(psi), 0.0)
+        closing = np.sum(rv * rv, axis=1)
+        tcpa = np.clip(-np.sum(rel * rv, axis=1) / np.maximum(closing, 1e-9), 0.0, TCPA_MAX_S)
+        dcpa = np.sqrt(np.sum((rel + rv * tcpa[:, None]) ** 2, axis=1))
+        cpa[: len(nearest), 0] = dcpa / SCALE_M
+        cpa[: len(nearest), 1] = tcpa / TCPA_SCALE_S
+    return np.concatenate([base, cpa.ravel()])
+
+
+# A fixed encounter whose observation a checkpoint stores: if the observation code changes
+# after training (scales, order), loading the checkpoint says so instead of acting on garbage.
+def _probe_observation(n_nearest: int) -> np.ndarray:
+    config = PlannerConfig()
+    state = np.array([400.0, 600.0, 120.0, 20.0, 0.7, 0.1, 0.17])
+    pos = np.array([[700.0, 900.0, 110.0], [380.0, 450.0, 135.0], [1500.0, 200.0, 100.0]])
+    vel = np.array([[-15.0, -10.0, 0.0], [3.0, 22.0, 0.5], [0.0, 25.0, 0.0]])
+    return observe(state, pos, vel, np.array([1000.0, 1000.0, 100.0]), config, n_nearest)
+
+
+def observe_api(
+    own: Ownship,
+    intruders: Sequence[Intruder],
+    goal: Goal,
+    config: PlannerConfig,
+    n_nearest: int = N_NEAREST,
+) -> np.ndarray:
+    """:func:`observe` from the planner-API types (SPEC §7)."""
+    pos, vel = intruder_arrays(intruders)
+    return observe(ownship_state(own), pos, vel, np.asarray(goal, float), config, n_nearest)
+
+
+def intruder_arrays(intruders: Sequence[Intruder]) -> tuple[np.ndarray, np.ndarray]:
+    """(N, 3) positions and velocities of the planner-API intruders."""
+    if not intruders:
+        return np.zeros((0, 3)), np.zeros((0, 3))
+    a = np.array([(i.x, i.y, i.h, i.vx, i.vy, i.vh) for i in intruders], dtype=float)
+    return a[:, :3], a[:, 3:]
+
+
+# ------------------------------------------------------------------------------------ networks
+class QNetwork(nn.Module):
+    """An MLP from the observation to one Q-value per action."""
+
+    def __init__(self, n_obs: int, hidden: Sequence[int] = (256, 256)) -> None:
+        super().__init__()
+        layers: list[nn.Module] = []
+        width = n_obs
+        for h in hidden:
+            layers += [nn.Linear(width, h), nn.ReLU()]
+            width = h
+        layers.append(nn.Linear(width, N_ACTIONS))
+        self.net = nn.Sequential(*layers)
+
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        return self.net(obs)
+
+
+def safe_action(q_goal: torch.Tensor, q_safety: torch.Tensor) -> torch.Tensor:
+    """Safe-DQN's choice per row: the best ``Q_goal + Q_safety`` among the actions whose
+    ``Q_safety`` is at least that row's median (lower median: 5 of the 9 actions pass)."""
+    median = q_safety.median(dim=-1, keepdim=True).values
+    total = torch.where(q_safety >= median, q_goal + q_safety, -torch.inf)
+    return total.argmax(dim=-1)
+
+
+def head_names(algo: str) -> tuple[str, ...]:
+    """The Q-networks an algorithm learns, in checkpoint order."""
+    return ("q",) if algo == "dqn" else ("goal", "safety")
+
+
+# --------------------------------------------------------------------------------- checkpoints
+def save_checkpoint(
+    path: Path,
+    algo: str,
+    nets: dict[str, QNetwork],
+    *,
+    hidden: Sequence[int],
+    n_nearest: int,
+    meta: dict,
+) -> None:
+    """``model.pt``: the networks' weights and what is needed to rebuild and feed them."""
+    torch.save(
+        {
+            "format": CHECKPOINT_FORMAT,
+            "algo": algo,
+            "n_nearest": int(n_nearest),
+            "obs_dim": obs_dim(n_nearest),
+            "obs_probe": torch.as_tensor(_probe_observation(n_nearest)),
+            "hidden": [int(h) for h in hidden],
+            "state_dicts": {k: net.state_dict() for k, net in nets.items()},
+            "meta": meta,
+        },
+        path,
+    )
+
+
+def shipped_checkpoint(algo: str) -> Path:
+    return avoidance_checkpoints_dir() / f"{algo}.pt"
+
+
+def load_checkpoint(path: str | Path | None, algo: str) -> tuple[dict[str, QNetwork], dict]:
+    """The networks of a checkpoint for ``algo`` (None: the shipped one), in eval mode.
+
+    Raises :class:`CheckpointError` naming the file when it is missing, unreadable or made for
+    another algorithm or observation.
+    """
+    if algo not in ALGOS:
+        raise CheckpointError(f"unknown learned avoidance algorithm '{algo}'; known: {ALGOS}")
+    p = Path(path) if path is not None else shipped_checkpoint(algo)
+    where = "avoidance.checkpoint" if path is not None else "the shipped checkpoint"
+    if not p.is_file():
+        hint = (
+            "train one with `uavxai train SCENARIO --stage avoidance --algo "
+            f"{algo} --out DIR` and point avoidance.checkpoint at DIR/model.pt"
+        )
+        raise CheckpointError(f"{where} {p}: no such file; {hint}.")
+    try:
+        ckpt = torch.load(p, map_location="cpu", weights_only=True)
+    except Exception as exc:  # noqa: BLE001 - any unreadable file is the same user error
+        raise CheckpointError(
+            f"{where} {p}: not a readable torch checkpoint ({type(exc).__name__}); "
+            f"expected a model.pt written by `uavxai train --stage avoidance --algo {algo}`."
+        ) from None
+    if not isinstance(ckpt, dict) or ckpt.get("format") != CHECKPOINT_FORMAT:
+        raise CheckpointError(
+            f"{where} {p}: not an avoidance checkpoint (format "
+            f"{ckpt.get('format') if isinstance(ckpt, dict) else type(ckpt).__name__!r}); "
+            f"expected one written by `uavxai train --stage avoidance --algo {algo}`."
+        )
+    if ckpt.get("algo") != algo:
+        raise CheckpointError(
+            f"{where} {p}: trained for '{ckpt.get('algo')}', but the planner is '{algo}'; "
+            f"use a checkpoint trained with --algo {algo}."
+        )
+    n_nearest = int(ckpt.get("n_nearest", 0))
+    probe = ckpt.get("obs_probe")
+    if (
+        n_nearest < 1
+        or ckpt.get("obs_dim") != obs_dim(n_nearest)
+        or probe is None
+        or not np.allclose(probe.numpy(), _probe_observation(n_nearest), atol=1e-5)
+    ):
+        raise CheckpointError(
+            f"{where} {p}: trained on an observation that differs from this uavxai's "
+            f"(size {ckpt.get('obs_dim')}, {n_nearest} nearest intruders); retrain it with "
+            f"`uavxai train SCENARIO --stage avoidance --algo {algo}`."
+        )
+    nets: dict[str, QNetwork] = {}
+    for name in head_names(algo):
+        net = QNetwork(obs_dim(n_nearest), ckpt["hidden"])
+        try:
+            net.load_state_dict(ckpt["state_dicts"][name])
+        except (KeyError, RuntimeError) as exc:
+            raise CheckpointError(
+                f"{where} {p}: network '{name}' is missing or has the wrong shape "
+                f"({str(exc).splitlines()[0]})."
+            ) from None
+        nets[name] = net.eval()
+    info = {"n_nearest": n_nearest, "hidden": list(ckpt["hidden"]), **dict(ckpt.get("meta", {}))}
+    return nets, info
+
+
+# ------------------------------------------------------------------------------------ planners
+class LearnedPlanner:
+    """A greedy policy over trained Q-networks, in the planner API (SPEC §7).
+
+    Deterministic: the same inputs give the same decision, whatever the seed.
+    """
+
+    algo = "dqn"
+    label = "DQN"
+
+    def __init__(
+        self,
+        config: PlannerConfig | None = None,
+        checkpoint: str | Path | None = None,
+        *,
+        name: str | None = None,
+    ) -> None:
+        self.config = config or PlannerConfig()
+        self.name = name or self.algo
+        self.nets, self.info = load_checkpoint(checkpoint, self.algo)
+        self.n_nearest = int(self.info["n_nearest"])
+        self.model = EncounterModel(self.config)
+
+    def reset(self, seed: int) -> None:
+        """Nothing to re-seed: the policy is greedy."""
+
+    @torch.no_grad()
+    def q_values(self, obs: np.ndarray) -> dict[str, np.ndarray]:
+        """Each network's Q-values (9,) for one observation."""
+        x = torch.as_tensor(obs, dtype=torch.float32)[None]
+        return {k: net(x)[0].numpy().astype(float) for k, net in self.nets.items()}
+
+    def choose(self, q: dict[str, np.ndarray]) -> tuple[int, np.ndarray]:
+        """(action, the Q reported per action)."""
+        return int(np.argmax(q["q"])), q["q"]
+
+    def plan(
+        self, own: Ownship, intruders: Sequence[Intruder], goal: Goal, *, step: int = 0
+    ) -> Decision:
+        t0 = time.perf_counter()
+        cfg, model = self.config, self.model
+        root = ownship_state(own)
+        pos, vel = intruder_arrays(intruders)
+        goal_xyz = np.asarray(goal, dtype=float)
+        q = self.q_values(observe(root, pos, vel, goal_xyz, cfg, self.n_nearest))
+        action, q_report = self.choose(q)
+
+        # What the encounter model says each action leads to, held for one tree level's time.
+        hold = cfg.action_hold_s
+        seg = model.fly(
+            np.repeat(root[None], N_ACTIONS, axis=0),
+            np.arange(N_ACTIONS),
+            goal_xyz,
+            hold,
+            model.predict(pos, vel, hold),
+            cull=False,
+        )
+        ids = [i.id for i in intruders]
+        children = []
+        for a in range(N_ACTIONS):
+            finite = bool(np.isfinite(seg.min_sep[a]))
+            children.append(
+                ChildStats(
+                    action=a,
+                    bank_cmd_rad=float(bank_command(root[PHI_CMD], a, cfg)),
+                    accel_mps2=float(accel_command(a, cfg)),
+                    visits=0,
+                    q=float(q_report[a]),
+                    predicted_min_separation_m=float(seg.min_sep[a]),
+                    closest_intruder=ids[int(seg.closest[a])] if finite else None,
+                    time_to_closest_s=float(seg.t_closest[a]) if finite else None,
+                    outcome=_OUTCOME.get(int(seg.event[a]), ""),
+                )
+            )
+        period = cfg.decision_period_s
+        next_seg = model.fly(
+            root[None], np.array([action]), goal_xyz, period, model.predict(pos, vel, period),
+            cull=False,
+        )  # fmt: skip
+        sentence, counterfactual = self.explain(action, q, children)
+        return Decision(
+            bank_cmd_rad=float(bank_command(own.bank, action, cfg)),
+            accel_mps2=float(accel_command(action, cfg)),
+            action=action,
+            children=children,
+            explanation=sentence,
+            plan=np.concatenate([root[None, :3], seg.samples[action, 1:]]),
+            predicted_min_separation_m=float(next_seg.min_sep[0]),
+            branch_min_separation_m=float(seg.min_sep[action]),
+            ms=1000.0 * (time.perf_counter() - t0),
+            counterfactual=counterfactual,
+            planner=self.name,
+            d_min_m=cfg.d_min_m,
+        )
+
+    def explain(
+        self, action: int, q: dict[str, np.ndarray], children: list[ChildStats]
+    ) -> tuple[str, str]:
+        qa = q["q"]
+        runner = max((a for a in range(N_ACTIONS) if a != action), key=lambda a: qa[a])
+        sentence = (
+            f"{self.label}: Q({action_name(action)}) = {qa[action]:.2f} highest; "
+            f"{_keeps(children[action], self.config)}"
+        )
+        why_not = (
+            f"why not {action_name(runner)}: Q {qa[runner]:.2f} against {qa[action]:.2f}; "
+            f"{_keeps(children[runner], self.config)}"
+        )
+        return sentence, why_not
+
+
+class DQNPlanner(LearnedPlanner):
+    algo = "dqn"
+    label = "DQN"
+
+
+class SafeDQNPlanner(LearnedPlanner):
+    algo = "safe_dqn"
+    label = "Safe-DQN"
+
+    def choose(self, q: dict[str, np.ndarray]) -> tuple[int, np.ndarray]:
+        a = int(safe_action(torch.as_tensor(q["goal"]), torch.as_tensor(q["safety"])))
+        return a, q["goal"] + q["safety"]
+
+    def explain(
+        self, action: int, q: dict[str, np.ndarray], children: list[ChildStats]
+    ) -> tuple[str, str]:
+        qg, qs = q["goal"], q["safety"]
+        median = float(np.sort(qs)[(N_ACTIONS - 1) // 2])
+        passed = qs >= median
+        sentence = (
+            f"{self.label}: {int(passed.sum())} of 9 actions pass the safety filter "
+            f"(Q_safety >= median {median:.2f}); {action_name(action)} has the best "
+            f"Q_goal + Q_safety = {qg[action] + qs[action]:.2f} (goal {qg[action]:.2f}, "
+            f"safety {qs[action]:.2f}) among them; {_keeps(children[action], self.config)}"
+        )
+        greedy = int(np.argmax(qg))
+        if greedy != action and not passed[greedy]:
+            why_not = (
+                f"why not {action_name(greedy)} (best for the goal, Q_goal {qg[greedy]:.2f}): "
+                f"its Q_safety {qs[greedy]:.2f} is below the median; "
+                f"{_keeps(children[greedy], self.config)}"
+            )
+        else:
+            total = np.where(passed, qg + qs, -np.inf)
+            total[action] = -np.inf
+            runner = int(np.argmax(total))
+            why_not = (
+                f"why not {action_name(runner)}: Q_goal + Q_safety "
+                f"{qg[runner] + qs[runner]:.2f} against {qg[action] + qs[action]:.2f}; "
+                f"{_keeps(children[runner], self.config)}"
+            )
+        return sentence, why_not
+
+
+_OUTCOME = {1: "goal", 2: "collision", 3: "out_of_bounds"}
+
+
+def _keeps(c: ChildStats, cfg: PlannerConfig) -> str:
+    """What the encounter model predicts for an action held ``action_hold_s``, in words."""
+    hold = f"held {cfg.action_hold_s:g} s"
+    if c.closest_intruder is None or not math.isfinite(c.predicted_min_separation_m):
+        return f"{hold} it meets no intruder"
+    verb = "meets" if c.predicted_min_separation_m < cfg.d_min_m else "keeps"
+    return (
+        f"{hold} it {verb} {c.predicted_min_separation_m:.0f} m from intruder "
+        f"{c.closest_intruder} in {c.time_to_closest_s or 0.0:.0f} s"
+    )
+
+
+def make_learned_planner(
+    algo: str, config: PlannerConfig | None = None, checkpoint: str | Path | None = None
+) -> LearnedPlanner:
+    """The planner for ``algo`` ('dqn' or 'safe_dqn') with ``checkpoint`` (None: shipped)."""
+    if algo == "dqn":
+        return DQNPlanner(config, checkpoint)
+    if algo == "safe_dqn":
+        return SafeDQNPlanner(config, checkpoint)
+    raise CheckpointError(f"unknown learned avoidance algorithm '{algo}'; known: {ALGOS}")
