@@ -442,11 +442,16 @@ def evaluate_command(
 ) -> dict:
     """The `uavxai evaluate` command: run the campaign with a progress bar, write
     ``results.csv``, ``episodes.csv`` and the plots into ``out``; return a short report."""
-    from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
-    from rich.progress import TimeElapsedColumn, TimeRemainingColumn
-
     import torch
+    from rich.console import Console
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
 
     torch.set_num_threads(1)
     _check(scenario, methods, intruders, episodes, dynamics, workers)

@@ -80,7 +80,7 @@ def planner_inputs(state: TrafficState, bank_cmd: float) -> tuple[Ownship, list[
     )
     intruders = [
         Intruder(
-            id=i,
+            id=state.ids[i],
             x=float(state.pos[i, 0]),
             y=float(state.pos[i, 1]),
             h=float(state.pos[i, 2]),
@@ -105,7 +105,7 @@ def _state_json(own: Ownship, intruders: list[Intruder]) -> dict:
         },
         "intruders": [
             {
-                "id": f"intruder-{i.id}",
+                "id": i.id,
                 "x": i.x,
                 "y": i.y,
                 "h": i.h,
@@ -147,7 +147,7 @@ def run_episode(
     from uavxai.avoidance import PlannerConfig, make_planner
     from uavxai.bridges.bridge import MavlinkBridge
     from uavxai.bridges.protocol import CommandEncoder
-    from uavxai.comms.channel import sum_rate_at
+    from uavxai.comms.channel import Channel
     from uavxai.dynamics.geodesy import LocalFrame
     from uavxai.dynamics.world import JSBSimWorld
     from uavxai.service.stage import plan_service
@@ -159,6 +159,12 @@ def run_episode(
     goal = np.asarray(
         sc.ownship.goal if sc.ownship.goal is not None else service.service_point, dtype=float
     )
+
+    # The live sum-rate metric: the service power allocation served from where the UAV is now,
+    # on the mean channel (no fading, so the curve shows geometry, not noise).
+    channel = Channel.from_scenario(sc, users=service.users)
+    power_w = np.asarray(service.power_w, dtype=float)
+    throughput_bits = 0.0
 
     world = JSBSimWorld(sc, seed=sc.seed)
     frame = LocalFrame.from_origin(sc.world.origin)
@@ -258,11 +264,13 @@ def run_episode(
                         flown_min,
                         _closest_approach(prev.pos[0], state.pos[0], prev.pos[1:], state.pos[1:]),
                     )
+                sum_rate = float(channel.evaluate(state.pos[0], power_w).sum_rate_bps)
+                throughput_bits += sum_rate * sample_dt
                 if recorder is not None:
                     recorder.log_traffic(state)
                     recorder.log_metrics(
                         state.t,
-                        sum_rate_bps=float(sum_rate_at(sc, service, state.pos[0])),
+                        sum_rate_bps=sum_rate,
                         min_separation_m=min(state.min_separation(), 1e4),
                         bank_deg=math.degrees(float(state.att[0, 0])),
                         airspeed_mps=float(state.airspeed[0]),
@@ -314,6 +322,7 @@ def run_episode(
         "goal": [float(v) for v in goal],
         **service.to_summary(),
         "decision_ms": _stats(decision_ms),
+        "throughput_in_flight_bits": throughput_bits,
         "sim_realtime_factor": state.t / wall if wall > 0 else None,
         "versions": _versions(),
         "trust": {"separation_error_m": _stats(sep_errors, ("mean", "p95", "max"))},

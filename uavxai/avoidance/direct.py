@@ -16,7 +16,14 @@ import numpy as np
 
 from uavxai.avoidance.mcts import intruder_arrays
 from uavxai.avoidance.model import EncounterModel, accel_command, bank_command, ownship_state
-from uavxai.avoidance.types import Decision, Goal, Intruder, Ownship, PlannerConfig
+from uavxai.avoidance.types import (
+    Decision,
+    Goal,
+    Intruder,
+    Ownship,
+    PlannerConfig,
+    check_plan_inputs,
+)
 
 HEADING_GAIN = 1.0  # rad of bank per rad of heading error
 HOLD_SPEED = 1  # accel index of "hold speed"
@@ -37,6 +44,7 @@ class DirectPlanner:
         self, own: Ownship, intruders: Sequence[Intruder], goal: Goal, *, step: int = 0
     ) -> Decision:
         t0 = time.perf_counter()
+        check_plan_inputs(own, intruders, goal)
         cfg = self.config
         bearing = math.atan2(goal[0] - own.x, goal[1] - own.y)  # clockwise from north
         error = math.atan2(math.sin(bearing - own.heading), math.cos(bearing - own.heading))
@@ -54,7 +62,7 @@ class DirectPlanner:
             np.array([action]),
             goal_xyz,
             period,
-            self.model.predict(pos, vel, period),
+            self.model.predict(pos, vel, period, index=False),
             cull=False,
             exact=True,
         )

@@ -33,7 +33,6 @@ from uavxai.avoidance.model import (
     GOAL,
     NONE,
     OUTCOME_NAMES,
-    PHI,
     PHI_CMD,
     PSI,
     STATE_DIM,
@@ -255,10 +254,7 @@ class EncounterEnv(gym.Env):
                 self.traffic[i, V] = speed  # the pilot's speed target, held
         if len(self.traffic) == 0:
             return np.zeros((self.model.substeps(duration) + 1, 0, 3)), self.traffic
-        pos, end = self.model.fly_commanded(self.traffic, cmd, duration)
-        end[:, PHI_CMD] = cmd
-        end[:, PHI] = np.where(np.isfinite(end[:, PHI]), end[:, PHI], 0.0)
-        return pos, end
+        return self.model.fly_commanded(self.traffic, cmd, duration)
 
 
 # ------------------------------------------------------------------------------ episodes

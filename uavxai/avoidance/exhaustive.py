@@ -28,6 +28,7 @@ from uavxai.avoidance.types import (
     Ownship,
     PlannerConfig,
     SearchTree,
+    check_plan_inputs,
 )
 
 
@@ -77,6 +78,7 @@ class ExhaustivePlanner:
         self, own: Ownship, intruders: Sequence[Intruder], goal: Goal, *, step: int = 0
     ) -> Decision:
         t_start = time.perf_counter()
+        check_plan_inputs(own, intruders, goal)
         cfg, model = self.config, self.model
         goal_xyz = np.asarray(goal, dtype=float)
         tracks = predict_levels(model, intruders, cfg.depth, cfg.action_hold_s)
@@ -89,7 +91,15 @@ class ExhaustivePlanner:
             time_left_s=(cfg.max_steps - step) * cfg.decision_period_s,
         )
         decision = decision_from_tree(
-            tree, chosen_action(tree), own, intruders, goal_xyz, tracks, model, name=self.name
+            tree,
+            chosen_action(tree),
+            own,
+            intruders,
+            goal_xyz,
+            tracks,
+            model,
+            name=self.name,
+            sampled=False,
         )
         decision.ms = 1000.0 * (time.perf_counter() - t_start)
         return decision

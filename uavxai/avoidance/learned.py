@@ -1,10 +1,10 @@
 """Learned avoidance baselines: DQN and Safe-DQN (the paper's learned comparisons).
 
-Both see the same intruder-count-independent observation (:func:`observe`): the ownship's own
-situation (goal bearing and distance, speed, bank, where it is in the flight area) and the
-``n_nearest`` intruders, nearest first, each as its position and velocity relative to the
-ownship in the ownship's heading frame plus its closest point of approach, normalised; absent
-slots are zeros with a ``present`` flag of 0, so 3 or 40 intruders give the same vector.
+Both see the same intruder-count-independent observation (:func:`observe`): the shared
+encounter observation of :mod:`uavxai.avoidance.observation` (goal bearing and distance,
+speed, bank, the nearest wall; the ``n_nearest`` intruders, nearest first, relative position
+and velocity in the ownship's heading frame, zero-padded with a ``present`` flag) plus each of
+those intruders' closest point of approach, so 3 or 40 intruders give the same vector.
 
 - **DQN**: one Q-network over the 9 actions, trained on the sum of the goal and safety rewards
   (see :mod:`uavxai.avoidance.train`); acts greedily.

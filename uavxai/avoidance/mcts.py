@@ -25,6 +25,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from uavxai.avoidance.model import (
+    COLLISION,
     NONE,
     OUTCOME_NAMES,
     TERMINAL_VALUE,
@@ -44,9 +45,11 @@ from uavxai.avoidance.types import (
     Ownship,
     PlannerConfig,
     SearchTree,
+    check_plan_inputs,
 )
 
 _VALUE_OF = np.array(TERMINAL_VALUE)
+_OPEN = [math.nan] * N_ACTIONS
 
 
 def search(
@@ -69,29 +72,37 @@ def search(
     Node 0 is the root; the children of a node are 9 consecutive nodes in action order.
     """
     depth_limit = len(tracks)
-    tree = TreeBuilder(model, root, goal, tracks, hold_s, time_left_s)
-    visits, value_sum, first_child = tree.visits, tree.value_sum, tree.first_child
-    is_leaf, value = tree.is_leaf, tree.value
-    explore = 2.0 * c * math.sqrt(2.0)  # 2C sqrt(2 ln n / n_j) = explore sqrt(ln n) / sqrt(n_j)
+    builder = TreeBuilder(model, root, goal, tracks, hold_s, time_left_s)
+    visits, value_sum, first_child = builder.visits, builder.value_sum, builder.first_child
+    is_leaf, value = builder.is_leaf, builder.value
+    # 2C sqrt(2 ln n / n_j) = [2C sqrt(2 ln n)] * [1 / sqrt(n_j)]: both from tables, so that the
+    # loop below makes no function calls
+    explore = [2.0 * c * math.sqrt(2.0 * math.log(n)) if n else 0.0 for n in range(simulations)]
+    inv_sqrt = [1.0 / math.sqrt(n) if n else math.inf for n in range(simulations)]
     draws = rng.random(simulations * depth_limit).tolist()  # tie-breaks, one per step
     draw = 0
     path = [0] * (depth_limit + 1)
     actions = range(N_ACTIONS)
+    all_actions = list(actions)
     for _ in range(simulations):
         node, length = 0, 1
         while not is_leaf[node]:
             first = first_child[node]
             if first < 0:
-                first = tree.expand(node)
-            kids = visits[first : first + N_ACTIONS]
-            if 0 in kids:
-                best = [j for j in actions if kids[j] == 0]
+                first = builder.expand(node)
+            n = visits[node]
+            if n == 0:  # a fresh node: every child unvisited
+                best = all_actions
             else:
-                e = explore * math.sqrt(math.log(visits[node]))
-                sums = value_sum[first : first + N_ACTIONS]
-                scores = [sums[j] / kids[j] + e / math.sqrt(kids[j]) for j in actions]
-                top = max(scores)
-                best = [j for j in actions if scores[j] == top]
+                kids = visits[first : first + N_ACTIONS]
+                if 0 in kids:  # children never visited come first
+                    best = [j for j in actions if kids[j] == 0]
+                else:
+                    sums = value_sum[first : first + N_ACTIONS]
+                    e = explore[n]
+                    scores = [sums[j] / kids[j] + e * inv_sqrt[kids[j]] for j in actions]
+                    top = max(scores)
+                    best = [j for j in actions if scores[j] == top]
             pick = best[0] if len(best) == 1 else best[int(draws[draw] * len(best))]
             draw += 1
             node = first + pick
@@ -102,7 +113,7 @@ def search(
             p = path[k]
             visits[p] += 1
             value_sum[p] += v
-    return tree.finish()
+    return builder.finish()
 
 
 def chosen_action(tree: SearchTree) -> int:
@@ -129,6 +140,7 @@ class MCTSPlanner:
         self, own: Ownship, intruders: Sequence[Intruder], goal: Goal, *, step: int = 0
     ) -> Decision:
         t_start = time.perf_counter()
+        check_plan_inputs(own, intruders, goal)
         cfg, model = self.config, self.model
         goal_xyz = np.asarray(goal, dtype=float)
         tracks = predict_levels(model, intruders, cfg.depth, cfg.action_hold_s)
@@ -176,12 +188,14 @@ def decision_from_tree(
     model: EncounterModel,
     *,
     name: str,
+    sampled: bool = True,
 ) -> Decision:
     """Everything a tree says about a decision: per-root-action stats, plan, explanation.
 
     The best line under every root action is re-flown exactly against every intruder (the
     search itself may skip far ones), and those numbers are written back into the tree.
-    Shared by the tree planners (MCTS and exhaustive).
+    Shared by the tree planners; ``sampled``: visits count simulations (MCTS), so the share
+    of each action's simulations that collided is reported too.
     """
     from uavxai.xai.explain import explain  # xai reads planner types; import late, no cycle
 
@@ -190,7 +204,11 @@ def decision_from_tree(
     root_children = tree.children_of(0)
     lines = {int(tree.action[ch]): tree.best_line(int(ch)) for ch in root_children}
     samples = _remeasure(model, tree, [n for line in lines.values() for n in line], goal, tracks)
-    children = [_child_stats(tree, a, line, own, cfg, ids) for a, line in lines.items()]
+    shares = collision_shares(tree) if sampled else None
+    children = [
+        _child_stats(tree, a, line, own, cfg, ids, None if shares is None else shares[a])
+        for a, line in lines.items()
+    ]
 
     chosen_line = lines[action]
     plan = [np.array([[own.x, own.y, own.h]])]
@@ -208,7 +226,7 @@ def decision_from_tree(
         np.array([action]),
         goal,
         period,
-        model.predict(pos, vel, period),
+        model.predict(pos, vel, period, index=False),
         cull=False,
         exact=True,
     )
@@ -230,6 +248,19 @@ def decision_from_tree(
     )
     decision.explanation, decision.counterfactual = explain(decision)
     return decision
+
+
+def collision_shares(tree: SearchTree) -> np.ndarray:
+    """(9,) share of each root action's visits that ended in a collision."""
+    hit = np.flatnonzero((tree.terminal == COLLISION) & (tree.visits > 0))
+    top = hit.copy()
+    for _ in range(int(tree.depth.max(initial=0))):  # climb to the depth-1 ancestor
+        top = np.where(tree.depth[top] > 1, tree.parent[top], top)
+    collided = np.bincount(tree.action[top], weights=tree.visits[hit], minlength=N_ACTIONS)
+    kids = tree.children_of(0)
+    visits = np.zeros(N_ACTIONS)
+    visits[tree.action[kids]] = tree.visits[kids]
+    return np.divide(collided, visits, out=np.zeros(N_ACTIONS), where=visits > 0)
 
 
 def _remeasure(
@@ -270,7 +301,13 @@ def _remeasure(
 
 
 def _child_stats(
-    tree: SearchTree, action: int, line: list[int], own: Ownship, cfg: PlannerConfig, ids: list
+    tree: SearchTree,
+    action: int,
+    line: list[int],
+    own: Ownship,
+    cfg: PlannerConfig,
+    ids: list,
+    collision_share: float | None,
 ) -> ChildStats:
     assert tree.t_closest is not None
     seps = tree.min_sep[line]
@@ -287,6 +324,7 @@ def _child_stats(
         closest_intruder=ids[closest] if known else None,
         time_to_closest_s=float(tree.t_closest[line[k]]) if known else None,
         outcome=OUTCOME_NAMES[int(tree.terminal[line[-1]])],
+        collision_share=None if collision_share is None else float(collision_share),
     )
 
 
@@ -327,9 +365,17 @@ class TreeBuilder:
         if (d + 1) * self.hold_s >= self.time_left_s - 1e-9:
             code = np.where(code == NONE, TIMEOUT, code).astype(np.int8)
         leaf_depth = d + 1 == self.depth_limit
-        value = _VALUE_OF[code]  # nan for open nodes: only where a walk ends is evaluated
-        if leaf_depth:
-            value = np.where(code == NONE, self.model.leaf_value(seg.end, self.goal), value)
+        codes = code.tolist()
+        # Only where a walk ends is evaluated: terminal children, and open ones at the limit.
+        if any(codes):
+            value = _VALUE_OF[code]
+            if leaf_depth:
+                value = np.where(code == NONE, self.model.leaf_value(seg.end, self.goal), value)
+            values = value.tolist()
+        elif leaf_depth:
+            values = self.model.leaf_value(seg.end, self.goal).tolist()
+        else:
+            values = _OPEN
         first = len(self.parent)
         self.first_child[node] = first
         self.parent.extend([node] * N_ACTIONS)
@@ -338,28 +384,31 @@ class TreeBuilder:
         self.visits.extend([0] * N_ACTIONS)
         self.value_sum.extend([0.0] * N_ACTIONS)
         self.first_child.extend([-1] * N_ACTIONS)
-        codes = code.tolist()
         self.terminal.extend(codes)
         self.is_leaf.extend([leaf_depth or k != NONE for k in codes])
-        self.value.extend(value.tolist())
+        self.value.extend(values)
         self.states.append(seg.end)
         self.min_sep.append(seg.min_sep)
         self.closest.append(seg.closest)
-        self.t_closest.append(seg.t_closest + d * self.hold_s)
+        self.t_closest.append(seg.t_closest)
         return first
 
     def finish(self) -> SearchTree:
         states = np.concatenate(self.states)
+        depth = np.array(self.depth)
+        # Segment times count from the parent; the tree's from the decision.
+        t_closest = np.concatenate(self.t_closest) + np.maximum(depth - 1, 0) * self.hold_s
         return SearchTree(
             parent=np.array(self.parent),
             action=np.array(self.action),
-            depth=np.array(self.depth),
+            depth=depth,
             visits=np.array(self.visits),
             value_sum=np.array(self.value_sum),
             min_sep=np.concatenate(self.min_sep),
             closest=np.concatenate(self.closest),
             terminal=np.array(self.terminal, dtype=np.int8),
             pos=states[:, :3].copy(),
-            t_closest=np.concatenate(self.t_closest),
+            t_closest=t_closest,
             state=states,
+            first_child=np.array(self.first_child),
         )

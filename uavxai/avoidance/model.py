@@ -91,7 +91,9 @@ class Track:
     """Intruder positions at a segment's sub-step instants, and a ball bounding each path.
 
     Between two instants an intruder moves in a straight line, so the ball around its samples
-    holds its whole path.
+    holds its whole path. ``Track.of(pos, index_distance=d)`` also files every intruder in a
+    grid of the horizontal plane, so that :meth:`near` queries up to ``d`` cost a dictionary
+    look-up when nothing is near (the usual case in a tree search).
     """
 
     pos: np.ndarray  # (n+1, N, 3)
@@ -100,23 +102,46 @@ class Track:
     centre: np.ndarray = field(repr=False)  # (N, 3)
     radius: np.ndarray = field(repr=False)  # (N,)
     step_max: float = 0.0  # longest straight piece of any path (one sub-step), m
+    index_distance: float = 0.0  # queries up to this distance use the grid
+    cells: dict[tuple[int, int], list] = field(default_factory=dict, repr=False)
 
     @classmethod
-    def of(cls, pos: np.ndarray) -> Track:
+    def of(cls, pos: np.ndarray, index_distance: float = 0.0) -> Track:
         pos = np.asarray(pos, dtype=float)
         if pos.ndim != 3 or pos.shape[2] != 3 or pos.shape[0] < 2:
             raise ValueError(f"intruder positions must be (n+1, N, 3) with n >= 1, got {pos.shape}")
         centre = 0.5 * (pos.min(axis=0) + pos.max(axis=0))
         radius = np.sqrt(np.max(np.sum((pos - centre) ** 2, axis=2), axis=0))
         steps = np.sqrt(np.sum(np.diff(pos, axis=0) ** 2, axis=2))
-        return cls(
+        track = cls(
             pos=pos,
             xy=pos[:, :, 0] + 1j * pos[:, :, 1],
             h=np.ascontiguousarray(pos[:, :, 2]),
             centre=centre,
             radius=radius,
             step_max=float(steps.max()) if steps.size else 0.0,
+            index_distance=index_distance if pos.shape[1] >= _INDEX_MIN else 0.0,
         )
+        if track.index_distance > 0:
+            track._file(index_distance)
+        return track
+
+    def _file(self, distance: float) -> None:
+        """Cell size ``distance``; each intruder goes into every cell that its ball grown by
+        ``distance`` touches, so a query point's cell lists every intruder it may be near.
+        Cells hold (index, x, y, h, radius) tuples: the few candidates are tested in Python."""
+        for j, ((x, y, h), r) in enumerate(
+            zip(self.centre.tolist(), self.radius.tolist(), strict=True)
+        ):
+            grown = r + distance
+            entry = (j, x, y, h, r)
+            for i in range(
+                math.floor((x - grown) / distance), math.floor((x + grown) / distance) + 1
+            ):
+                for k in range(
+                    math.floor((y - grown) / distance), math.floor((y + grown) / distance) + 1
+                ):
+                    self.cells.setdefault((i, k), []).append(entry)
 
     @property
     def n(self) -> int:
@@ -129,12 +154,28 @@ class Track:
 
     def near(self, centre: np.ndarray, distance: float) -> np.ndarray:
         """Indices of intruders whose path may come within ``distance`` of ``centre`` (3,)."""
+        if distance <= self.index_distance:
+            x, y, h = centre.tolist()
+            size = self.index_distance
+            found = [
+                j
+                for j, cx, cy, ch, r in self.cells.get(
+                    (math.floor(x / size), math.floor(y / size)), ()
+                )
+                if (cx - x) ** 2 + (cy - y) ** 2 + (ch - h) ** 2 <= (distance + r) ** 2
+            ]
+            return np.array(found, dtype=int) if found else _NO_INTRUDERS
         d = self.centre - centre
         return np.flatnonzero(np.einsum("ij,ij->i", d, d) <= (distance + self.radius) ** 2)
 
 
+_INDEX_MIN = 6  # below this many intruders a plain distance test is as fast as the grid
+_NO_INTRUDERS = np.zeros(0, dtype=int)
+_NO_INTRUDERS.flags.writeable = False
+
+
 # ----------------------------------------------------------------------------------- segments
-@dataclass(frozen=True)
+@dataclass(slots=True)  # not frozen: built hundreds of times per decision
 class Segment:
     """A batch of ownship states, each flying one action for the same duration.
 
@@ -150,12 +191,14 @@ class Segment:
     t_closest: np.ndarray  # (B,) seconds from the segment's start to that closest approach
     event: np.ndarray  # (B,) int8 terminal code, NONE when nothing happened
     t_event: np.ndarray  # (B,) seconds from the start to the start of the event's sub-step
-    xy: np.ndarray = field(repr=False)  # (B, n+1) complex positions at the sub-step instants
-    hs: np.ndarray = field(repr=False)  # (B or 1, n+1) altitudes at the sub-step instants
+    xy: np.ndarray | None = field(repr=False)  # (B, n+1) complex positions at the sub-steps
+    hs: np.ndarray | None = field(repr=False)  # (B or 1, n+1) altitudes at the sub-steps
 
     @property
-    def samples(self) -> np.ndarray:
-        """(B, n+1, 3) positions at the sub-step instants."""
+    def samples(self) -> np.ndarray | None:
+        """(B, n+1, 3) positions at the sub-step instants (None: not computed)."""
+        if self.xy is None or self.hs is None:
+            return None
         h = np.broadcast_to(self.hs, self.xy.shape)
         return np.stack([self.xy.real, self.xy.imag, h], axis=-1)
 
@@ -172,6 +215,7 @@ class _BodyMotion:
     ball: complex = 0j  # centre of a circle holding every row's path (body frame) ...
     ball_r: float = 0.0  # ... and its radius
     step_max: float = 0.0  # longest horizontal sub-step chord of any row
+    template: np.ndarray | None = None  # (B, 7) end states with V, PHI, PHI_CMD filled in
 
 
 # Where a batch of paths stays: (centre (3,), horizontal radius, half-height).
@@ -204,15 +248,32 @@ class EncounterModel:
         """Sub-steps of a segment: the fewest of at most ``substep_s`` each."""
         return max(1, math.ceil(duration / self.config.substep_s - 1e-9))
 
-    def predict(self, pos: np.ndarray, vel: np.ndarray, duration: float, t0: float = 0.0) -> Track:
-        """Constant-velocity track over [t0, t0 + duration] of intruders now at ``pos``."""
+    def predict(
+        self,
+        pos: np.ndarray,
+        vel: np.ndarray,
+        duration: float,
+        t0: float = 0.0,
+        *,
+        index: bool = True,
+    ) -> Track:
+        """Constant-velocity track over [t0, t0 + duration] of intruders now at ``pos``;
+        ``index``: filed for quick :meth:`Track.near` queries within an ownship's reach."""
         n = self.substeps(duration)
         t = t0 + (duration / n) * np.arange(n + 1)
-        return Track.of(pos[None, :, :] + t[:, None, None] * vel[None, :, :])
+        distance = self.reach(0.0, duration) + self.config.d_min_m if index else 0.0
+        return Track.of(pos[None, :, :] + t[:, None, None] * vel[None, :, :], distance)
+
+    def reach(self, speed: float, duration: float) -> float:
+        """The farthest (3-D) an ownship at ``speed`` can get from its start in ``duration``."""
+        v_top = max(self.config.speed_mps[1], speed)
+        return math.hypot(v_top, self.config.climb_rate_mps) * duration
 
     def leaf_value(self, positions: np.ndarray, goal: np.ndarray) -> np.ndarray:
         """Paper eq 13 for non-terminal states: 1 - d(o, g) / d_max."""
-        d = np.sqrt(np.sum((positions[..., :3] - goal) ** 2, axis=-1))
+        d = np.sqrt(
+            np.einsum("...i,...i->...", positions[..., :3] - goal, positions[..., :3] - goal)
+        )
         return 1.0 - d / self.config.d_max
 
     # -------------------------------------------------------------------------------- flying
@@ -260,7 +321,11 @@ class EncounterModel:
     def fly_all_actions(
         self, state: np.ndarray, goal: np.ndarray, duration: float, track: Track
     ) -> Segment:
-        """The 9 children of one state, in action order: ``fly`` with every action, memoised."""
+        """The 9 children of one state, in action order: ``fly`` with every action, memoised.
+
+        The tree search's hot path. When nothing (intruder, goal, wall) is within reach, the
+        sub-step positions are not computed: ``xy``, ``hs`` and ``samples`` are then None.
+        """
         cfg = self.config
         n = self._check(duration, track)
         x, y, h, v, psi, phi, cmd = state.tolist()
@@ -275,21 +340,21 @@ class EncounterModel:
             v_, phi_, cmd_ = (np.full(N_ACTIONS, k) for k in key[:3])
             body = self._memo[key] = self._body(v_, phi_, cmd_, ALL_ACTIONS, duration, n)
         rot = complex(math.cos(psi), -math.sin(psi))
-        xy = complex(x, y) + body.z * rot
         climb = cfg.climb_rate_mps * duration
         h_end = h + min(max(goal[2] - h, -climb), climb)
-        if h_end == h:
-            hs = np.full((1, n + 1), h)
-        else:
-            hs = h + np.clip(goal[2] - h, *self._climb_window(duration, n))[None]
-        end = self._end(xy[:, -1], h_end, psi, body)
+        end = self._end(complex(x, y) + body.z[:, -1] * rot, h_end, psi, body)
 
         c = complex(x, y) + body.ball * rot
         centre = np.array([c.real, c.imag, 0.5 * (h + h_end)])
         box = (centre, body.ball_r, 0.5 * abs(h_end - h))
         near = track.near(centre, math.hypot(box[1], box[2]) + cfg.d_min_m)
-        if not near.size and not self._near_goal_or_wall(box, goal):
-            return Segment(end, *self._quiet, xy=xy, hs=hs)
+        if not near.size and not self._near_goal(box, goal) and not self._near_wall(box):
+            return Segment(end, *self._quiet, xy=None, hs=None)  # no sample was needed
+        xy = complex(x, y) + body.z * rot
+        if h_end == h:
+            hs = np.full((1, n + 1), h)
+        else:
+            hs = h + np.clip(goal[2] - h, *self._climb_window(duration, n))[None]
         own_step = self._own_step(body, duration / n)
         return self._events(end, xy, hs, goal, track, near, box, duration / n, own_step, False)
 
@@ -326,13 +391,16 @@ class EncounterModel:
         climb = self.config.climb_rate_mps * (duration / n) * np.arange(n + 1)
         return -climb, climb
 
-    def _near_goal_or_wall(self, box: _Cylinder, goal: np.ndarray) -> bool:
-        """Could a path inside ``box`` reach the goal or leave the flight area?"""
+    def _near_goal(self, box: _Cylinder, goal: np.ndarray) -> bool:
+        """Could a path inside ``box`` come within the goal radius?"""
+        centre, r_xy, r_h = box
+        return math.dist(centre.tolist(), goal) <= math.hypot(r_xy, r_h) + self.config.goal_radius_m
+
+    def _near_wall(self, box: _Cylinder) -> bool:
+        """Could a path inside ``box`` leave the flight area?"""
         cfg = self.config
         centre, r_xy, r_h = box
         x, y, h = centre.tolist()
-        if math.dist((x, y, h), goal) <= math.hypot(r_xy, r_h) + cfg.goal_radius_m:
-            return True
         return not (
             cfg.x_bounds[0] <= x - r_xy
             and x + r_xy <= cfg.x_bounds[1]
@@ -374,6 +442,8 @@ class EncounterModel:
         lo = complex(z.real.min(), z.imag.min())
         hi = complex(z.real.max(), z.imag.max())
         ball = 0.5 * (lo + hi)
+        template = np.zeros((len(v0), STATE_DIM))
+        template[:, V], template[:, PHI], template[:, PHI_CMD] = v_end, phi_end, phi_cmd
         return _BodyMotion(
             z=z,
             dpsi=psi[:, -1],
@@ -383,17 +453,15 @@ class EncounterModel:
             ball=ball,
             ball_r=float(np.abs(z - ball).max()),
             step_max=float(chord.max()),
+            template=template,
         )
 
     def _end(self, xy_end, h_end, psi, body: _BodyMotion) -> np.ndarray:
-        end = np.empty((len(body.dpsi), STATE_DIM))
+        end = body.template.copy()
         end[:, X] = xy_end.real
         end[:, Y] = xy_end.imag
         end[:, H] = h_end
-        end[:, V] = body.v_end
         end[:, PSI] = np.mod(psi + body.dpsi, 2.0 * np.pi)
-        end[:, PHI] = body.phi_end
-        end[:, PHI_CMD] = body.phi_cmd
         return end
 
     # -------------------------------------------------------------------------------- events
@@ -413,44 +481,27 @@ class EncounterModel:
         cfg = self.config
         B, n = xy.shape[0], xy.shape[1] - 1
         rows = np.arange(B)
+        never = np.full(B, n)
         k = near.size
-        goal_or_wall = self._near_goal_or_wall(box, goal)
+
+        # Intruders: squared distances at the sub-step instants first. No point of a
+        # sub-step's relative chord is farther than half its length from an end, so if every
+        # sampled distance clears d_min by that much there is no conflict, and the sampled
+        # minimum is within L^2 / (8 d) of the true one; otherwise solve every chord.
+        k_hit, sep2, frac = never, None, None
         if k:
             rel_xy = xy[:, :, None] - track.xy[:, near][None]  # (B, n+1, k)
             rel_h = hs[:, :, None] - track.h[:, near][None]  # (B or 1, n+1, k)
-            d2 = rel_xy.real**2
-            d2 += rel_xy.imag**2
-            d2 += rel_h**2
-            flat = d2.reshape(B, (n + 1) * k).argmin(axis=1)
-            k_min, j_min = np.divmod(flat, k)
-            d2_min = d2[rows, k_min, j_min]
-            # No point of a sub-step's relative chord is farther than half its length from
-            # an end; so if every sampled distance clears d_min by that much, none can
-            # conflict and the sampled minimum is within L^2 / (8 d) of the true one.
+            sep2 = rel_xy.real**2
+            sep2 += rel_xy.imag**2
+            sep2 += rel_h**2
             slack = 0.5 * (own_step + track.step_max) + 1e-6
-            quiet = not (exact or goal_or_wall)
-            if quiet and d2_min.min() >= (cfg.d_min_m + slack) ** 2:
-                return Segment(
-                    end=end,
-                    min_sep=np.sqrt(d2_min),
-                    closest=near[j_min],
-                    t_closest=k_min * dt,
-                    event=np.zeros(B, dtype=np.int8),
-                    t_event=np.full(B, np.nan),
-                    xy=xy,
-                    hs=hs,
-                )
-            chord_d2, s = _closest_on_chords(rel_xy, rel_h, d2)  # (B, n, k)
-            k_hit = _first_true(chord_d2.min(axis=2) < cfg.d_min_m**2)
-        else:
-            k_hit = np.full(B, n)
+            if exact or sep2.min() < (cfg.d_min_m + slack) ** 2:
+                sep2, frac = _closest_on_chords(rel_xy, rel_h, sep2)  # (B, n, k) per sub-step
+                k_hit = _first_true(sep2.min(axis=2) < cfg.d_min_m**2)
 
-        k_goal = k_out = np.full(B, n)
-        if goal_or_wall:
-            g_xy = xy - complex(goal[0], goal[1])
-            g_h = np.broadcast_to(hs - goal[2], xy.shape)
-            g_d2, _ = _closest_on_chords(g_xy, g_h, g_xy.real**2 + g_xy.imag**2 + g_h**2)
-            k_goal = _first_true(g_d2 < cfg.goal_radius_m**2)
+        k_out = never
+        if self._near_wall(box):
             # The box is convex: a chord between two samples inside it stays inside.
             h_all = np.broadcast_to(hs, xy.shape)[:, 1:]
             outside = (
@@ -462,6 +513,12 @@ class EncounterModel:
                 | (h_all > cfg.h_bounds[1])
             )
             k_out = _first_true(outside)
+        k_goal = never
+        if self._near_goal(box, goal):
+            g_xy = xy - complex(goal[0], goal[1])
+            g_h = np.broadcast_to(hs - goal[2], xy.shape)
+            g_d2, _ = _closest_on_chords(g_xy, g_h, g_xy.real**2 + g_xy.imag**2 + g_h**2)
+            k_goal = _first_true(g_d2 < cfg.goal_radius_m**2)
 
         # The first event wins; at equal sub-steps collision beats leaving the map beats the
         # goal (the conservative reading of a sub-step that holds two of them).
@@ -471,21 +528,24 @@ class EncounterModel:
         happened = k_event < n
         event = np.where(happened, _EVENT_CODES[kind], NONE).astype(np.int8)
         t_event = np.where(happened, k_event * dt, np.nan)
-        if not k:
+        if sep2 is None:
             return Segment(
                 end, np.full(B, np.inf), np.full(B, -1), np.zeros(B), event, t_event, xy, hs
             )
 
-        # Separation counts only up to (and including) the event's sub-step.
-        after = (np.arange(n)[None, :] > k_event[:, None])[..., None]
-        chord_d2 = np.where(after, np.inf, chord_d2)
-        flat = chord_d2.reshape(B, n * k).argmin(axis=1)
+        if happened.any():
+            # Separation counts up to the end of the event's sub-step, not beyond.
+            last = k_event + (1 if frac is None else 0)  # instants vs sub-steps
+            after = np.arange(sep2.shape[1])[None, :] > last[:, None]
+            sep2 = np.where(after[..., None], np.inf, sep2)
+        flat = sep2.reshape(B, -1).argmin(axis=1)
         k_min, j_min = np.divmod(flat, k)
+        t_closest = k_min * dt if frac is None else (k_min + frac[rows, k_min, j_min]) * dt
         return Segment(
             end=end,
-            min_sep=np.sqrt(chord_d2[rows, k_min, j_min]),
+            min_sep=np.sqrt(sep2[rows, k_min, j_min]),
             closest=near[j_min],
-            t_closest=(k_min + s[rows, k_min, j_min]) * dt,
+            t_closest=t_closest,
             event=event,
             t_event=t_event,
             xy=xy,

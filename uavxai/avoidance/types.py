@@ -168,6 +168,7 @@ class ChildStats:
     closest_intruder: int | str | None  # id of the intruder that comes closest on that line
     time_to_closest_s: float | None = None  # from the decision, s
     outcome: str = ""  # how that line ends: goal, collision, out_of_bounds, timeout or "" (open)
+    collision_share: float | None = None  # MCTS: share of this action's simulations that collided
 
 
 @dataclass
@@ -185,6 +186,9 @@ class SearchTree:
     pos: np.ndarray  # (M, 3) ownship position at the node, for drawing the tree in 3-D
     t_closest: np.ndarray | None = None  # (M,) s from the decision to that closest approach
     state: np.ndarray | None = None  # (M, 7) encounter-model state (x, y, h, V, psi, phi, cmd)
+    # (M,) index of a node's first child when children are stored as consecutive blocks of
+    # N_ACTIONS (as the search builds them), -1 without children; None: look them up by parent
+    first_child: np.ndarray | None = None
 
     @property
     def q(self) -> np.ndarray:
@@ -195,15 +199,20 @@ class SearchTree:
         return int(self.parent.shape[0])
 
     def children_of(self, node: int) -> np.ndarray:
+        if self.first_child is not None:
+            first = int(self.first_child[node])
+            return np.arange(first, first + N_ACTIONS) if first >= 0 else np.zeros(0, dtype=int)
         return np.flatnonzero(self.parent == node)
 
     def best_child(self, node: int) -> int | None:
         """The most visited child of ``node`` (ties: higher Q, then lower action), or None."""
         kids = self.children_of(node)
-        kids = kids[self.visits[kids] > 0]
+        visits = self.visits[kids]
+        kids, visits = kids[visits > 0], visits[visits > 0]
         if kids.size == 0:
             return None
-        order = np.lexsort((self.action[kids], -self.q[kids], -self.visits[kids]))
+        q = self.value_sum[kids] / visits
+        order = np.lexsort((self.action[kids], -q, -visits))
         return int(kids[order[0]])
 
     def best_line(self, node: int) -> list[int]:
@@ -242,6 +251,15 @@ class SearchTree:
 
 @dataclass
 class Decision:
+    """One decision of a planner (SPEC §7), with what it is based on.
+
+    ``predicted_min_separation_m`` is the "trust" figure: the smallest 3-D separation the
+    planner predicts over the *next decision period* only (the chosen action held for
+    ``decision_period_s``, every intruder at constant velocity, closest approach solved
+    exactly), i.e. over exactly what the dynamics fly before the next decision.
+    ``branch_min_separation_m`` covers the chosen branch's whole planned line instead.
+    """
+
     bank_cmd_rad: float
     accel_mps2: float
     action: int
@@ -253,11 +271,7 @@ class Decision:
     confidence: float = 0.0  # share of root visits that went to the chosen action
     ms: float = 0.0  # planner wall time
     counterfactual: str = ""  # why not the runner-up
-    # Minimum separation along the chosen branch's whole planned line (depth x action_hold_s),
-    # whereas predicted_min_separation_m covers only the next decision period: the chosen
-    # action held for decision_period_s, intruders at constant velocity. The latter is what the
-    # dynamics fly before the next decision, so it is the one to compare with them ("trust").
-    branch_min_separation_m: float = math.inf
+    branch_min_separation_m: float = math.inf  # along the chosen line, depth x action_hold_s
     planner: str = ""  # which planner decided (mcts, exhaustive, none, ...)
     d_min_m: float = 50.0  # the collision distance the planner worked with
 
@@ -285,6 +299,7 @@ class Decision:
                     "closest_intruder": c.closest_intruder,
                     "time_to_closest_s": c.time_to_closest_s,
                     "outcome": c.outcome,
+                    "collision_share": c.collision_share,
                 }
                 for c in self.children
             ],
@@ -299,6 +314,23 @@ class Decision:
 
 
 Goal = tuple[float, float, float]
+
+
+def check_plan_inputs(own: Ownship, intruders: Sequence[Intruder], goal: Goal) -> None:
+    """A UserError for inputs no planner can work with: non-finite numbers, a stalled
+    ownship, a goal that is not (x, y, h)."""
+    if len(goal) != 3 or not all(math.isfinite(float(g)) for g in goal):
+        raise UserError(f"goal must be three finite numbers (x, y, h) in metres, got {goal!r}")
+    values = (own.x, own.y, own.h, own.speed, own.heading, own.bank)
+    if not all(math.isfinite(v) for v in values) or (
+        own.phi is not None and not math.isfinite(own.phi)
+    ):
+        raise UserError(f"the ownship has a non-finite field: {own}")
+    if own.speed <= 0:
+        raise UserError(f"the ownship speed must be > 0 m/s, got {own.speed}")
+    for i in intruders:
+        if not all(math.isfinite(v) for v in (i.x, i.y, i.h, i.vx, i.vy, i.vh)):
+            raise UserError(f"intruder {i.id} has a non-finite field: {i}")
 
 
 @runtime_checkable

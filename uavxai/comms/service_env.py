@@ -112,8 +112,8 @@ class ServiceEnv(gym.Env):
         naive = naive_placement(space, channel.users)
         # The naive objective sets the scale learners divide rewards by (about 1 near the
         # optimum, whatever the bandwidth, access mode or environment).
-        naive_obj = channel.evaluate(naive, channel.equal_power()).objective
-        self.reward_scale = float(naive_obj) if naive_obj > 0 else channel.bandwidth_hz
+        self.naive_objective = float(channel.evaluate(naive, channel.equal_power()).objective)
+        self.reward_scale = self.naive_objective if self.naive_objective > 0 else 1.0
         self.position = space.start.copy()
         self.t = 0
         self.path: list[np.ndarray] = []

@@ -72,9 +72,8 @@ class BranchingQNetwork(nn.Module):
         super().__init__()
         self.k, self.power_levels, self.dueling = k, power_levels, dueling
         sizes = [obs_dim] + [hidden] * layers
-        self.trunk = nn.Sequential(
-            *(m for a, b in zip(sizes, sizes[1:]) for m in (nn.Linear(a, b), nn.ReLU()))
-        )
+        pairs = zip(sizes[:-1], sizes[1:], strict=True)
+        self.trunk = nn.Sequential(*(m for a, b in pairs for m in (nn.Linear(a, b), nn.ReLU())))
         self.move = nn.Linear(hidden, len(MOVES))
         self.power = nn.Linear(hidden, k * power_levels)
         self.value = nn.Linear(hidden, 1) if dueling else None
@@ -163,6 +162,7 @@ class TrainResult:
     config: D3QNConfig
     curve: list[dict[str, float]] = field(default_factory=list)
     wall_s: float = 0.0
+    best: Episode | None = None  # the best position visited while training (one layout)
 
 
 def linear_schedule(start: float, end: float, duration: int, t: int) -> float:
@@ -170,32 +170,34 @@ def linear_schedule(start: float, end: float, duration: int, t: int) -> float:
 
 
 def train(
-    env: ServiceEnv,
+    env: ServiceEnv | Callable[[int], ServiceEnv],
     cfg: D3QNConfig,
     init: BranchingQNetwork | None = None,
     on_episode: Callable[[int, dict[str, float]], None] | None = None,
 ) -> TrainResult:
-    """Train on ``env``; after every episode the greedy policy is evaluated on a fading-free
-    copy of it (``greedy_objective``: the objective of the service point it would pick)."""
+    """Train on ``env``, or on ``env(episode)`` — a fresh environment per episode (random user
+    layouts for the shipped models; they must share K and L). After every episode the greedy
+    policy is evaluated on a fading-free copy of the episode's environment:
+    ``greedy_objective`` is the objective of the service point it would pick."""
     t0 = time.perf_counter()
     torch.manual_seed(cfg.seed)
     rng = np.random.default_rng(cfg.seed)
-    k, L = env.channel.k, env.power_levels
-    obs_dim = env.observation_space.shape[0]
+    make_env = env if callable(env) and not isinstance(env, ServiceEnv) else (lambda _: env)
+    first = make_env(0)
+    k, L, steps = first.channel.k, first.power_levels, first.steps
+    obs_dim = first.observation_space.shape[0]
     q = init if init is not None else _new_network(obs_dim, k, L, cfg)
     target = copy.deepcopy(q)
     optimizer = torch.optim.Adam(q.parameters(), lr=cfg.learning_rate)
     rb = ReplayBuffer(cfg.buffer_size, obs_dim, 1 + k)
-    eval_env = ServiceEnv(replace(env.channel, fading="none"), env.space, env.steps, L)
-    nvec = env.action_space.nvec
-    total_steps = cfg.episodes * env.steps
+    nvec = first.action_space.nvec
+    total_steps = cfg.episodes * steps
     result = TrainResult(net=q, config=cfg)
 
     global_step = 0
-    obs, _ = env.reset(seed=cfg.seed)
     for episode in range(cfg.episodes):
-        if episode > 0:
-            obs, _ = env.reset()
+        env_e = first if episode == 0 else make_env(episode)
+        obs, _ = env_e.reset(seed=cfg.seed + episode)
         ret, done = 0.0, False
         while not done:
             epsilon = linear_schedule(
@@ -204,15 +206,10 @@ def train(
             action = greedy_action(q, obs)
             explore = rng.random(len(nvec)) < epsilon
             action[explore] = rng.integers(0, nvec[explore])
-            next_obs, reward, terminated, truncated, _ = env.step(action)
+            next_obs, reward, terminated, truncated, _ = env_e.step(action)
             # Truncation is the search budget, not an end of the world: keep bootstrapping.
-            rb.add(
-                obs,
-                next_obs,
-                action,
-                reward / env.reward_scale - cfg.reward_baseline,
-                float(terminated),
-            )
+            scaled = reward / env_e.reward_scale - cfg.reward_baseline
+            rb.add(obs, next_obs, action, scaled, float(terminated))
             obs, ret, done = next_obs, ret + reward, terminated or truncated
             global_step += 1
 
@@ -221,19 +218,28 @@ def train(
             if global_step % cfg.target_network_frequency == 0:
                 target.load_state_dict(q.state_dict())
 
-        greedy = rollout(q, eval_env)
+        if result.best is None or env_e.best["objective"] > result.best.objective:
+            result.best = episode_of(env_e, ret)
+        greedy = rollout(q, fading_free(env_e))
         row = {
             "episode": episode + 1,
             "epsilon": epsilon,
-            "return": ret / env.steps,
-            "train_objective": env.best["objective"],
+            "return": ret / steps,
+            "train_objective": env_e.best["objective"],
             "greedy_objective": greedy.objective,
+            "reward_scale": env_e.reward_scale,
         }
         result.curve.append(row)
         if on_episode is not None:
             on_episode(episode, row)
     result.wall_s = time.perf_counter() - t0
     return result
+
+
+def fading_free(env: ServiceEnv) -> ServiceEnv:
+    """A copy of ``env`` with ``fading: none``: deterministic, for evaluation."""
+    channel = replace(env.channel, fading="none")
+    return ServiceEnv(channel, env.space, env.steps, env.power_levels)
 
 
 def _new_network(obs_dim: int, k: int, L: int, cfg: D3QNConfig) -> BranchingQNetwork:

@@ -56,9 +56,9 @@ def counterfactual(decision: Decision) -> str:
     head = f"why not {_short(runner.action)}"
     if _conflict(runner, decision.d_min_m):
         return f"{head}: it {_meets(runner)}, a collision"
-    reason = f"Q {runner.q:.2f} against {chosen.q:.2f}"
-    if runner.visits:
-        reason += f" ({runner.visits} simulations against {chosen.visits})"
+    reason = f"Q {runner.q:.3f} against {chosen.q:.3f}"
+    if decision.planner != "exhaustive":  # there every sequence is scored once
+        reason += f" ({runner.visits} simulations against {chosen.visits}{_risk(runner)})"
     if math.isfinite(runner.predicted_min_separation_m) and runner.closest_intruder is not None:
         reason += (
             f"; it passes {_name(runner.closest_intruder)} at "
@@ -90,7 +90,14 @@ def _reference(hold: ChildStats, chosen: ChildStats, d_min: float) -> str:
         return f"holding course {_meets(hold)}"
     if hold.outcome in ("out_of_bounds", "timeout"):
         return f"holding course ends {hold.outcome.replace('_', ' ')}"
-    return f"holding course scores lower (Q {hold.q:.2f} against {chosen.q:.2f})"
+    return f"holding course scores lower (Q {hold.q:.3f} against {chosen.q:.3f}{_risk(hold)})"
+
+
+def _risk(c: ChildStats) -> str:
+    """How often the search saw an action end in a collision, when it did."""
+    if c.collision_share is None or c.collision_share < 0.005:
+        return ""
+    return f"; {100 * c.collision_share:.0f}% of its simulations collide"
 
 
 def _keeps(c: ChildStats, d_min: float) -> str:
@@ -230,7 +237,7 @@ def render_record(record: dict[str, Any], index: int, total: int) -> str:
     if record.get("explanation"):
         lines.append(f"  why:     {record['explanation']}")
     if record.get("counterfactual"):
-        lines.append(f"  why not: {record['counterfactual']}")
+        lines.append(f"  why not: {record['counterfactual'].removeprefix('why not ')}")
     sep = record.get("predicted_min_separation_m")
     if sep is not None:
         lines.append(f"  predicted minimum separation over the next decision period: {sep:.0f} m")

@@ -1,0 +1,199 @@
+"""MCTS: picks the safe action in hand-made encounters; the tree is consistent data."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from uavxai.avoidance import Intruder, MCTSPlanner, Ownship, PlannerConfig
+from uavxai.avoidance.direct import DirectPlanner
+from uavxai.avoidance.episode import EncounterEnv
+from uavxai.avoidance.model import TIMEOUT
+from uavxai.scenario import IntruderSpec
+
+NORTH = 0.0
+
+
+def spec(x, y, heading_deg, speed, h=120.0) -> IntruderSpec:
+    return IntruderSpec(x=x, y=y, h=h, heading_deg=heading_deg, speed_mps=speed)
+
+
+# Hand-made encounters: ownship at (1000, 400) flying north, goal far ahead on its track.
+ENCOUNTERS = {
+    # nose to nose on the same track, 40 m/s closing: contact in about 9 s
+    "head-on": (Ownship(1000, 400, 120, 20, NORTH), [spec(1000, 800, 180, 20)]),
+    # from the right, both reach (1000, 600) at t = 10 s
+    "crossing": (Ownship(1000, 400, 120, 20, NORTH), [spec(1200, 600, 270, 20)]),
+    # a slow aircraft ahead on the same track, 12 m/s closing
+    "overtaking": (Ownship(1000, 300, 120, 25, NORTH), [spec(1000, 420, 0, 13)]),
+}
+GOAL = (1000.0, 1800.0, 120.0)
+
+
+def fly(planner, own: Ownship, intruders, steps: int) -> tuple[str, float]:
+    """Closed loop on the kinematic model: (outcome or '', minimum separation)."""
+    env = EncounterEnv(planner.config, intruders, GOAL, own)
+    env.reset(seed=0)
+    min_sep = math.inf
+    for _ in range(steps):
+        d = planner.plan(env.ownship, env.intruders, GOAL, step=env.steps)
+        *_, info = env.step(d.action)
+        min_sep = min(min_sep, info["min_separation_m"])
+        if env.outcome:
+            break
+    return env.outcome, min_sep
+
+
+@pytest.mark.parametrize("name", list(ENCOUNTERS))
+def test_mcts_avoids_what_flying_straight_hits(name):
+    own, intruders = ENCOUNTERS[name]
+    cfg = PlannerConfig(seed=1)
+    outcome, _ = fly(DirectPlanner(cfg), own, intruders, 25)
+    assert outcome == "collision"  # the encounter is a real conflict
+    outcome, min_sep = fly(MCTSPlanner(cfg), own, intruders, 25)
+    assert outcome != "collision"
+    assert min_sep >= cfg.d_min_m
+
+
+@pytest.mark.parametrize("name", list(ENCOUNTERS))
+def test_first_decision_turns_or_slows_away_and_says_why(name):
+    own, specs = ENCOUNTERS[name]
+    intruders = EncounterEnv(PlannerConfig(), specs, GOAL, own)
+    intruders.reset(seed=0)
+    decision = MCTSPlanner(PlannerConfig(seed=2)).plan(own, intruders.intruders, GOAL)
+    by_action = {c.action: c for c in decision.children}
+    hold = by_action[4]
+    chosen = by_action[decision.action]
+    assert decision.action != 4
+    assert hold.outcome == "collision" and hold.predicted_min_separation_m < 50.0
+    assert chosen.outcome != "collision" and chosen.predicted_min_separation_m >= 50.0
+    assert chosen.q > hold.q
+    assert "holding course meets intruder 1" in decision.explanation
+    assert decision.counterfactual.startswith("why not")
+
+
+def random_encounter(seed: int, n: int = 20) -> tuple[Ownship, list[Intruder]]:
+    rng = np.random.default_rng(seed)
+    own = Ownship(500.0, 500.0, 120.0, 20.0, math.radians(45.0))
+    intruders = []
+    for i in range(n):
+        x, y = rng.uniform(0, 2000, 2)
+        a, s = rng.uniform(0, 2 * np.pi), rng.uniform(15, 30)
+        intruders.append(Intruder(i + 1, x, y, 120.0, s * math.sin(a), s * math.cos(a)))
+    return own, intruders
+
+
+def test_visit_counts_add_up():
+    own, intruders = random_encounter(4)
+    cfg = PlannerConfig(simulations=150, depth=4, seed=0)
+    tree = MCTSPlanner(cfg).plan(own, intruders, (1000, 1000, 100)).tree
+    assert tree is not None
+    root_kids = tree.children_of(0)
+    assert tree.visits[0] == 150
+    assert tree.visits[root_kids].sum() == 150
+    for node in np.flatnonzero(tree.visits > 0):
+        kids = tree.children_of(node)
+        ended = tree.depth[node] == cfg.depth or tree.terminal[node] != 0
+        assert tree.visits[kids].sum() == (0 if ended else tree.visits[node])
+    assert tree.depth.max() == cfg.depth  # every simulation walks to the depth limit
+
+
+def test_every_action_is_tried_before_any_twice():
+    own, intruders = random_encounter(5)
+    tree = MCTSPlanner(PlannerConfig(simulations=9)).plan(own, intruders, (1000, 1000, 100)).tree
+    assert list(tree.visits[tree.children_of(0)]) == [1] * 9
+
+
+def test_same_seed_same_decision():
+    own, intruders = random_encounter(6)
+    a = MCTSPlanner(PlannerConfig(seed=7)).plan(own, intruders, (1000, 1000, 100))
+    b = MCTSPlanner(PlannerConfig(seed=7)).plan(own, intruders, (1000, 1000, 100))
+    assert a.action == b.action
+    assert [c.visits for c in a.children] == [c.visits for c in b.children]
+    np.testing.assert_array_equal(a.tree.visits, b.tree.visits)
+    np.testing.assert_array_equal(a.tree.value_sum, b.tree.value_sum)
+    # reset() restarts the random stream: the planner then repeats itself
+    planner = MCTSPlanner(PlannerConfig(seed=7))
+    first = planner.plan(own, intruders, (1000, 1000, 100))
+    planner.reset(7)
+    again = planner.plan(own, intruders, (1000, 1000, 100))
+    np.testing.assert_array_equal(first.tree.visits, again.tree.visits)
+
+
+def test_leaf_values_are_eq13_and_time_out_is_0_1():
+    own, intruders = random_encounter(8)
+    cfg = PlannerConfig(simulations=60, depth=2)
+    planner = MCTSPlanner(cfg)
+    goal = np.array([1000.0, 1000.0, 100.0])
+    tree = planner.plan(own, intruders, tuple(goal)).tree
+    leaves = np.flatnonzero((tree.depth == 2) & (tree.visits > 0) & (tree.terminal == 0))
+    expected = 1.0 - np.linalg.norm(tree.pos[leaves] - goal, axis=1) / cfg.d_max
+    np.testing.assert_allclose(tree.q[leaves], expected)
+    # One decision period left: every root action ends in a time-out.
+    late = MCTSPlanner(PlannerConfig(simulations=30, max_steps=10)).plan(
+        own, intruders, tuple(goal), step=9
+    )
+    kids = late.tree.children_of(0)
+    safe = late.tree.terminal[kids] != 2
+    assert np.all(late.tree.terminal[kids][safe] == TIMEOUT)
+    np.testing.assert_allclose(late.tree.q[kids][safe], 0.1)
+
+
+def test_decision_is_complete_and_serialisable():
+    own, intruders = random_encounter(9)
+    d = MCTSPlanner(PlannerConfig()).plan(own, intruders, (1000, 1000, 100))
+    assert len(d.children) == 9
+    assert 0 < d.confidence <= 1
+    assert d.confidence == pytest.approx(d.children[d.action].visits / 200)
+    np.testing.assert_allclose(d.plan[0], [own.x, own.y, own.h])
+    assert d.plan.shape[1] == 3 and len(d.plan) > 1
+    assert d.predicted_min_separation_m > 0 and math.isfinite(d.predicted_min_separation_m)
+    # the chosen branch's separation covers more time than the next period alone
+    assert d.branch_min_separation_m <= d.predicted_min_separation_m + 1e-6
+    assert d.bank_cmd_rad == pytest.approx(d.children[d.action].bank_cmd_rad)
+    text = json.dumps(d.to_json())
+    assert json.loads(text)["action"]["index"] == d.action
+    assert d.explanation and d.ms > 0
+
+
+def test_collision_share_and_pruned_tree_agree_with_the_raw_tree():
+    own, specs = ENCOUNTERS["head-on"]
+    env = EncounterEnv(PlannerConfig(), specs, GOAL, own)
+    env.reset(seed=0)
+    d = MCTSPlanner(PlannerConfig(seed=3)).plan(own, env.intruders, GOAL)
+    tree = d.tree
+    collided = np.zeros(9)
+    for node in np.flatnonzero((tree.terminal == 2) & (tree.visits > 0)):
+        top = int(node)
+        while tree.depth[top] > 1:
+            top = int(tree.parent[top])
+        collided[tree.action[top]] += tree.visits[node]
+    for c in d.children:
+        assert c.collision_share == pytest.approx(collided[c.action] / c.visits)
+    assert d.children[4].collision_share > 0.2  # holding course often ends in the intruder
+
+    small = tree.pruned()
+    assert small.size == 1 + int(np.sum(tree.visits[1:] > 0))
+    assert small.visits[0] == tree.visits[0]
+    for node in range(1, small.size):  # parents keep their visits and come first
+        assert 0 <= small.parent[node] < node
+        assert small.visits[node] <= small.visits[small.parent[node]]
+    np.testing.assert_array_equal(
+        small.visits[small.children_of(0)], tree.visits[tree.children_of(0)]
+    )
+
+
+def test_nonsense_inputs_are_user_errors():
+    from uavxai.errors import UserError
+
+    planner = MCTSPlanner(PlannerConfig(simulations=10))
+    own, intruders = random_encounter(1, n=2)
+    with pytest.raises(UserError, match="speed must be > 0"):
+        planner.plan(Ownship(500, 500, 120, 0.0, 0.0), intruders, GOAL)
+    with pytest.raises(UserError, match="goal must be three finite numbers"):
+        planner.plan(own, intruders, (1.0, math.nan, 3.0))
+    with pytest.raises(UserError, match="intruder 9 has a non-finite field"):
+        planner.plan(own, [Intruder(9, math.inf, 0, 120, 0, 0)], GOAL)

@@ -1,0 +1,198 @@
+"""`uavxai evaluate`: files and columns, seeded rows, local workers and Ray give the same rows,
+the JSBSim episode loop, and (slow) the paper's claim on a reduced campaign."""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from uavxai.campaign import (
+    EPISODE_COLUMNS,
+    RESULT_COLUMNS,
+    TIMING_COLUMNS,
+    closest_approach,
+    evaluate_command,
+    rerun_row,
+    run_campaign,
+    run_campaign_episode,
+    summarise,
+)
+from uavxai.cli import main
+from uavxai.errors import UserError
+from uavxai.scenario import default_scenario
+
+SCENARIO = default_scenario("campaign-test")
+METHODS = ["none", "dqn"]
+COUNTS = [5, 20]
+
+
+def _read(path: Path) -> tuple[list[str], list[dict]]:
+    with path.open() as f:
+        reader = csv.DictReader(f)
+        return list(reader.fieldnames or []), list(reader)
+
+
+def _seeded(rows: list[dict]) -> list[dict]:
+    """The columns that depend only on the seed (not on the machine's speed)."""
+    return [
+        {k: v for k, v in r.items() if k not in TIMING_COLUMNS and k != "decision_ms"} for r in rows
+    ]
+
+
+@pytest.fixture(scope="module")
+def local_rows() -> list[dict]:
+    return run_campaign(SCENARIO, METHODS, COUNTS, 3, workers=1)
+
+
+def test_evaluate_writes_results_episodes_and_plots(tmp_path: Path) -> None:
+    report = evaluate_command(
+        SCENARIO,
+        methods=METHODS,
+        intruders=COUNTS,
+        episodes=3,
+        dynamics="kinematic",
+        workers=1,
+        ray_address=None,
+        out=tmp_path,
+    )
+    assert report["episodes"] == 12
+    columns, results = _read(tmp_path / "results.csv")
+    assert columns == list(RESULT_COLUMNS)
+    assert columns[:9] == [
+        "method",
+        "intruders",
+        "episodes",
+        "goal_rate",
+        "collision_rate",
+        "timeout_rate",
+        "mean_steps",
+        "mean_min_separation_m",
+        "decision_ms_p50",
+    ]  # SPEC §4, in order
+    assert [(r["method"], int(r["intruders"])) for r in results] == [
+        (m, n) for m in METHODS for n in COUNTS
+    ]
+    for r in results:
+        assert int(r["episodes"]) == 3
+        rates = [float(r[k]) for k in columns if k.endswith("_rate")]
+        assert all(0.0 <= x <= 1.0 for x in rates)
+        assert sum(rates) == pytest.approx(1.0)
+        assert float(r["mean_steps"]) >= 1 and float(r["decision_ms_p50"]) > 0
+    columns, episodes = _read(tmp_path / "episodes.csv")
+    assert columns == list(EPISODE_COLUMNS)
+    assert len(episodes) == 12
+    assert {e["outcome"] for e in episodes} <= {"goal", "collision", "timeout", "out_of_bounds"}
+    assert [int(e["seed"]) for e in episodes[:3]] == [SCENARIO.seed + i for i in range(3)]
+    for name in ("goal_rate.png", "collision_rate.png", "steps.png"):
+        assert (tmp_path / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_results_agree_with_the_episode_rows(local_rows: list[dict]) -> None:
+    for r in summarise(local_rows):
+        mine = [
+            e for e in local_rows if (e["method"], e["intruders"]) == (r["method"], r["intruders"])
+        ]
+        assert r["goal_rate"] == sum(e["outcome"] == "goal" for e in mine) / len(mine)
+        assert r["collision_rate"] == sum(e["outcome"] == "collision" for e in mine) / len(mine)
+        assert r["mean_steps"] == pytest.approx(np.mean([e["steps"] for e in mine]))
+
+
+def test_same_seed_same_rows_and_any_row_reruns_alone(local_rows: list[dict]) -> None:
+    again = run_campaign(SCENARIO, METHODS, COUNTS, 3, workers=1)
+    assert _seeded(again) == _seeded(local_rows)
+    # Every method meets the same encounters: episode i has seed scenario.seed + i.
+    assert {(r["episode"], r["seed"]) for r in local_rows} == {(i, i) for i in range(3)}
+    row = local_rows[-1]
+    alone = run_campaign_episode(SCENARIO, row["method"], row["intruders"], row["seed"])
+    assert _seeded([{**alone, "episode": row["episode"]}]) == _seeded([row])
+    other_seed = run_campaign(SCENARIO.with_seed(100), ["none"], [20], 3, workers=1)
+    assert [r["seed"] for r in other_seed] == [100, 101, 102]
+
+
+def test_rerun_row_from_the_scenario_file(tmp_path: Path, local_rows: list[dict]) -> None:
+    path = tmp_path / "s.yaml"
+    path.write_text("name: campaign-test\n")
+    row = next(r for r in local_rows if r["method"] == "none" and r["intruders"] == 20)
+    again = rerun_row(path, "none", 20, row["seed"])
+    assert again["outcome"] == row["outcome"] and again["steps"] == row["steps"]
+    assert again["min_separation_m"] == row["min_separation_m"]
+
+
+def test_two_workers_give_the_same_rows(local_rows: list[dict]) -> None:
+    pooled = run_campaign(SCENARIO, METHODS, COUNTS, 3, workers=2)
+    assert _seeded(pooled) == _seeded(local_rows)
+
+
+def test_bad_requests_are_user_errors() -> None:
+    with pytest.raises(UserError, match="astar"):
+        run_campaign(SCENARIO, ["astar"], [5], 1)
+    with pytest.raises(UserError, match="--intruders"):
+        run_campaign(SCENARIO, ["none"], [], 1)
+    with pytest.raises(UserError, match="--dynamics"):
+        run_campaign(SCENARIO, ["none"], [5], 1, dynamics="xplane")
+    fixed = default_scenario(
+        "fixed",
+        intruders={"list": [{"x": 900, "y": 900, "h": 120, "heading_deg": 0, "speed_mps": 20}]},
+    )
+    with pytest.raises(UserError, match="intruders.list"):
+        run_campaign(fixed, ["none"], [5], 1)
+
+
+def test_evaluate_through_the_cli(tmp_path: Path) -> None:
+    scenario = tmp_path / "s.yaml"
+    scenario.write_text("name: cli-campaign\nseed: 5\n")
+    out = tmp_path / "out"
+    args = ["evaluate", str(scenario), "--methods", "none", "--intruders", "3", "--episodes", "2"]
+    assert main([*args, "--out", str(out)]) == 0
+    _, rows = _read(out / "episodes.csv")
+    assert [int(r["seed"]) for r in rows] == [5, 6]
+    assert main([*args, "--out", str(out)]) == 2  # never overwrites without --force
+
+
+def test_closest_approach_catches_a_pass_through_between_samples() -> None:
+    # Ownship east 0 -> 40 m; intruder north through its path: at the samples they are 28 m
+    # and more apart... and they pass 0 m apart halfway.
+    p0, p1 = np.array([0.0, 0.0, 100.0]), np.array([40.0, 0.0, 100.0])
+    q0, q1 = np.array([[20.0, -20.0, 100.0]]), np.array([[20.0, 20.0, 100.0]])
+    assert min(np.linalg.norm(q0 - p0), np.linalg.norm(q1 - p1)) > 28.0
+    assert closest_approach(p0, p1, q0, q1) == pytest.approx(0.0, abs=1e-9)
+    assert closest_approach(p0, p1, np.zeros((0, 3)), np.zeros((0, 3))) == math.inf
+
+
+def test_jsbsim_episode_flies_the_same_encounter() -> None:
+    sc = default_scenario("jsbsim-campaign", avoidance={"max_steps": 12})
+    row = run_campaign_episode(sc, "none", 5, 3, dynamics="jsbsim")
+    assert row["outcome"] in ("goal", "collision", "timeout", "out_of_bounds")
+    assert row["steps"] == 12 and row["outcome"] == "timeout"
+    assert row["flight_time_s"] == pytest.approx(12.0, abs=0.05)
+    kin = run_campaign_episode(sc, "none", 5, 3, dynamics="kinematic")
+    assert kin["steps"] == 12
+    # Same traffic, same planner, 12 s: the flown minimum separations agree to within metres.
+    assert row["min_separation_m"] == pytest.approx(kin["min_separation_m"], rel=0.1)
+
+
+@pytest.mark.slow
+def test_ray_local_gives_the_same_rows(local_rows: list[dict]) -> None:
+    ray = pytest.importorskip("ray")
+    os.environ["RAY_USAGE_STATS_ENABLED"] = "0"
+    ray.init(num_cpus=2, include_dashboard=False)
+    try:
+        rows = run_campaign(SCENARIO, METHODS, COUNTS, 3, ray_address="auto")
+    finally:
+        ray.shutdown()
+    assert _seeded(rows) == _seeded(local_rows)
+
+
+@pytest.mark.slow
+def test_mcts_beats_the_learned_baselines_on_collisions() -> None:
+    """The paper's claim on a reduced campaign: 40 episodes at 20 and 40 intruders."""
+    rows = run_campaign(SCENARIO, ["mcts", "dqn", "safe_dqn"], [20, 40], 40, workers=2)
+    rate = {(r["method"], r["intruders"]): r["collision_rate"] for r in summarise(rows)}
+    for n in (20, 40):
+        assert rate[("mcts", n)] < rate[("dqn", n)], (n, rate)
+        assert rate[("mcts", n)] < rate[("safe_dqn", n)], (n, rate)

@@ -1,0 +1,187 @@
+"""Training the learned avoidance baselines: rewards, the TD update, a smoke run of the
+command (files, report, a loadable checkpoint) and determinism."""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from uavxai.avoidance.episode import EncounterEnv
+from uavxai.avoidance.learned import QNetwork, load_checkpoint, obs_dim, observe
+from uavxai.avoidance.train import (
+    CURVE_COLUMNS,
+    Batch,
+    Hyperparameters,
+    rewards,
+    td_loss,
+    train,
+    train_command,
+)
+from uavxai.avoidance.types import N_ACTIONS
+from uavxai.errors import UserError
+from uavxai.scenario import default_scenario
+
+
+@pytest.fixture(autouse=True)
+def _one_torch_thread():
+    """One thread, as in training and campaigns: a second one only contends on small nets."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
+SCENARIO = default_scenario("train-test", intruders={"count": 10})
+# Tiny settings: a few short episodes, learning from the first transitions.
+TINY = Hyperparameters(
+    episodes=6,
+    intruders=(5, 10),
+    n_envs=2,
+    hidden=(32, 32),
+    n_nearest=4,
+    buffer_size=5_000,
+    batch_size=32,
+    learning_starts=64,
+    train_frequency=2,
+)
+
+
+def test_rewards_split_goal_and_safety() -> None:
+    hp = Hyperparameters()
+    g, s = rewards(hp, "", 1000.0, 980.0, 400.0)
+    assert g == pytest.approx(20.0 / hp.progress_scale_m) and s == 0.0
+    g, s = rewards(hp, "", 1000.0, 980.0, hp.warn_separation_m / 2)
+    assert s == pytest.approx(-hp.separation_weight * 0.25)
+    g_goal, _ = rewards(hp, "goal", 60.0, 45.0, 400.0)
+    assert g_goal == pytest.approx(15.0 / hp.progress_scale_m + hp.arrival_reward)
+    for failure in ("collision", "out_of_bounds"):
+        _, s_fail = rewards(hp, failure, 500.0, 490.0, 40.0)
+        assert s_fail < -hp.failure_penalty
+
+
+def _real_batch(n_obs_nearest: int, size: int, seed: int = 0) -> Batch:
+    """Transitions of random actions on the real encounter model."""
+    env = EncounterEnv.from_scenario(SCENARIO, 10, n_nearest=n_obs_nearest)
+    rng = np.random.default_rng(seed)
+    hp = Hyperparameters()
+    rows = []
+    env.reset(seed=seed)
+
+    def obs() -> np.ndarray:
+        pos, vel = env.intruder_arrays()
+        return observe(env.own, pos, vel, env.goal, env.config, n_obs_nearest)
+
+    o = obs()
+    while len(rows) < size:
+        a = int(rng.integers(N_ACTIONS))
+        d0 = env.distance_to_goal()
+        _, _, term, trunc, info = env.step(a)
+        nxt = obs()
+        r = rewards(hp, env.outcome, d0, info["distance_m"], info["min_separation_m"])
+        rows.append((o, a, r, nxt, float(term)))
+        o = nxt
+        if term or trunc:
+            env.reset(seed=seed + len(rows))
+            o = obs()
+    return Batch(
+        obs=torch.as_tensor(np.stack([r[0] for r in rows])),
+        action=torch.as_tensor([r[1] for r in rows]),
+        reward=torch.as_tensor(np.array([r[2] for r in rows], dtype=np.float32)),
+        next_obs=torch.as_tensor(np.stack([r[3] for r in rows])),
+        done=torch.as_tensor([r[4] for r in rows]),
+    )
+
+
+@pytest.mark.parametrize("algo", ["dqn", "safe_dqn"])
+def test_td_updates_reduce_the_loss_against_a_fixed_target(algo: str) -> None:
+    torch.manual_seed(0)
+    batch = _real_batch(4, 256)
+    heads = ("q",) if algo == "dqn" else ("goal", "safety")
+    q = {k: QNetwork(obs_dim(4), (32, 32)) for k in heads}
+    target = {k: QNetwork(obs_dim(4), (32, 32)) for k in heads}
+    before = {k: [p.clone() for p in q[k].parameters()] for k in heads}
+    opt = torch.optim.Adam([p for k in heads for p in q[k].parameters()], lr=1e-3)
+    first = td_loss(algo, q, target, batch, 0.98).item()
+    for _ in range(150):
+        loss = td_loss(algo, q, target, batch, 0.98)
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+    last = td_loss(algo, q, target, batch, 0.98).item()
+    assert last < 0.5 * first
+    for k in heads:
+        assert any(not torch.equal(a, b) for a, b in zip(before[k], q[k].parameters(), strict=True))
+
+
+def test_terminal_transitions_are_not_bootstrapped() -> None:
+    torch.manual_seed(1)
+    batch = _real_batch(4, 8)
+    batch.done[:] = 1.0
+    q = {"q": QNetwork(obs_dim(4), (8,))}
+    target = {"q": QNetwork(obs_dim(4), (8,))}
+    loss_a = td_loss("dqn", q, target, batch, 0.98).item()
+    for p in target["q"].parameters():  # the target net must not matter at all
+        p.data.mul_(-3.0)
+    assert td_loss("dqn", q, target, batch, 0.98).item() == pytest.approx(loss_a)
+
+
+@pytest.mark.parametrize("algo", ["dqn", "safe_dqn"])
+def test_train_command_writes_a_loadable_model(tmp_path: Path, algo: str) -> None:
+    report = train_command(SCENARIO, algo, 6, tmp_path, hp=TINY)
+    for name in ("model.pt", "model.json", "learning_curve.csv", "learning_curve.png"):
+        assert (tmp_path / name).stat().st_size > 0
+    assert report["episodes"] == 6
+    assert 0.0 <= report["final_goal_rate"] <= 1.0
+    assert 0.0 <= report["final_collision_rate"] <= 1.0
+    with (tmp_path / "learning_curve.csv").open() as f:
+        rows = list(csv.DictReader(f))
+    assert tuple(rows[0]) == CURVE_COLUMNS and len(rows) == 6
+    assert all(5 <= int(r["intruders"]) <= 10 for r in rows)
+    nets, info = load_checkpoint(tmp_path / "model.pt", algo)
+    assert info["trained_on"]["scenario"] == "train-test"
+    assert json.loads((tmp_path / "model.json").read_text())["algo"] == algo
+
+    # The checkpoint drives a planner, through the scenario as a user would name it.
+    from uavxai.avoidance.episode import run_episode
+
+    sc = SCENARIO.model_copy(
+        update={
+            "avoidance": SCENARIO.avoidance.model_copy(
+                update={"checkpoint": str(tmp_path / "model.pt"), "max_steps": 5}
+            )
+        }
+    )
+    assert run_episode(algo, sc, 0, 3).steps >= 1
+
+
+def test_training_changes_the_networks_and_repeats_with_the_seed() -> None:
+    a = train(SCENARIO, "dqn", TINY)
+    b = train(SCENARIO, "dqn", TINY)
+    assert a.td_losses and np.all(np.isfinite(a.td_losses))
+    assert [r["outcome"] for r in a.curve] == [r["outcome"] for r in b.curve]
+    for pa, pb in zip(a.nets["q"].parameters(), b.nets["q"].parameters(), strict=True):
+        assert torch.equal(pa, pb)
+    torch.manual_seed(TINY.seed)
+    fresh = QNetwork(obs_dim(TINY.n_nearest), TINY.hidden)  # the run's initial weights
+    assert any(
+        not torch.equal(p0, p1)
+        for p0, p1 in zip(fresh.parameters(), a.nets["q"].parameters(), strict=True)
+    )
+    other = train(SCENARIO, "dqn", dataclasses.replace(TINY, seed=1))
+    assert any(
+        not torch.equal(p0, p1)
+        for p0, p1 in zip(other.nets["q"].parameters(), a.nets["q"].parameters(), strict=True)
+    )
+
+
+def test_bad_training_requests_are_user_errors(tmp_path: Path) -> None:
+    with pytest.raises(UserError, match="--algo d3qn"):
+        train_command(SCENARIO, "d3qn", 5, tmp_path)
+    with pytest.raises(UserError, match="--episodes 0"):
+        train_command(SCENARIO, "dqn", 0, tmp_path)

@@ -1,0 +1,477 @@
+"""Training of the learned avoidance baselines, DQN and Safe-DQN, on the kinematic encounter
+model (`uavxai train SCENARIO --stage avoidance --algo dqn|safe_dqn`).
+
+One file, top to bottom, CleanRL style: hyper-parameters in :class:`Hyperparameters`, the
+rewards in :func:`rewards`, then the loop in :func:`train`.
+
+Episodes are the scenario's (its start, goal, intruder behaviour, speeds and altitudes) with a
+fresh intruder count drawn from ``intruders`` each time, so that one network serves 5 or 40
+intruders; a share of episodes (``random_start_share``) starts and ends elsewhere in the
+flight area, so that the policy has seen walls and goals from every side and does not just
+memorise the scenario's one route.
+
+Rewards. The paper's eq 14 pays only at the end (goal 1, time-out 0.1, collision 0), which a
+DQN cannot learn from in a few thousand episodes; both baselines are given the same, denser
+signal split in two parts, as Safe-DQN needs:
+
+- goal: progress towards the goal per step (metres closed over ``progress_scale_m``) plus
+  ``arrival_reward`` at the goal;
+- safety: a penalty growing as the separation falls below ``warn_separation_m`` (quadratic in
+  the shortfall, up to ``separation_weight`` per step), and ``-failure_penalty`` for a
+  collision or leaving the flight area.
+
+DQN learns one Q-network on their sum (double-DQN targets). Safe-DQN learns two, one per
+part; both are bootstrapped on the action Safe-DQN itself would take next (the best
+``Q_goal + Q_safety`` among actions with ``Q_safety`` at least the median), so their sum is
+the value of the policy that acts. A time-out is a truncation: it is bootstrapped, since the
+observation holds no clock.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from uavxai.avoidance.episode import EncounterEnv, default_goal
+from uavxai.avoidance.learned import (
+    ALGOS,
+    QNetwork,
+    head_names,
+    load_checkpoint,
+    obs_dim,
+    observe,
+    safe_action,
+    save_checkpoint,
+)
+from uavxai.avoidance.types import N_ACTIONS, PlannerConfig
+from uavxai.errors import UserError
+from uavxai.scenario import Scenario, Start
+
+
+@dataclass(frozen=True)
+class Hyperparameters:
+    episodes: int = 3000
+    seed: int = 0
+    intruders: tuple[int, int] = (5, 40)  # count drawn uniformly per episode, inclusive
+    random_start_share: float = 0.5
+    n_envs: int = 8  # episodes flown side by side (one batched forward pass for all)
+    n_nearest: int = 8
+    hidden: tuple[int, ...] = (128, 128)
+    learning_rate: float = 5e-4
+    buffer_size: int = 200_000
+    batch_size: int = 128
+    gamma: float = 0.98
+    tau: float = 0.01  # soft target update per gradient step
+    start_e: float = 1.0
+    end_e: float = 0.03
+    exploration_fraction: float = 0.4  # of the episodes
+    learning_starts: int = 5_000  # transitions before the first gradient step
+    train_frequency: int = 4  # transitions per gradient step
+    max_grad_norm: float = 10.0
+    # rewards (see the module docstring)
+    progress_scale_m: float = 500.0
+    arrival_reward: float = 1.0
+    warn_separation_m: float = 150.0
+    separation_weight: float = 0.2
+    failure_penalty: float = 1.0
+    log_window: int = 100  # episodes in the rolling rates
+
+
+DEFAULT_EPISODES = Hyperparameters.episodes
+
+
+def rewards(
+    hp: Hyperparameters, outcome: str, d_before: float, d_after: float, min_sep: float
+) -> tuple[float, float]:
+    """(goal reward, safety reward) of one step."""
+    goal = (d_before - d_after) / hp.progress_scale_m
+    if outcome == "goal":
+        goal += hp.arrival_reward
+    shortfall = max(0.0, 1.0 - min_sep / hp.warn_separation_m) if math.isfinite(min_sep) else 0.0
+    safety = -hp.separation_weight * shortfall**2
+    if outcome in ("collision", "out_of_bounds"):
+        safety -= hp.failure_penalty
+    return goal, safety
+
+
+# ------------------------------------------------------------------------------ environments
+class _Episodes:
+    """The scenario's encounters, one env per slot, each with its own seed stream."""
+
+    def __init__(self, scenario: Scenario, hp: Hyperparameters, slot: int) -> None:
+        from uavxai.dynamics.traffic import draw_intruders
+
+        self.scenario, self.hp = scenario, hp
+        self.rng = np.random.default_rng(np.random.SeedSequence(hp.seed, spawn_key=(slot,)))
+        self.config = PlannerConfig.from_scenario(scenario)
+        self.count = hp.intruders[0]
+        self.env = EncounterEnv(
+            self.config,
+            lambda rng: draw_intruders(scenario, rng, self.count),
+            default_goal(scenario),
+            scenario.ownship.start,
+            scenario=scenario,
+            n_nearest=hp.n_nearest,
+        )
+
+    def reset(self) -> np.ndarray:
+        env, rng, hp = self.env, self.rng, self.hp
+        self.count = int(rng.integers(hp.intruders[0], hp.intruders[1] + 1))
+        if rng.random() < hp.random_start_share:
+            env.start, env.goal = self._random_route()
+        else:
+            env.start, env.goal = (
+                self.scenario.ownship.start,
+                np.asarray(default_goal(self.scenario), dtype=float),
+            )
+        env.reset(seed=int(rng.integers(2**31)))
+        return self.obs()
+
+    def obs(self) -> np.ndarray:
+        pos, vel = self.env.intruder_arrays()
+        return observe(self.env.own, pos, vel, self.env.goal, self.config, self.hp.n_nearest)
+
+    def _random_route(self) -> tuple[Start, np.ndarray]:
+        """A start and goal anywhere in the area, at least 600 m apart, 150 m off the walls."""
+        w, sc = self.scenario.world, self.scenario
+        margin = 150.0
+        lo = np.array([w.x[0] + margin, w.y[0] + margin])
+        hi = np.array([w.x[1] - margin, w.y[1] - margin])
+        while True:
+            a, b = self.rng.uniform(lo, hi), self.rng.uniform(lo, hi)
+            if np.linalg.norm(a - b) >= 600.0:
+                break
+        h = float(np.clip(sc.ownship.start.h, *w.h))
+        start = Start(
+            x=float(a[0]),
+            y=float(a[1]),
+            h=h,
+            heading_deg=float(self.rng.uniform(0.0, 360.0)),
+            speed_mps=float(self.rng.uniform(*sc.avoidance.speed_mps)),
+        )
+        goal_h = float(default_goal(sc)[2])
+        return start, np.array([b[0], b[1], goal_h])
+
+
+# ---------------------------------------------------------------------------------- training
+@dataclass
+class TrainResult:
+    nets: dict[str, QNetwork]
+    curve: list[dict] = field(default_factory=list)
+    td_losses: list[float] = field(default_factory=list)
+    wall_s: float = 0.0
+
+
+def train(
+    scenario: Scenario,
+    algo: str,
+    hp: Hyperparameters,
+    *,
+    init: dict[str, QNetwork] | None = None,
+    on_episode=None,
+) -> TrainResult:
+    """Train ``algo`` ('dqn' or 'safe_dqn') on ``scenario``'s encounters; ``init`` warm-starts
+    from trained networks. ``on_episode(row)`` sees every finished episode."""
+    if algo not in ALGOS:
+        raise UserError(f"--algo {algo}: the avoidance stage trains {', '.join(ALGOS)}.")
+    wall0 = time.perf_counter()
+    torch.manual_seed(hp.seed)
+    rng = np.random.default_rng(hp.seed)
+    heads = head_names(algo)
+    n_obs = obs_dim(hp.n_nearest)
+    q = {k: QNetwork(n_obs, hp.hidden) for k in heads}
+    if init is not None:
+        for k in heads:
+            q[k].load_state_dict(init[k].state_dict())
+    target = {k: QNetwork(n_obs, hp.hidden) for k in heads}
+    for k in heads:
+        target[k].load_state_dict(q[k].state_dict())
+    params = [p for k in heads for p in q[k].parameters()]
+    optimizer = torch.optim.Adam(params, lr=hp.learning_rate)
+
+    # Replay buffer: rewards kept in two parts; DQN learns their sum.
+    size = hp.buffer_size
+    buf_obs = np.zeros((size, n_obs), np.float32)
+    buf_next = np.zeros((size, n_obs), np.float32)
+    buf_act = np.zeros(size, np.int64)
+    buf_rew = np.zeros((size, 2), np.float32)
+    buf_done = np.zeros(size, np.float32)
+    stored = cursor = 0
+
+    def act(obs: np.ndarray) -> np.ndarray:
+        with torch.no_grad():
+            x = torch.as_tensor(obs)
+            if algo == "dqn":
+                return q["q"](x).argmax(dim=1).numpy()
+            return safe_action(q["goal"](x), q["safety"](x)).numpy()
+
+    def gradient_step() -> float:
+        idx = rng.integers(0, stored, hp.batch_size)
+        batch = Batch(
+            obs=torch.as_tensor(buf_obs[idx]),
+            action=torch.as_tensor(buf_act[idx]),
+            reward=torch.as_tensor(buf_rew[idx]),
+            next_obs=torch.as_tensor(buf_next[idx]),
+            done=torch.as_tensor(buf_done[idx]),
+        )
+        loss = td_loss(algo, q, target, batch, hp.gamma)
+        optimizer.zero_grad()
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(params, hp.max_grad_norm)
+        optimizer.step()
+        with torch.no_grad():
+            for k in heads:
+                for p_t, p in zip(target[k].parameters(), q[k].parameters(), strict=True):
+                    p_t.lerp_(p, hp.tau)
+        return loss.item()
+
+    slots = [_Episodes(scenario, hp, i) for i in range(hp.n_envs)]
+    obs = np.stack([s.reset() for s in slots])
+    returns = np.zeros((hp.n_envs, 2))
+    episode_min_sep = np.full(hp.n_envs, math.inf)
+    result = TrainResult(nets=q)
+    recent: list[str] = []
+    losses: list[float] = []
+    transitions = 0
+    explore_episodes = max(1, int(hp.exploration_fraction * hp.episodes))
+    while (finished := len(result.curve)) < hp.episodes:
+        epsilon = hp.start_e + (hp.end_e - hp.start_e) * min(1.0, finished / explore_episodes)
+        greedy = act(obs)
+        explore = rng.random(hp.n_envs) < epsilon
+        actions = np.where(explore, rng.integers(0, N_ACTIONS, hp.n_envs), greedy)
+        for i, slot in enumerate(slots):
+            env = slot.env
+            d_before = env.distance_to_goal()
+            _, _, terminated, truncated, info = env.step(int(actions[i]))
+            nxt = slot.obs()
+            r = rewards(hp, env.outcome, d_before, info["distance_m"], info["min_separation_m"])
+            buf_obs[cursor], buf_next[cursor], buf_act[cursor] = obs[i], nxt, actions[i]
+            buf_rew[cursor], buf_done[cursor] = r, float(terminated)
+            cursor = (cursor + 1) % size
+            stored = min(stored + 1, size)
+            transitions += 1
+            returns[i] += r
+            episode_min_sep[i] = min(episode_min_sep[i], info["min_separation_m"])
+            if transitions >= hp.learning_starts and transitions % hp.train_frequency == 0:
+                losses.append(gradient_step())
+            if terminated or truncated:
+                recent = (recent + [env.outcome])[-hp.log_window :]
+                row = {
+                    "episode": len(result.curve),
+                    "intruders": slot.count,
+                    "outcome": env.outcome,
+                    "steps": env.steps,
+                    "return_goal": round(float(returns[i, 0]), 4),
+                    "return_safety": round(float(returns[i, 1]), 4),
+                    "min_separation_m": round(float(episode_min_sep[i]), 2),
+                    "epsilon": round(epsilon, 4),
+                    "td_loss": round(float(np.mean(losses[-200:])), 6) if losses else math.nan,
+                    "goal_rate": recent.count("goal") / len(recent),
+                    "collision_rate": recent.count("collision") / len(recent),
+                    "transitions": transitions,
+                }
+                result.curve.append(row)
+                if on_episode:
+                    on_episode(row)
+                if len(result.curve) == hp.episodes:
+                    break
+                returns[i] = 0.0
+                episode_min_sep[i] = math.inf
+                nxt = slot.reset()
+            obs[i] = nxt
+    result.td_losses = losses
+    result.wall_s = time.perf_counter() - wall0
+    for net in q.values():
+        net.eval()
+    return result
+
+
+@dataclass
+class Batch:
+    obs: torch.Tensor  # (B, n_obs)
+    action: torch.Tensor  # (B,) int64
+    reward: torch.Tensor  # (B, 2): goal, safety
+    next_obs: torch.Tensor  # (B, n_obs)
+    done: torch.Tensor  # (B,) 1.0 where the episode terminated (no bootstrap)
+
+
+def td_loss(
+    algo: str,
+    q: dict[str, QNetwork],
+    target: dict[str, QNetwork],
+    batch: Batch,
+    gamma: float,
+) -> torch.Tensor:
+    """The Huber TD loss of one batch, summed over the algorithm's Q-networks."""
+    not_done = 1.0 - batch.done
+    a = batch.action[:, None]
+    with torch.no_grad():
+        nxt = batch.next_obs
+        if algo == "dqn":
+            a_next = q["q"](nxt).argmax(dim=1, keepdim=True)  # double DQN
+            y = {"q": batch.reward.sum(dim=1) + gamma * not_done * _at(target["q"](nxt), a_next)}
+        else:
+            a_next = safe_action(q["goal"](nxt), q["safety"](nxt))[:, None]
+            y = {
+                name: batch.reward[:, col] + gamma * not_done * _at(target[name](nxt), a_next)
+                for col, name in enumerate(("goal", "safety"))
+            }
+    return sum(
+        torch.nn.functional.smooth_l1_loss(_at(q[k](batch.obs), a), y[k]) for k in head_names(algo)
+    )
+
+
+def _at(values: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
+    return values.gather(1, actions).squeeze(1)
+
+
+# ------------------------------------------------------------------------------ the command
+CURVE_COLUMNS = (
+    "episode",
+    "intruders",
+    "outcome",
+    "steps",
+    "return_goal",
+    "return_safety",
+    "min_separation_m",
+    "epsilon",
+    "td_loss",
+    "goal_rate",
+    "collision_rate",
+    "transitions",
+)
+
+
+def train_command(
+    scenario: Scenario,
+    algo: str,
+    episodes: int | None,
+    out: Path,
+    *,
+    hp: Hyperparameters | None = None,
+) -> dict:
+    """`uavxai train --stage avoidance`: train with a progress bar and write ``out/model.pt``
+    (with ``out/model.json`` saying what it was trained on), ``out/learning_curve.csv`` and
+    ``out/learning_curve.png``; return a short report.
+
+    A checkpoint named in the scenario (``avoidance.checkpoint``) is the starting point
+    (it must be a model of ``algo``); without one the networks start from scratch.
+    """
+    from rich.console import Console
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
+    if algo not in ALGOS:
+        raise UserError(f"--algo {algo}: the avoidance stage trains {', '.join(ALGOS)}.")
+    hp = hp or Hyperparameters(seed=scenario.seed)
+    if episodes is not None:
+        if episodes < 1:
+            raise UserError(f"--episodes {episodes}: must be >= 1.")
+        hp = Hyperparameters(**{**asdict(hp), "episodes": int(episodes)})
+    init = None
+    if scenario.avoidance.checkpoint is not None:
+        init, info = load_checkpoint(scenario.avoidance.checkpoint, algo)
+        if info["n_nearest"] != hp.n_nearest or list(info["hidden"]) != list(hp.hidden):
+            hp = Hyperparameters(
+                **{**asdict(hp), "n_nearest": info["n_nearest"], "hidden": tuple(info["hidden"])}
+            )
+    torch.set_num_threads(1)
+    out.mkdir(parents=True, exist_ok=True)
+    console = Console(stderr=True)
+    with Progress(
+        TextColumn("[bold]{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        TimeRemainingColumn(),
+        console=console,
+    ) as progress:
+        bar = progress.add_task(f"{algo} on {scenario.name}", total=hp.episodes)
+
+        def on_episode(row: dict) -> None:
+            progress.update(
+                bar,
+                advance=1,
+                description=(
+                    f"{algo}: goal {row['goal_rate']:.2f} collision {row['collision_rate']:.2f} "
+                    f"eps {row['epsilon']:.2f}"
+                ),
+            )
+
+        result = train(scenario, algo, hp, init=init, on_episode=on_episode)
+
+    last = result.curve[-hp.log_window :]
+    report = {
+        "algo": algo,
+        "scenario": scenario.name,
+        "episodes": len(result.curve),
+        "transitions": result.curve[-1]["transitions"] if result.curve else 0,
+        "final_goal_rate": sum(r["outcome"] == "goal" for r in last) / max(1, len(last)),
+        "final_collision_rate": sum(r["outcome"] == "collision" for r in last) / max(1, len(last)),
+        "final_window_episodes": len(last),
+        "wall_s": round(result.wall_s, 1),
+        "model": str(out / "model.pt"),
+    }
+    meta = {
+        "trained_on": {
+            "scenario": scenario.name,
+            "seed": scenario.seed,
+            "intruders": list(hp.intruders),
+            "behaviour": scenario.intruders.behaviour,
+            "episodes": len(result.curve),
+            "warm_start": scenario.avoidance.checkpoint,
+        },
+        "hyperparameters": asdict(hp),
+        "report": {k: v for k, v in report.items() if k != "model"},
+        "versions": {"torch": str(torch.__version__)},
+    }
+    save_checkpoint(
+        out / "model.pt", algo, result.nets, hidden=hp.hidden, n_nearest=hp.n_nearest, meta=meta
+    )
+    (out / "model.json").write_text(json.dumps({"algo": algo, **meta}, indent=2) + "\n")
+    with (out / "learning_curve.csv").open("w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=CURVE_COLUMNS)
+        w.writeheader()
+        w.writerows(result.curve)
+    plot_learning_curve(result.curve, out / "learning_curve.png", f"{algo} on {scenario.name}")
+    return report
+
+
+def plot_learning_curve(curve: list[dict], path: Path, title: str) -> None:
+    """Rolling goal and collision rates, and the TD loss, against the episode."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    ep = [r["episode"] for r in curve]
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(7.0, 5.5), dpi=110, sharex=True)
+    top.plot(ep, [r["goal_rate"] for r in curve], label="goal rate")
+    top.plot(ep, [r["collision_rate"] for r in curve], label="collision rate")
+    top.plot(ep, [r["epsilon"] for r in curve], label="epsilon", linestyle=":", color="grey")
+    top.set_ylim(-0.02, 1.02)
+    top.set_ylabel("rolling rate")
+    top.legend(fontsize=8)
+    top.grid(alpha=0.3)
+    top.set_title(title, fontsize=10)
+    bottom.plot(ep, [r["td_loss"] for r in curve], color="tab:red")
+    bottom.set_yscale("log")
+    bottom.set_ylabel("TD loss")
+    bottom.set_xlabel("episode")
+    bottom.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)

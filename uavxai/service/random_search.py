@@ -1,0 +1,30 @@
+"""The paper's random baseline: random points of the search area, random power levels.
+
+Each of ``evaluations`` draws is a lattice position (uniform per axis over the points the moves
+can reach) and a uniform level per user; the best draw by the fading-free objective is the
+service point. With the same budget as the learned agents' ``service.steps``, it shows what
+a search without learning finds.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from uavxai.comms.service_env import ServiceEnv, levels_to_power
+from uavxai.service.d3qn import Episode
+
+
+def random_search(env: ServiceEnv, evaluations: int, rng: np.random.Generator) -> Episode:
+    axes = env.space.axes()
+    positions = np.column_stack([rng.choice(axis, size=evaluations) for axis in axes])
+    levels = rng.integers(0, env.power_levels, size=(evaluations, env.channel.k))
+    power = levels_to_power(levels, env.channel.p_max_w, env.power_levels)
+    objective = env.channel.evaluate(positions, power).objective
+    best = int(np.argmax(objective))
+    return Episode(
+        objective=float(objective[best]),
+        position=positions[best],
+        levels=levels[best],
+        path=positions,
+        ret=float(objective.sum()),
+    )

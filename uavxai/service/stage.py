@@ -1,0 +1,217 @@
+"""The service-point stage: where the UAV should hover and with what power per user.
+
+``plan_service(scenario)`` draws the users (``channel.draw_users``: the scenario's positions, or
+uniform in the region from ``default_rng(seed)``), runs the chosen planner and reports the
+link at the chosen point. Planners:
+
+- ``d3qn`` — with ``service.checkpoint: null`` the model shipped for (K, L, access) is
+  fine-tuned on this layout for ``FINETUNE_EPISODES`` search episodes (a few seconds) and then
+  flown greedily; the service point is the best position visited by the whole search. With a
+  checkpoint from ``uavxai train`` the model is flown greedily as trained.
+- ``dqn`` — a checkpoint from ``uavxai train --algo dqn`` flown greedily (nothing is shipped).
+- ``random`` — ``service.steps`` random lattice points with random power levels.
+- ``grid`` — the exact optimum over the lattice and the discrete power levels.
+
+Positions are ranked by the fading-free objective (fading averages out over the time the UAV
+hovers there). ``sinr_db``/``rate_bps`` are fading-free; ``ergodic_*`` average over fading.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from uavxai.comms.channel import Channel
+from uavxai.comms.service_env import ServiceEnv, levels_to_power
+from uavxai.errors import CheckpointError, UserError
+from uavxai.paths import service_checkpoints_dir
+from uavxai.scenario import Scenario
+from uavxai.service import d3qn
+from uavxai.service.grid import solve_grid
+from uavxai.service.random_search import random_search
+
+FINETUNE_EPISODES = 30
+FINETUNE_CONFIG = d3qn.D3QNConfig(
+    episodes=FINETUNE_EPISODES,
+    learning_starts=200,
+    start_e=0.3,
+    end_e=0.1,
+    exploration_fraction=0.7,
+)
+ERGODIC_DRAWS = 2000
+PLANNERS = ("d3qn", "dqn", "random", "grid")
+
+
+@dataclass
+class ServiceResult:
+    planner: str
+    users: np.ndarray  # (K, 3)
+    service_point: np.ndarray  # (3,)
+    levels: np.ndarray  # (K,) integer power levels
+    power_w: np.ndarray  # (K,)
+    sinr_db: np.ndarray  # (K,), -inf for unserved users
+    rate_bps: np.ndarray  # (K,)
+    sum_rate_bps: float
+    qos_satisfied: int
+    objective: float  # R / 2^lambda, fading-free
+    visited: np.ndarray  # (T, 3): the search path (or the points evaluated)
+    naive_objective: float  # users' centroid at 100 m, equal power
+    ergodic_sum_rate_bps: float
+    ergodic_objective: float
+    wall_s: float
+    extras: dict[str, Any] = field(default_factory=dict)
+
+    def to_summary(self) -> dict[str, Any]:
+        """Plain JSON-serialisable fields (SPEC §4 service fields plus extras)."""
+        return {
+            "planner": self.planner,
+            "service_point": [float(v) for v in self.service_point],
+            "power_w": [float(v) for v in self.power_w],
+            "power_levels": [int(v) for v in self.levels],
+            # null for users given no power: they are not served
+            "sinr_db": [float(v) if np.isfinite(v) else None for v in self.sinr_db],
+            "rate_bps": [float(v) for v in self.rate_bps],
+            "sum_rate_bps": float(self.sum_rate_bps),
+            "qos_satisfied": int(self.qos_satisfied),
+            "objective": float(self.objective),
+            "naive_objective": float(self.naive_objective),
+            "ergodic_sum_rate_bps": float(self.ergodic_sum_rate_bps),
+            "ergodic_objective": float(self.ergodic_objective),
+            "users": [[float(v) for v in u] for u in self.users],
+            "search_points": len(self.visited),
+            "service_wall_s": round(float(self.wall_s), 3),
+            **self.extras,
+        }
+
+
+def run_service_stage(scenario: Scenario, planner: str | None = None) -> dict[str, Any]:
+    """The summary fields of the service-point stage (what `uavxai service` prints)."""
+    return plan_service(scenario, planner).to_summary()
+
+
+def plan_service(scenario: Scenario, planner: str | None = None) -> ServiceResult:
+    t0 = time.perf_counter()
+    name = planner or scenario.service.planner
+    if name not in PLANNERS:
+        raise UserError(f"service planner '{name}' is unknown; allowed: {', '.join(PLANNERS)}.")
+    torch.manual_seed(scenario.seed)
+    env = ServiceEnv.from_scenario(scenario)
+    extras: dict[str, Any] = {
+        "access": scenario.comms.access,
+        "environment": scenario.comms.environment,
+        "fading": scenario.comms.fading,
+    }
+    if name == "grid":
+        best = solve_grid(env.channel, env.space, env.power_levels)
+        levels, position = best.levels, best.position
+        visited = np.array([env.space.start, position])
+        extras.update(lattice_points=best.lattice_points, grid_evaluations=best.evaluations)
+    elif name == "random":
+        ep = random_search(env, scenario.service.steps, np.random.default_rng(scenario.seed))
+        levels, position, visited = ep.levels, ep.position, ep.path
+    else:
+        ep, info = _learned_search(scenario, env, name)
+        levels, position, visited = ep.levels, ep.position, ep.path
+        extras.update(info)
+    return _report(name, scenario, env, position, levels, visited, t0, extras)
+
+
+def _learned_search(
+    scenario: Scenario, env: ServiceEnv, algo: str
+) -> tuple[d3qn.Episode, dict[str, Any]]:
+    net, info, shipped = resolve_checkpoint(scenario, algo)
+    report: dict[str, Any] = {"checkpoint": info["path"]}
+    if shipped:
+        cfg = d3qn.D3QNConfig(**{**d3qn.config_dict(FINETUNE_CONFIG), "seed": scenario.seed})
+        result = d3qn.train(env, cfg, init=net)
+        report["finetune_episodes"] = cfg.episodes
+        net = result.net
+    greedy = d3qn.rollout(net, d3qn.fading_free(env))
+    if shipped and result.best is not None and result.best.objective > greedy.objective:
+        return result.best, report
+    return greedy, report
+
+
+def shipped_checkpoint(k: int, power_levels: int, access: str) -> Path:
+    return service_checkpoints_dir() / f"d3qn_k{k}_l{power_levels}_{access}.pt"
+
+
+def resolve_checkpoint(
+    scenario: Scenario, algo: str
+) -> tuple[d3qn.BranchingQNetwork, dict[str, Any], bool]:
+    """The model for ``algo``: ``service.checkpoint`` if set, else the shipped one."""
+    c = scenario.comms
+    k, L = c.users.k, c.power_levels
+    train_hint = f"`uavxai train SCENARIO --stage service --algo {algo}`"
+    given = scenario.service.checkpoint
+    if given is None:
+        path = shipped_checkpoint(k, L, c.access)
+        if algo != "d3qn" or not path.is_file():
+            have = sorted(p.name for p in service_checkpoints_dir().glob("*.pt"))
+            raise CheckpointError(
+                f"no shipped {algo} model fits this scenario (K = {k} users, power_levels = "
+                f"{L}, access = {c.access}); shipped: {', '.join(have) or 'none'}. Train one "
+                f"with {train_hint} and set service.checkpoint to its model.pt, or use "
+                "service.planner: grid or random."
+            )
+    else:
+        path = Path(given)
+    net, info = d3qn.load_checkpoint(path)
+    problems = []
+    if info["algo"] != algo:
+        problems.append(f"it is a {info['algo']} model but the planner is {algo}")
+    if info["k"] != k:
+        problems.append(f"it was trained for K = {info['k']} users, the scenario has {k}")
+    if info["power_levels"] != L:
+        problems.append(
+            f"it was trained for power_levels = {info['power_levels']}, the scenario has {L}"
+        )
+    if problems:
+        raise CheckpointError(
+            f"service.checkpoint {path}: does not fit this scenario: {'; '.join(problems)}. "
+            f"Train a matching model with {train_hint}."
+        )
+    info["path"] = str(path) if given is not None else f"shipped:{path.name}"
+    return net, info, given is None
+
+
+def _report(
+    name: str,
+    scenario: Scenario,
+    env: ServiceEnv,
+    position: np.ndarray,
+    levels: np.ndarray,
+    visited: np.ndarray,
+    t0: float,
+    extras: dict[str, Any],
+) -> ServiceResult:
+    channel: Channel = env.channel
+    levels = np.asarray(levels, dtype=np.int64)
+    power = levels_to_power(levels, channel.p_max_w, env.power_levels)
+    link = channel.evaluate(position, power)
+    rng = np.random.default_rng(scenario.seed)
+    draws = np.broadcast_to(position, (ERGODIC_DRAWS, 3))
+    ergodic = channel.evaluate(draws, power, rng)
+    return ServiceResult(
+        planner=name,
+        users=channel.users,
+        service_point=np.asarray(position, dtype=float),
+        levels=levels,
+        power_w=power,
+        sinr_db=link.sinr_db,
+        rate_bps=link.rate_bps,
+        sum_rate_bps=float(link.sum_rate_bps),
+        qos_satisfied=int((link.rate_bps >= channel.qos_rate_bps).sum()),
+        objective=float(link.objective),
+        visited=np.asarray(visited, dtype=float),
+        naive_objective=env.naive_objective,
+        ergodic_sum_rate_bps=float(ergodic.sum_rate_bps.mean()),
+        ergodic_objective=float(ergodic.objective.mean()),
+        wall_s=time.perf_counter() - t0,
+        extras=extras,
+    )

@@ -1,0 +1,312 @@
+"""Training of the service-point planners, and the shipped checkpoints.
+
+``uavxai train SCENARIO --stage service --algo d3qn|dqn`` calls :func:`train_command`: it
+trains the requested algorithm on the scenario's user layout, and — for the comparison figure
+of the paper — the other one and the random baseline with the same budget, then writes
+
+- ``model.pt``: the requested model (load it with ``service.checkpoint``);
+- ``learning_curve.csv``: one row per algorithm and episode;
+- ``learning_curve.png``: left, the objective R/2^lambda of the service point each method
+  would pick after every episode (the greedy policy for D3QN/DQN, the best of ``steps``
+  random draws for random) against the exact grid optimum and the naive placement; right,
+  the mean reward per step while training (epsilon-greedy), the paper's convergence plot.
+
+"Episodes to converge" is the first episode from which the running mean (10 episodes) of the
+greedy objective stays within 5 % of the final level (the mean of the last 10 % of episodes).
+
+``python -m uavxai.service.train shipped`` regenerates ``uavxai/service/checkpoints``: one
+D3QN per access mode for K = 10, L = 6, trained on a fresh random layout, environment and
+fading for every episode (so it is a prior, fine-tuned on the actual layout at run time).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from uavxai import __version__
+from uavxai.comms.channel import ENVIRONMENTS
+from uavxai.comms.service_env import ServiceEnv
+from uavxai.paths import service_checkpoints_dir
+from uavxai.scenario import Scenario, default_scenario
+from uavxai.service import d3qn, dqn
+from uavxai.service.grid import solve_grid
+from uavxai.service.random_search import random_search
+
+DEFAULT_EPISODES = 300
+CONVERGENCE_TOLERANCE = 0.05
+SMOOTHING_EPISODES = 10
+SHIPPED_EPISODES = 1500
+FADINGS = ("none", "rayleigh", "rician")
+
+
+def episodes_to_converge(
+    values: np.ndarray, tol: float = CONVERGENCE_TOLERANCE, window: int = SMOOTHING_EPISODES
+) -> tuple[int, float]:
+    """(first episode, 1-based, from which the running mean stays within ``tol`` of the final
+    level; the final level = mean of the last 10 % of episodes, at least ``window``)."""
+    values = np.asarray(values, dtype=float)
+    final = float(values[-max(window, len(values) // 10) :].mean())
+    smooth = running_mean(values, window)
+    outside = np.flatnonzero(np.abs(smooth - final) > tol * abs(final))
+    return (int(outside[-1]) + 2 if outside.size else 1), final
+
+
+def running_mean(values: np.ndarray, window: int) -> np.ndarray:
+    c = np.cumsum(np.insert(np.asarray(values, dtype=float), 0, 0.0))
+    n = np.minimum(np.arange(1, len(values) + 1), window)
+    return (c[1:] - c[np.arange(1, len(values) + 1) - n]) / n
+
+
+def train_command(scenario: Scenario, algo: str, episodes: int | None, out: Path) -> dict[str, Any]:
+    """Train ``algo`` on the scenario's layout; write model.pt and the learning curves."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
+
+    torch.set_num_threads(1)
+    episodes = episodes or DEFAULT_EPISODES
+    env = ServiceEnv.from_scenario(scenario)
+    other = "dqn" if algo == "d3qn" else "d3qn"
+    configs = {
+        "d3qn": d3qn.D3QNConfig(episodes=episodes, seed=scenario.seed),
+        "dqn": dqn.DQNConfig(episodes=episodes, seed=scenario.seed),
+    }
+    columns = (
+        TextColumn("{task.description:<8}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("{task.fields[status]}"),
+    )
+    runs: dict[str, dict[str, Any]] = {}
+    with Progress(*columns) as progress:
+        for name in (algo, other):
+            task = progress.add_task(name, total=episodes, status="")
+            result = d3qn.train(
+                env, configs[name], on_episode=_progress(progress, task, env.naive_objective)
+            )
+            runs[name] = {"curve": result.curve, "wall_s": result.wall_s, "net": result.net}
+        task = progress.add_task("random", total=episodes, status="")
+        runs["random"] = _random_curve(env, episodes, scenario.seed, progress, task)
+        task = progress.add_task("grid", total=1, status="exact optimum ...")
+        t0 = time.perf_counter()
+        grid = solve_grid(d3qn.fading_free(env).channel, env.space, env.power_levels)
+        progress.update(task, advance=1, status=f"{time.perf_counter() - t0:.1f} s")
+
+    d3qn.save_checkpoint(
+        out / "model.pt",
+        runs[algo]["net"],
+        algo,
+        configs[algo],
+        {"scenario": scenario.name, "seed": scenario.seed, "access": scenario.comms.access},
+    )
+    _write_csv(out / "learning_curve.csv", runs)
+    summary = {}
+    for name, run in runs.items():
+        greedy = np.array([row["greedy_objective"] for row in run["curve"]])
+        converge, final = episodes_to_converge(greedy)
+        summary[name] = {
+            "final_objective": final,
+            "final_over_optimum": final / grid.objective,
+            "episodes_to_converge": converge,
+            "wall_s": round(run["wall_s"], 2),
+        }
+    _plot(out / "learning_curve.png", runs, grid.objective, env.naive_objective, scenario)
+    mine = summary[algo]
+    return {
+        "algo": algo,
+        "episodes": episodes,
+        "model": str(out / "model.pt"),
+        "final_objective": mine["final_objective"],
+        "final_over_optimum": mine["final_over_optimum"],
+        "episodes_to_converge": mine["episodes_to_converge"],
+        "wall_s": mine["wall_s"],
+        "grid_objective": grid.objective,
+        "naive_objective": env.naive_objective,
+        "beats": {
+            name: mine["final_objective"] > s["final_objective"]
+            for name, s in summary.items()
+            if name != algo
+        },
+        "comparison": summary,
+        "learning_curve": str(out / "learning_curve.png"),
+    }
+
+
+def _progress(progress, task, naive: float) -> Callable[[int, dict[str, float]], None]:
+    def update(_episode: int, row: dict[str, float]) -> None:
+        status = f"greedy/naive {row['greedy_objective'] / naive:.3f}  eps {row['epsilon']:.2f}"
+        progress.update(task, advance=1, status=status)
+
+    return update
+
+
+def _random_curve(env: ServiceEnv, episodes: int, seed: int, progress, task) -> dict[str, Any]:
+    t0 = time.perf_counter()
+    rng = np.random.default_rng(seed)
+    curve = []
+    for episode in range(episodes):
+        ep = random_search(env, env.steps, rng)
+        curve.append(
+            {
+                "episode": episode + 1,
+                "epsilon": 1.0,
+                "return": ep.ret / env.steps,
+                "train_objective": ep.objective,
+                "greedy_objective": ep.objective,
+            }
+        )
+        progress.update(task, advance=1)
+    return {"curve": curve, "wall_s": time.perf_counter() - t0}
+
+
+def _write_csv(path: Path, runs: dict[str, dict[str, Any]]) -> None:
+    fields = ["algo", "episode", "epsilon", "return_bps", "train_objective", "greedy_objective"]
+    with path.open("w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(fields)
+        for name, run in runs.items():
+            for row in run["curve"]:
+                writer.writerow(
+                    [
+                        name,
+                        row["episode"],
+                        f"{row['epsilon']:.4f}",
+                        f"{row['return']:.6g}",
+                        f"{row['train_objective']:.6g}",
+                        f"{row['greedy_objective']:.6g}",
+                    ]
+                )
+
+
+def _plot(
+    path: Path, runs: dict[str, dict[str, Any]], optimum: float, naive: float, sc: Scenario
+) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    colours = {"d3qn": "tab:red", "dqn": "tab:blue", "random": "tab:gray"}
+    labels = {"d3qn": "D3QN", "dqn": "DQN", "random": "Random"}
+    fig, (left, right) = plt.subplots(1, 2, figsize=(12, 4.5), constrained_layout=True)
+    for name in ("d3qn", "dqn", "random"):
+        curve = runs[name]["curve"]
+        ep = [row["episode"] for row in curve]
+        greedy = np.array([row["greedy_objective"] for row in curve]) / 1e6
+        ret = np.array([row["return"] for row in curve]) / 1e6
+        left.plot(ep, greedy, color=colours[name], alpha=0.2, lw=0.8)
+        left.plot(ep, running_mean(greedy, SMOOTHING_EPISODES), color=colours[name], lw=2,
+                  label=labels[name])  # fmt: skip
+        right.plot(ep, running_mean(ret, SMOOTHING_EPISODES), color=colours[name], lw=2,
+                   label=labels[name])  # fmt: skip
+    left.axhline(optimum / 1e6, color="k", ls="--", lw=1, label="grid optimum")
+    left.axhline(naive / 1e6, color="tab:green", ls=":", lw=1.5, label="naive placement")
+    left.set(
+        xlabel="episode",
+        ylabel="R / 2^λ of the service point [Mbit/s]",
+        title="Service point of the greedy policy (fading-free)",
+    )
+    right.set(
+        xlabel="episode",
+        ylabel="mean reward per step [Mbit/s]",
+        title="Reward while training (ε-greedy)",
+    )
+    for ax in (left, right):
+        ax.grid(alpha=0.3)
+        ax.legend(loc="lower right")
+    c = sc.comms
+    fig.suptitle(
+        f"{sc.name}: K = {c.users.k}, {c.access}, {c.environment}, fading {c.fading}, "
+        f"seed {sc.seed}"
+    )
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+# ------------------------------------------------------------------------- shipped checkpoints
+def random_layout_envs(
+    access: str, seed: int, k: int = 10, power_levels: int = 6
+) -> Callable[[int], ServiceEnv]:
+    """A fresh environment per episode: users uniform in the default region, a random
+    Al-Hourani environment and fading; everything else at the scenario defaults."""
+    environments = list(ENVIRONMENTS)
+
+    def make(episode: int) -> ServiceEnv:
+        rng = np.random.default_rng([seed, episode])
+        scenario = default_scenario(
+            "pretrain",
+            seed=int(rng.integers(2**31 - 1)),
+            comms={
+                "users": {"count": k},
+                "access": access,
+                "power_levels": power_levels,
+                "environment": environments[rng.integers(len(environments))],
+                "fading": FADINGS[rng.integers(len(FADINGS))],
+            },
+        )
+        return ServiceEnv.from_scenario(scenario)
+
+    return make
+
+
+def train_shipped(access: str, episodes: int, out_dir: Path, seed: int = 0) -> Path:
+    from rich.progress import Progress
+
+    torch.set_num_threads(1)
+    cfg = d3qn.D3QNConfig(episodes=episodes, seed=seed)
+    make = random_layout_envs(access, seed)
+    with Progress() as progress:
+        task = progress.add_task(f"d3qn {access}", total=episodes)
+        result = d3qn.train(make, cfg, on_episode=lambda *_: progress.advance(task))
+    last = result.curve[-max(1, episodes // 10) :]
+    trained_on = {
+        "algo": "d3qn",
+        "k": 10,
+        "power_levels": 6,
+        "access": access,
+        "episodes": episodes,
+        "layouts": "a new one per episode: 10 users uniform in x, y in [750, 1250] m",
+        "environments": list(ENVIRONMENTS),
+        "fading": list(FADINGS),
+        "other_parameters": "scenario defaults (2 GHz, 1 MHz, -100 dBm, 1 W, QoS 100 kbit/s, "
+        "100 steps of 10 m from (1000, 1000, 100) m, world.h [50, 300] m)",
+        "seed": seed,
+        "config": d3qn.config_dict(cfg),
+        "greedy_over_naive_last_10pct": float(
+            np.mean([row["greedy_objective"] / row["reward_scale"] for row in last])
+        ),
+        "wall_s": round(result.wall_s, 1),
+        "uavxai_version": __version__,
+        "torch_version": torch.__version__,
+        "command": f"python -m uavxai.service.train shipped --access {access} "
+        f"--episodes {episodes} --seed {seed}",
+    }
+    out_dir.mkdir(parents=True, exist_ok=True)
+    path = out_dir / f"d3qn_k10_l6_{access}.pt"
+    d3qn.save_checkpoint(path, result.net, "d3qn", cfg, trained_on)
+    path.with_suffix(".json").write_text(json.dumps(trained_on, indent=2) + "\n")
+    return path
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(prog="python -m uavxai.service.train")
+    sub = parser.add_subparsers(dest="command", required=True)
+    s = sub.add_parser("shipped", help="regenerate the shipped D3QN checkpoints")
+    s.add_argument("--access", choices=("shared", "ofdma", "both"), default="both")
+    s.add_argument("--episodes", type=int, default=SHIPPED_EPISODES)
+    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--out", type=Path, default=service_checkpoints_dir())
+    args = parser.parse_args(argv)
+    for access in ("shared", "ofdma") if args.access == "both" else (args.access,):
+        print(train_shipped(access, args.episodes, args.out, args.seed))
+
+
+if __name__ == "__main__":
+    main()
