@@ -185,3 +185,16 @@ def test_mcts_avoids_what_flying_straight_runs_into():
     assert outcomes["none"].count("collision") >= 5  # the traffic is a real threat
     assert outcomes["mcts"].count("collision") <= 2
     assert outcomes["mcts"].count("goal") >= 27
+
+
+@pytest.mark.filterwarnings("ignore:.*Box observation space:UserWarning")
+def test_env_passes_the_gymnasium_checker():
+    from gymnasium.utils.env_checker import check_env
+
+    env = EncounterEnv.from_scenario(small_scenario(), n_intruders=8)
+    check_env(env, skip_render_check=True)
+    a, _ = env.reset(seed=4)
+    b, _ = env.reset(seed=4)
+    np.testing.assert_array_equal(a, b)
+    c, _ = env.reset(seed=5)
+    assert not np.array_equal(a, c)  # fresh intruders per seed

@@ -205,3 +205,35 @@ def test_indexed_track_finds_every_intruder_a_plain_test_finds():
         np.testing.assert_array_equal(plain.near(centre, distance), expected)
         found += expected.size
     assert found > 100
+
+
+def test_fly_levels_equals_flying_each_level():
+    cfg = PlannerConfig()
+    model = EncounterModel(cfg)
+    rng = np.random.default_rng(8)
+    n = 12
+    pos = np.c_[rng.uniform(600, 1400, (n, 2)), rng.uniform(110, 130, n)]
+    vel = np.c_[rng.uniform(-25, 25, (n, 2)), np.zeros(n)]
+    tracks = [model.predict(pos, vel, 4.0, t0=4.0 * d) for d in range(3)]
+    states = np.array(
+        [
+            ownship_state(Ownship(*rng.uniform(800, 1200, 2), 120, 20, rng.uniform(0, 6)))
+            for _ in range(6)
+        ]
+    )
+    actions = rng.integers(0, 9, 6)
+    levels = np.array([0, 2, 1, 1, 0, 2])
+    goal = np.array([1000.0, 1000.0, 110.0])
+    both = model.fly_levels(states, actions, levels, goal, 4.0, tracks)
+    for b in range(6):
+        one = model.fly(
+            states[b : b + 1],
+            actions[b : b + 1],
+            goal,
+            4.0,
+            tracks[levels[b]],
+            cull=False,
+            exact=True,
+        )
+        for name in ("end", "min_sep", "closest", "t_closest", "event"):
+            np.testing.assert_allclose(getattr(both, name)[b], getattr(one, name)[0], atol=1e-9)

@@ -159,6 +159,14 @@ def test_command_silence_rolls_wings_level(caplog: pytest.LogCaptureFixture) -> 
 def test_mavproxy_sees_the_vehicle_online(tmp_path: Path) -> None:
     port = free_udp_port()
     mavproxy = shutil.which("mavproxy.py") or str(Path(sys.executable).parent / "mavproxy.py")
+    world, sc = make_world(intruders={"count": 3, "min_start_distance_m": 200})
+    bridge = MavlinkBridge(
+        1,
+        LocalFrame.from_origin(sc.world.origin),
+        world,
+        link=f"udpout:127.0.0.1:{port}",
+        command_timeout_s=60.0,
+    )
     log = (tmp_path / "mavproxy.log").open("w")
     proc = subprocess.Popen(
         [
@@ -175,14 +183,6 @@ def test_mavproxy_sees_the_vehicle_online(tmp_path: Path) -> None:
         stdin=subprocess.DEVNULL,
         cwd=tmp_path,
         env={**os.environ, "HOME": str(tmp_path)},
-    )
-    world, sc = make_world(intruders={"count": 3, "min_start_distance_m": 200})
-    bridge = MavlinkBridge(
-        1,
-        LocalFrame.from_origin(sc.world.origin),
-        world,
-        link=f"udpout:127.0.0.1:{port}",
-        command_timeout_s=60.0,
     )
     text = ""
     try:

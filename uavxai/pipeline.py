@@ -26,7 +26,7 @@ from uavxai.dynamics.state import TrafficState
 from uavxai.scenario import Scenario
 
 log = logging.getLogger(__name__)
-console = Console(stderr=True)
+console = Console(stderr=True, soft_wrap=True)
 
 TRAJECTORY_FIELDS = ("t", "id", "x", "y", "h", "vx", "vy", "vh", "phi", "theta", "psi", "airspeed")
 
@@ -211,7 +211,7 @@ def run_episode(
             bounds={"x": sc.world.x, "y": sc.world.y, "h": sc.world.h},
             users=service.users,
             service_point=service.service_point,
-            search_path=getattr(service, "path", None),
+            search_path=service.visited,
             intruder_ids=intruder_ids,
             goal=goal,
         )

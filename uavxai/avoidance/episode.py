@@ -132,7 +132,7 @@ class EncounterEnv(gym.Env):
     def from_scenario(
         cls, scenario: Scenario, n_intruders: int | None = None, **kwargs: Any
     ) -> EncounterEnv:
-        """Episodes of ``scenario``: fresh intruders drawn at every reset from its seed."""
+        """Episodes of ``scenario``: intruders drawn afresh at every reset, from its seed."""
         from uavxai.dynamics.traffic import draw_intruders
 
         return cls(

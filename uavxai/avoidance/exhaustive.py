@@ -51,13 +51,15 @@ def exhaustive_search(
                 first = builder.expand(node)
                 nxt.extend(range(first, first + N_ACTIONS))
         frontier = nxt
-    first_child = np.array(builder.first_child)
     value = np.array(builder.value)
     tree = builder.finish()
+    unscored = np.isnan(value) & (tree.depth == len(tracks))
+    value[unscored] = model.leaf_value(tree.pos[unscored], goal)
+    assert tree.first_child is not None
     blocks = np.arange(N_ACTIONS)
-    for d in range(len(tracks) - 1, -1, -1):
-        inner = np.flatnonzero((tree.depth == d) & (first_child >= 0))
-        value[inner] = value[first_child[inner, None] + blocks].max(axis=1)
+    for d in range(len(tracks) - 1, -1, -1):  # best value below, bottom up
+        inner = np.flatnonzero((tree.depth == d) & (tree.first_child >= 0))
+        value[inner] = value[tree.first_child[inner, None] + blocks].max(axis=1)
     tree.visits = np.ones(tree.size, dtype=int)
     tree.value_sum = value
     return tree

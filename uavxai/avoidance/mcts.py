@@ -49,7 +49,7 @@ from uavxai.avoidance.types import (
 )
 
 _VALUE_OF = np.array(TERMINAL_VALUE)
-_OPEN = [math.nan] * N_ACTIONS
+_OPEN = [math.nan] * N_ACTIONS  # open nodes: scored when a walk first ends there, or never
 
 
 def search(
@@ -109,6 +109,8 @@ def search(
             path[length] = node
             length += 1
         v = value[node]
+        if v != v:  # nan: an open leaf at the depth limit, scored when first reached
+            v = value[node] = builder.leaf_value(node)
         for k in range(length):
             p = path[k]
             visits[p] += 1
@@ -270,34 +272,22 @@ def _remeasure(
     goal: np.ndarray,
     tracks: Sequence[Track],
 ) -> dict[int, np.ndarray]:
-    """Re-fly the edges into ``nodes`` exactly, against every intruder; one call per level.
+    """Re-fly the edges into ``nodes`` exactly, against every intruder, in one batch.
 
     Updates the tree's min_sep, closest and t_closest of those nodes; returns each node's
     (n+1, 3) sub-step positions.
     """
     assert tree.state is not None and tree.t_closest is not None
     hold = model.config.action_hold_s
-    nodes_arr = np.array(nodes, dtype=int)
-    samples: dict[int, np.ndarray] = {}
-    for d in range(len(tracks)):
-        group = nodes_arr[tree.depth[nodes_arr] == d + 1]
-        if group.size == 0:
-            continue
-        seg = model.fly(
-            tree.state[tree.parent[group]],
-            tree.action[group],
-            goal,
-            hold,
-            tracks[d],
-            cull=False,
-            exact=True,
-        )
-        tree.min_sep[group] = seg.min_sep
-        tree.closest[group] = seg.closest
-        tree.t_closest[group] = seg.t_closest + d * hold
-        for node, points in zip(group.tolist(), seg.samples, strict=True):
-            samples[node] = points
-    return samples
+    group = np.array(nodes, dtype=int)
+    level = tree.depth[group] - 1
+    seg = model.fly_levels(
+        tree.state[tree.parent[group]], tree.action[group], level, goal, hold, tracks
+    )
+    tree.min_sep[group] = seg.min_sep
+    tree.closest[group] = seg.closest
+    tree.t_closest[group] = seg.t_closest + level * hold
+    return dict(zip(group.tolist(), seg.samples, strict=True))
 
 
 def _child_stats(
@@ -331,25 +321,30 @@ def _child_stats(
 class TreeBuilder:
     """A growing search tree over the encounter model (MCTS grows it, exhaustive fills it).
 
-    Node 0 is the root; :meth:`expand` appends a node's 9 children as one block. Hot
-    statistics are Python lists (cheap to touch one element at a time from the simulation
-    loop); per-child arrays are appended a block at a time. ``value`` holds what a walk that
-    ends at the node scores: the terminal value, or eq 13 at the depth limit (nan otherwise).
+    Node 0 is the root; :meth:`expand` appends a node's 9 children as one block, so the
+    children of a node are ``first_child[node] + action``. What the simulation loop touches
+    one element at a time lives in Python lists, per node (cheap to index from Python);
+    everything else is kept per block of 9 and assembled by :meth:`finish`. ``value`` holds
+    what a walk ending at the node scores: its terminal value, or eq 13 for an open node at
+    the depth limit, filled in by :meth:`leaf_value` when first needed (nan until then, and
+    for open nodes above the limit, where no walk ends).
     """
 
     def __init__(self, model, root, goal, tracks, hold_s: float, time_left_s: float) -> None:
-        self.model, self.goal, self.tracks = model, goal, tracks
+        self.model, self.tracks = model, tracks
+        self.goal = tuple(np.asarray(goal, dtype=float).tolist())  # floats: cheap to index
         self.hold_s, self.time_left_s = hold_s, time_left_s
         self.depth_limit = len(tracks)
-        self.parent = [-1]
-        self.action = [-1]
-        self.depth = [0]
+        # per node
         self.visits = [0]
         self.value_sum = [0.0]
         self.first_child = [-1]
-        self.terminal = [NONE]
         self.is_leaf = [False]
         self.value = [math.nan]
+        # per block of 9 children (block 0 is the root alone)
+        self.block_parent = [-1]
+        self.block_depth = [0]
+        self.codes = [np.array([NONE], dtype=np.int8)]
         self.states = [np.asarray(root, dtype=float)[None]]
         self.min_sep = [np.array([np.inf])]
         self.closest = [np.array([-1])]
@@ -357,58 +352,69 @@ class TreeBuilder:
 
     def expand(self, node: int) -> int:
         """Compute the 9 children of ``node``; returns the index of the first."""
-        d = self.depth[node]
-        # Blocks: [root], then 9 children per expansion, in node order.
-        state = self.states[(node + 8) // 9][(node - 1) % 9] if node else self.states[0][0]
-        seg = self.model.fly_all_actions(state, self.goal, self.hold_s, self.tracks[d])
+        block, row = ((node + 8) // 9, (node - 1) % 9) if node else (0, 0)
+        d = self.block_depth[block]
+        seg = self.model.fly_all_actions(
+            self.states[block][row], self.goal, self.hold_s, self.tracks[d]
+        )
         code = seg.event
         if (d + 1) * self.hold_s >= self.time_left_s - 1e-9:
             code = np.where(code == NONE, TIMEOUT, code).astype(np.int8)
-        leaf_depth = d + 1 == self.depth_limit
+        at_limit = d + 1 == self.depth_limit
         codes = code.tolist()
-        # Only where a walk ends is evaluated: terminal children, and open ones at the limit.
-        if any(codes):
-            value = _VALUE_OF[code]
-            if leaf_depth:
-                value = np.where(code == NONE, self.model.leaf_value(seg.end, self.goal), value)
-            values = value.tolist()
-        elif leaf_depth:
-            values = self.model.leaf_value(seg.end, self.goal).tolist()
+        ended = any(codes)
+        # Terminal children are scored now; open ones at the depth limit when a walk first
+        # ends there (see leaf_value); open ones above it are never scored.
+        if at_limit:
+            self.value.extend(_VALUE_OF[code].tolist() if ended else _OPEN)
+            self.is_leaf.extend(_TRUE)
+        elif ended:
+            self.value.extend(_VALUE_OF[code].tolist())
+            self.is_leaf.extend([k != NONE for k in codes])
         else:
-            values = _OPEN
-        first = len(self.parent)
+            self.value.extend(_OPEN)
+            self.is_leaf.extend(_FALSE)
+        first = len(self.visits)
         self.first_child[node] = first
-        self.parent.extend([node] * N_ACTIONS)
-        self.action.extend(range(N_ACTIONS))
-        self.depth.extend([d + 1] * N_ACTIONS)
-        self.visits.extend([0] * N_ACTIONS)
-        self.value_sum.extend([0.0] * N_ACTIONS)
-        self.first_child.extend([-1] * N_ACTIONS)
-        self.terminal.extend(codes)
-        self.is_leaf.extend([leaf_depth or k != NONE for k in codes])
-        self.value.extend(values)
+        self.visits.extend(_ZERO)
+        self.value_sum.extend(_ZERO_F)
+        self.first_child.extend(_NO_CHILD)
+        self.block_parent.append(node)
+        self.block_depth.append(d + 1)
+        self.codes.append(code)
         self.states.append(seg.end)
         self.min_sep.append(seg.min_sep)
         self.closest.append(seg.closest)
         self.t_closest.append(seg.t_closest)
         return first
 
+    def leaf_value(self, node: int) -> float:
+        """Eq 13 at an open node: 1 - d(o, g) / d_max."""
+        x, y, h = self.states[(node + 8) // 9][(node - 1) % 9, :3].tolist()
+        return 1.0 - math.dist((x, y, h), self.goal) / self.model.config.d_max
+
     def finish(self) -> SearchTree:
+        blocks = len(self.block_parent) - 1
         states = np.concatenate(self.states)
-        depth = np.array(self.depth)
+        depth = np.concatenate([[0], np.repeat(self.block_depth[1:], N_ACTIONS)]).astype(int)
         # Segment times count from the parent; the tree's from the decision.
         t_closest = np.concatenate(self.t_closest) + np.maximum(depth - 1, 0) * self.hold_s
         return SearchTree(
-            parent=np.array(self.parent),
-            action=np.array(self.action),
+            parent=np.concatenate([[-1], np.repeat(self.block_parent[1:], N_ACTIONS)]).astype(int),
+            action=np.concatenate([[-1], np.tile(np.arange(N_ACTIONS), blocks)]).astype(int),
             depth=depth,
             visits=np.array(self.visits),
             value_sum=np.array(self.value_sum),
             min_sep=np.concatenate(self.min_sep),
             closest=np.concatenate(self.closest),
-            terminal=np.array(self.terminal, dtype=np.int8),
+            terminal=np.concatenate(self.codes),
             pos=states[:, :3].copy(),
             t_closest=t_closest,
             state=states,
             first_child=np.array(self.first_child),
         )
+
+
+# Constant runs of 9 to extend the per-node lists with.
+_ZERO, _ZERO_F, _NO_CHILD = [0] * N_ACTIONS, [0.0] * N_ACTIONS, [-1] * N_ACTIONS
+_TRUE, _FALSE = [True] * N_ACTIONS, [False] * N_ACTIONS

@@ -18,21 +18,23 @@ Intruders come as a :class:`Track`: their positions at the segment's sub-step in
   included) is always decided exactly: either the closest approach on every sub-step is
   solved in closed form, or the sampled distances prove there is none (no point of a chord is
   farther than half its length from an end);
-* ``min_sep`` is exact whenever it is within ``d_min + `` one relative sub-step of a conflict,
-  or when asked for (``exact=True``); otherwise it is the minimum over the sub-step instants,
-  which overstates the true minimum ``d`` by at most ``L^2 / (8 d)`` for a relative sub-step
-  ``L``: under 2 m with the defaults (0.5 s sub-steps, 30 m/s aircraft, d > 65 m).
+* ``min_sep`` is solved exactly in the same cases (a sampled distance within half a relative
+  sub-step of ``d_min``), or always with ``exact=True``; otherwise it is the minimum over the
+  sub-step instants, which overstates the true minimum ``d`` by at most ``L^2 / (8 d)`` for a
+  relative sub-step ``L``: under 2 m with the defaults (0.5 s sub-steps, 30 m/s, d > 65 m).
 
 Speed (a tree search calls this hundreds of times per decision): the ownship's motion
 relative to its start, in its body frame, depends only on (speed, bank, bank command) and the
-action, so :meth:`EncounterModel.fly_all_actions` memoises it together with a ball bounding
-all nine paths; intruders, goal and walls outside that ball's reach are skipped. Horizontal
-positions are complex numbers ``x + iy`` so that a rotation is one multiplication.
+action, so :meth:`EncounterModel.fly_all_actions` memoises it together with a circle bounding
+all nine paths; intruders (found through a grid, see :class:`Track`), goal and walls out of
+that circle's reach are skipped. Horizontal positions are complex numbers ``x + iy`` so that
+a rotation is one multiplication.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -127,21 +129,23 @@ class Track:
         return track
 
     def _file(self, distance: float) -> None:
-        """Cell size ``distance``; each intruder goes into every cell that its ball grown by
-        ``distance`` touches, so a query point's cell lists every intruder it may be near.
-        Cells hold (index, x, y, h, radius) tuples: the few candidates are tested in Python."""
+        """Each intruder goes into every cell that its ball grown by ``distance`` touches, so
+        a query point's cell lists every intruder it may be near. Cells hold (index, x, y, h,
+        radius) tuples: the few candidates are tested in Python."""
+        cell = self.cell_m
         for j, ((x, y, h), r) in enumerate(
             zip(self.centre.tolist(), self.radius.tolist(), strict=True)
         ):
             grown = r + distance
             entry = (j, x, y, h, r)
-            for i in range(
-                math.floor((x - grown) / distance), math.floor((x + grown) / distance) + 1
-            ):
-                for k in range(
-                    math.floor((y - grown) / distance), math.floor((y + grown) / distance) + 1
-                ):
+            for i in range(math.floor((x - grown) / cell), math.floor((x + grown) / cell) + 1):
+                for k in range(math.floor((y - grown) / cell), math.floor((y + grown) / cell) + 1):
                     self.cells.setdefault((i, k), []).append(entry)
+
+    @property
+    def cell_m(self) -> float:
+        """Side of the grid's cells: large, so that an intruder sits in few of them."""
+        return 2.0 * self.index_distance
 
     @property
     def n(self) -> int:
@@ -152,11 +156,11 @@ class Track:
     def count(self) -> int:
         return self.pos.shape[1]
 
-    def near(self, centre: np.ndarray, distance: float) -> np.ndarray:
-        """Indices of intruders whose path may come within ``distance`` of ``centre`` (3,)."""
+    def near(self, centre: Sequence[float], distance: float) -> np.ndarray:
+        """Indices of intruders whose path may come within ``distance`` of ``centre``."""
         if distance <= self.index_distance:
-            x, y, h = centre.tolist()
-            size = self.index_distance
+            x, y, h = centre
+            size = self.cell_m
             found = [
                 j
                 for j, cx, cy, ch, r in self.cells.get(
@@ -165,7 +169,7 @@ class Track:
                 if (cx - x) ** 2 + (cy - y) ** 2 + (ch - h) ** 2 <= (distance + r) ** 2
             ]
             return np.array(found, dtype=int) if found else _NO_INTRUDERS
-        d = self.centre - centre
+        d = self.centre - np.asarray(centre, dtype=float)
         return np.flatnonzero(np.einsum("ij,ij->i", d, d) <= (distance + self.radius) ** 2)
 
 
@@ -216,10 +220,25 @@ class _BodyMotion:
     ball_r: float = 0.0  # ... and its radius
     step_max: float = 0.0  # longest horizontal sub-step chord of any row
     template: np.ndarray | None = None  # (B, 7) end states with V, PHI, PHI_CMD filled in
+    z_end: np.ndarray | None = None  # (B,) the last column of z
 
 
-# Where a batch of paths stays: (centre (3,), horizontal radius, half-height).
-_Cylinder = tuple[np.ndarray, float, float]
+@dataclass(slots=True)
+class _Intruders:
+    """The intruders a batch is checked against, laid out to broadcast against its rows."""
+
+    xy: np.ndarray  # (1 or B, n+1, k) complex
+    h: np.ndarray  # (1 or B, n+1, k)
+    ids: np.ndarray  # (k,) their indices in the track(s)
+    step_max: float  # longest straight piece of any of their paths
+
+    @classmethod
+    def of(cls, track: Track, near: np.ndarray) -> _Intruders:
+        return cls(track.xy[:, near][None], track.h[:, near][None], near, track.step_max)
+
+
+# Where a batch of paths stays: a vertical cylinder.
+_Cylinder = tuple[float, float, float, float, float]  # x, y, h, horizontal radius, half-height
 
 
 def _frozen(a: np.ndarray) -> np.ndarray:
@@ -234,6 +253,7 @@ class EncounterModel:
         self.config = config
         self._roll = math.radians(config.roll_rate_limit_deg_s)
         self._memo: dict[tuple[float, float, float, float], _BodyMotion] = {}
+        self._substeps: dict[float, int] = {}
         # What a segment with nothing in reach reports, shared and read-only.
         self._quiet = (
             _frozen(np.full(N_ACTIONS, np.inf)),
@@ -246,7 +266,12 @@ class EncounterModel:
     # ------------------------------------------------------------------------------- helpers
     def substeps(self, duration: float) -> int:
         """Sub-steps of a segment: the fewest of at most ``substep_s`` each."""
-        return max(1, math.ceil(duration / self.config.substep_s - 1e-9))
+        n = self._substeps.get(duration)
+        if n is None:
+            n = self._substeps[duration] = max(
+                1, math.ceil(duration / self.config.substep_s - 1e-9)
+            )
+        return n
 
     def predict(
         self,
@@ -295,31 +320,37 @@ class EncounterModel:
         the closest approach on every sub-step even when nothing comes near.
         """
         n = self._check(duration, track)
-        states = np.asarray(states, dtype=float)
-        body = self._body(states[:, V], states[:, PHI], states[:, PHI_CMD], actions, duration, n)
-        p = states[:, X, None] + 1j * states[:, Y, None]
-        rot = np.exp(-1j * states[:, PSI, None])
-        xy = p + body.z * rot
-        h0 = states[:, H, None]
-        hs = h0 + np.clip(goal[2] - h0, *self._climb_window(duration, n))
-        end = self._end(xy[:, -1], hs[:, -1], states[:, PSI], body)
-
-        # A cylinder around every row's samples: centred on their box, radius r_xy to the
-        # farthest, half-height r_h.
-        lo = np.array([xy.real.min(), xy.imag.min(), hs.min()])
-        hi = np.array([xy.real.max(), xy.imag.max(), hs.max()])
-        centre = 0.5 * (lo + hi)
-        r_xy = float(np.abs(xy - complex(centre[0], centre[1])).max())
-        r_h = 0.5 * float(hi[2] - lo[2])
-        reach = math.hypot(r_xy, r_h) + self.config.d_min_m
-        near = track.near(centre, reach) if cull else np.arange(track.count)
+        body, xy, hs, end, box = self._place(states, actions, goal, duration, n)
+        reach = math.hypot(box[3], box[4]) + self.config.d_min_m
+        near = track.near(box[:3], reach) if cull else np.arange(track.count)
+        seen = _Intruders.of(track, near)
         own_step = self._own_step(body, duration / n)
-        return self._events(
-            end, xy, hs, goal, track, near, (centre, r_xy, r_h), duration / n, own_step, exact
+        return self._events(end, xy, hs, goal, seen, box, duration / n, own_step, exact)
+
+    def fly_levels(
+        self,
+        states: np.ndarray,
+        actions: np.ndarray,
+        levels: np.ndarray,
+        goal: np.ndarray,
+        duration: float,
+        tracks: Sequence[Track],
+    ) -> Segment:
+        """As ``fly(..., cull=False, exact=True)``, but row ``b`` meets the intruders of
+        ``tracks[levels[b]]``: the edges of several tree levels in one batch."""
+        n = max(self._check(duration, t) for t in tracks)
+        body, xy, hs, end, box = self._place(states, actions, goal, duration, n)
+        seen = _Intruders(
+            xy=np.stack([t.xy for t in tracks])[levels],
+            h=np.stack([t.h for t in tracks])[levels],
+            ids=np.arange(tracks[0].count),
+            step_max=max(t.step_max for t in tracks),
         )
+        own_step = self._own_step(body, duration / n)
+        return self._events(end, xy, hs, goal, seen, box, duration / n, own_step, True)
 
     def fly_all_actions(
-        self, state: np.ndarray, goal: np.ndarray, duration: float, track: Track
+        self, state: np.ndarray, goal: Sequence[float], duration: float, track: Track
     ) -> Segment:
         """The 9 children of one state, in action order: ``fly`` with every action, memoised.
 
@@ -342,12 +373,11 @@ class EncounterModel:
         rot = complex(math.cos(psi), -math.sin(psi))
         climb = cfg.climb_rate_mps * duration
         h_end = h + min(max(goal[2] - h, -climb), climb)
-        end = self._end(complex(x, y) + body.z[:, -1] * rot, h_end, psi, body)
+        end = self._end(complex(x, y) + body.z_end * rot, h_end, psi, body)
 
         c = complex(x, y) + body.ball * rot
-        centre = np.array([c.real, c.imag, 0.5 * (h + h_end)])
-        box = (centre, body.ball_r, 0.5 * abs(h_end - h))
-        near = track.near(centre, math.hypot(box[1], box[2]) + cfg.d_min_m)
+        box = (c.real, c.imag, 0.5 * (h + h_end), body.ball_r, 0.5 * abs(h_end - h))
+        near = track.near(box[:3], math.hypot(box[3], box[4]) + cfg.d_min_m)
         if not near.size and not self._near_goal(box, goal) and not self._near_wall(box):
             return Segment(end, *self._quiet, xy=None, hs=None)  # no sample was needed
         xy = complex(x, y) + body.z * rot
@@ -356,7 +386,8 @@ class EncounterModel:
         else:
             hs = h + np.clip(goal[2] - h, *self._climb_window(duration, n))[None]
         own_step = self._own_step(body, duration / n)
-        return self._events(end, xy, hs, goal, track, near, box, duration / n, own_step, False)
+        seen = _Intruders.of(track, near)
+        return self._events(end, xy, hs, goal, seen, box, duration / n, own_step, False)
 
     def fly_commanded(
         self, states: np.ndarray, bank_cmd: np.ndarray, duration: float
@@ -374,6 +405,23 @@ class EncounterModel:
         end = self._end(xy[:, -1], states[:, H], states[:, PSI], body)
         pos = np.stack([xy.real.T, xy.imag.T, np.broadcast_to(states[:, H], xy.T.shape)], axis=-1)
         return pos, end
+
+    def _place(self, states, actions, goal, duration: float, n: int):
+        """Body motion, sub-step positions, end states and a bounding cylinder of a batch."""
+        states = np.asarray(states, dtype=float)
+        body = self._body(states[:, V], states[:, PHI], states[:, PHI_CMD], actions, duration, n)
+        p = states[:, X, None] + 1j * states[:, Y, None]
+        xy = p + body.z * np.exp(-1j * states[:, PSI, None])
+        h0 = states[:, H, None]
+        hs = h0 + np.clip(goal[2] - h0, *self._climb_window(duration, n))
+        end = self._end(xy[:, -1], hs[:, -1], states[:, PSI], body)
+        # The cylinder: centred on the samples' box, radius to the farthest, half-height.
+        lo = np.array([xy.real.min(), xy.imag.min(), hs.min()])
+        hi = np.array([xy.real.max(), xy.imag.max(), hs.max()])
+        cx, cy, ch = (0.5 * (lo + hi)).tolist()
+        r_xy = float(np.abs(xy - complex(cx, cy)).max())
+        box: _Cylinder = (cx, cy, ch, r_xy, 0.5 * float(hi[2] - lo[2]))
+        return body, xy, hs, end, box
 
     def _check(self, duration: float, track: Track) -> int:
         n = self.substeps(duration)
@@ -393,14 +441,13 @@ class EncounterModel:
 
     def _near_goal(self, box: _Cylinder, goal: np.ndarray) -> bool:
         """Could a path inside ``box`` come within the goal radius?"""
-        centre, r_xy, r_h = box
-        return math.dist(centre.tolist(), goal) <= math.hypot(r_xy, r_h) + self.config.goal_radius_m
+        x, y, h, r_xy, r_h = box
+        return math.dist((x, y, h), goal) <= math.hypot(r_xy, r_h) + self.config.goal_radius_m
 
     def _near_wall(self, box: _Cylinder) -> bool:
         """Could a path inside ``box`` leave the flight area?"""
         cfg = self.config
-        centre, r_xy, r_h = box
-        x, y, h = centre.tolist()
+        x, y, h, r_xy, r_h = box
         return not (
             cfg.x_bounds[0] <= x - r_xy
             and x + r_xy <= cfg.x_bounds[1]
@@ -454,6 +501,7 @@ class EncounterModel:
             ball_r=float(np.abs(z - ball).max()),
             step_max=float(chord.max()),
             template=template,
+            z_end=z[:, -1].copy(),
         )
 
     def _end(self, xy_end, h_end, psi, body: _BodyMotion) -> np.ndarray:
@@ -471,8 +519,7 @@ class EncounterModel:
         xy: np.ndarray,
         hs: np.ndarray,
         goal: np.ndarray,
-        track: Track,
-        near: np.ndarray,
+        seen: _Intruders | None,
         box: _Cylinder,
         dt: float,
         own_step: float,
@@ -482,20 +529,20 @@ class EncounterModel:
         B, n = xy.shape[0], xy.shape[1] - 1
         rows = np.arange(B)
         never = np.full(B, n)
-        k = near.size
+        k = 0 if seen is None else seen.ids.size
 
         # Intruders: squared distances at the sub-step instants first. No point of a
         # sub-step's relative chord is farther than half its length from an end, so if every
         # sampled distance clears d_min by that much there is no conflict, and the sampled
         # minimum is within L^2 / (8 d) of the true one; otherwise solve every chord.
         k_hit, sep2, frac = never, None, None
-        if k:
-            rel_xy = xy[:, :, None] - track.xy[:, near][None]  # (B, n+1, k)
-            rel_h = hs[:, :, None] - track.h[:, near][None]  # (B or 1, n+1, k)
+        if seen is not None and k:
+            rel_xy = xy[:, :, None] - seen.xy  # (B, n+1, k)
+            rel_h = hs[:, :, None] - seen.h  # (B or 1, n+1, k)
             sep2 = rel_xy.real**2
             sep2 += rel_xy.imag**2
             sep2 += rel_h**2
-            slack = 0.5 * (own_step + track.step_max) + 1e-6
+            slack = 0.5 * (own_step + seen.step_max) + 1e-6
             if exact or sep2.min() < (cfg.d_min_m + slack) ** 2:
                 sep2, frac = _closest_on_chords(rel_xy, rel_h, sep2)  # (B, n, k) per sub-step
                 k_hit = _first_true(sep2.min(axis=2) < cfg.d_min_m**2)
@@ -544,7 +591,7 @@ class EncounterModel:
         return Segment(
             end=end,
             min_sep=np.sqrt(sep2[rows, k_min, j_min]),
-            closest=near[j_min],
+            closest=seen.ids[j_min],
             t_closest=t_closest,
             event=event,
             t_event=t_event,

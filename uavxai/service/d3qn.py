@@ -180,6 +180,7 @@ def train(
     policy is evaluated on a fading-free copy of the episode's environment:
     ``greedy_objective`` is the objective of the service point it would pick."""
     t0 = time.perf_counter()
+    torch.set_num_threads(1)  # a 3 x 40 MLP: a second thread only adds contention
     torch.manual_seed(cfg.seed)
     rng = np.random.default_rng(cfg.seed)
     make_env = env if callable(env) and not isinstance(env, ServiceEnv) else (lambda _: env)

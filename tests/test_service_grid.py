@@ -1,0 +1,79 @@
+"""The reference optimum: exact power DP and the lattice branch-and-bound, against brute force."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+
+from uavxai.comms.channel import Channel
+from uavxai.comms.service_env import SearchSpace, levels_to_power
+from uavxai.scenario import default_scenario
+from uavxai.service.grid import optimal_levels, optimal_objective, solve_grid
+
+
+def brute_force(channel: Channel, gain: np.ndarray, L: int) -> float:
+    levels = np.array(list(itertools.product(range(L), repeat=channel.k)))
+    power = levels_to_power(levels, channel.p_max_w, L)
+    return float(channel.objective(channel.rate(gain[None, :], power)).max())
+
+
+@pytest.mark.parametrize("access", ["shared", "ofdma"])
+@pytest.mark.parametrize(("k", "L", "qos"), [(3, 4, 1e5), (4, 3, 3e5), (5, 3, 2e5), (3, 6, 6e5)])
+def test_power_dp_equals_brute_force(access, k, L, qos):
+    sc = default_scenario(
+        seed=k * 10 + L,
+        comms={"users": {"count": k}, "access": access, "power_levels": L, "qos_rate_bps": qos},
+    )
+    ch = Channel.from_scenario(sc)
+    rng = np.random.default_rng(k + L)
+    positions = np.column_stack(
+        [rng.uniform(750, 1250, 6), rng.uniform(750, 1250, 6), rng.uniform(50, 300, 6)]
+    )
+    gains = ch.mean_gain(positions)
+    batch = optimal_objective(ch, gains, L)
+    for g, value in zip(gains, batch, strict=True):
+        truth = brute_force(ch, g, L)
+        levels, objective = optimal_levels(ch, g, L)
+        assert value == pytest.approx(truth, rel=1e-12)
+        assert objective == pytest.approx(truth, rel=1e-12)
+        # the levels it returns really achieve it
+        achieved = ch.objective(ch.rate(g, levels_to_power(levels, ch.p_max_w, L)))
+        assert float(achieved) == pytest.approx(truth, rel=1e-12)
+
+
+@pytest.mark.parametrize("access", ["shared", "ofdma"])
+def test_branch_and_bound_finds_the_lattice_optimum(access):
+    sc = default_scenario(
+        seed=4,
+        comms={
+            "users": {"count": 3, "region": {"x": [800, 1200], "y": [850, 1150]}},
+            "access": access,
+            "power_levels": 3,
+            "environment": "dense_urban",
+        },
+        service={"step_m": 25},
+    )
+    ch, space = Channel.from_scenario(sc), SearchSpace.from_scenario(sc)
+    result = solve_grid(ch, space, 3)
+    xs, ys, hs = space.axes()
+    mesh = np.stack(np.meshgrid(xs, ys, hs, indexing="ij"), axis=-1).reshape(-1, 3)
+    values = optimal_objective(ch, ch.mean_gain(mesh), 3)
+    assert result.lattice_points == len(mesh) == 17 * 13 * 11
+    assert result.objective == pytest.approx(values.max(), rel=1e-12)
+    achieved = ch.evaluate(result.position, result.power_w).objective
+    assert float(achieved) == pytest.approx(values.max(), rel=1e-12)
+    # it pruned: fewer solves than lattice points
+    assert result.evaluations < len(mesh)
+
+
+def test_shared_band_optimum_puts_the_rest_on_one_user():
+    # Interference-limited: every other user sits exactly at the QoS edge, one takes the rest.
+    sc = default_scenario(comms={"access": "shared", "fading": "none"})
+    ch = Channel.from_scenario(sc)
+    gain = ch.mean_gain(np.array([1000.0, 1000.0, 150.0]))
+    levels, objective = optimal_levels(ch, gain, 6)
+    assert sorted(levels.tolist()) == [1] * 9 + [5]
+    equal = ch.evaluate(np.array([1000.0, 1000.0, 150.0]), ch.equal_power()).objective
+    assert objective > 1.04 * float(equal)
