@@ -77,6 +77,7 @@ def planner_inputs(state: TrafficState, bank_cmd: float) -> tuple[Ownship, list[
         speed=float(state.airspeed[0]),
         heading=float(state.att[0, 2]),
         bank=float(bank_cmd),
+        phi=float(state.att[0, 0]),
     )
     intruders = [
         Intruder(
@@ -91,31 +92,6 @@ def planner_inputs(state: TrafficState, bank_cmd: float) -> tuple[Ownship, list[
         for i in range(1, state.n)
     ]
     return own, intruders
-
-
-def _state_json(own: Ownship, intruders: list[Intruder]) -> dict:
-    return {
-        "ownship": {
-            "x": own.x,
-            "y": own.y,
-            "h": own.h,
-            "speed": own.speed,
-            "heading": own.heading,
-            "bank": own.bank,
-        },
-        "intruders": [
-            {
-                "id": i.id,
-                "x": i.x,
-                "y": i.y,
-                "h": i.h,
-                "vx": i.vx,
-                "vy": i.vy,
-                "vh": i.vh,
-            }
-            for i in intruders
-        ],
-    }
 
 
 def _trajectory_rows(state: TrafficState):
@@ -151,6 +127,7 @@ def run_episode(
     from uavxai.dynamics.geodesy import LocalFrame
     from uavxai.dynamics.world import JSBSimWorld
     from uavxai.service.stage import plan_service
+    from uavxai.xai.explain import decision_record
 
     sc = scenario
     av = sc.avoidance
@@ -238,15 +215,10 @@ def run_episode(
         while steps < av.max_steps:
             bank_cmd = world.ownship_command()["bank_cmd_rad"]
             own, intruders = planner_inputs(state, bank_cmd)
-            decision: Decision = planner.plan(own, intruders, tuple(goal))
+            decision: Decision = planner.plan(own, intruders, tuple(goal), step=steps)
             decision_ms.append(decision.ms)
             bridge.feed(encoder.encode(decision.bank_cmd_rad, decision.accel_mps2))
-            record_json = {
-                "t": round(state.t, 4),
-                "step": steps,
-                "state": _state_json(own, intruders),
-                **decision.to_json(),
-            }
+            record_json = {"step": steps, **decision_record(state.t, own, intruders, decision)}
             dec_f.write(json.dumps(record_json) + "\n")
             if recorder is not None:
                 recorder.log_decision(steps, state.t, decision, intruder_ids)

@@ -8,7 +8,10 @@ action and explains it.
 
 One simulation walks from the root down to the search depth (or to a terminal state): at
 every node it takes the child with the best UCT score ``Q + 2C sqrt(2 ln n / n_j)``, children
-never visited first, ties broken at random. A node met for the first time is expanded: its 9
+never visited first, ties broken at random. ``Q`` is min-max normalised over the siblings
+before it enters the score (as in mctx): the leaf values ``1 - d/d_max`` of neighbouring actions
+differ by about 1 %, and against the paper's exploration term raw values would leave the
+visits uniform, the choice arbitrary and the confidence meaningless. A node met for the first time is expanded: its 9
 children are computed at once, vectorised, and kept (child states are deterministic, so every
 later simulation reuses them). The value at the end of the walk is 1 for the goal, 0 for a
 collision or leaving the map, 0.1 for a time-out and ``1 - d(o, g) / d_max`` otherwise (eqs
@@ -99,8 +102,14 @@ def search(
                     best = [j for j in actions if kids[j] == 0]
                 else:
                     sums = value_sum[first : first + N_ACTIONS]
+                    q = [sums[j] / kids[j] for j in actions]
+                    lo, hi = min(q), max(q)
+                    # Q normalised over the siblings (as mctx does): leaf values
+                    # 1 - d/d_max of neighbouring actions differ by ~1 %, which the paper's
+                    # exploration term would swamp, leaving visits uniform.
+                    scale = 1.0 / (hi - lo) if hi - lo > 1e-12 else 0.0
                     e = explore[n]
-                    scores = [sums[j] / kids[j] + e * inv_sqrt[kids[j]] for j in actions]
+                    scores = [(q[j] - lo) * scale + e * inv_sqrt[kids[j]] for j in actions]
                     top = max(scores)
                     best = [j for j in actions if scores[j] == top]
             pick = best[0] if len(best) == 1 else best[int(draws[draw] * len(best))]

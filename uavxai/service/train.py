@@ -284,7 +284,7 @@ def train_shipped(access: str, episodes: int, out_dir: Path, seed: int = 0) -> P
         ),
         "wall_s": round(result.wall_s, 1),
         "uavxai_version": __version__,
-        "torch_version": torch.__version__,
+        "torch_version": str(torch.__version__),
         "command": f"python -m uavxai.service.train shipped --access {access} "
         f"--episodes {episodes} --seed {seed}",
     }

@@ -247,7 +247,7 @@ def render_record(record: dict[str, Any], index: int, total: int) -> str:
         lines.append("  root actions:")
         lines.append(
             f"    {'action':<26}{'visits':>7}{'share':>7}{'Q':>7}{'min sep':>10}"
-            f"{'intruder':>10}{'in':>7}  line ends"
+            f"  {'intruder':<12}{'in':>7}  line ends"
         )
         chosen_index = act.get("index")
         for c in children:
@@ -262,7 +262,7 @@ def render_record(record: dict[str, Any], index: int, total: int) -> str:
                 f"{100 * visits / total_visits:>6.0f}%",
                 f"{_num(c.get('q'), '.3f'):>7}",
                 f"{_num(sep) + ' m' if sep is not None else 'clear':>10}",
-                f"{who if who is not None else '-':>10}",
+                f"  {who if who is not None else '-':<12}",
                 f"{_num(when, '.1f') + ' s' if when is not None else '-':>7}",
                 f"  {c.get('outcome') or 'open'}",
             ]
