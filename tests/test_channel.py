@@ -62,9 +62,7 @@ def test_geometry_and_path_loss_by_hand():
     # L = 81.4787 + 0.96769 * 1 + 0.03231 * 20 = 83.0926 dB
     # user 1 (straight below): P_LoS = 0.99998, L = 78.4684 + 1.0005 = 79.4689 dB
     np.testing.assert_allclose(ch.path_loss_db(uav), [79.4689, 83.0926], atol=2e-4)
-    np.testing.assert_allclose(
-        ch.mean_gain(uav), [10 ** (-7.94689), 10 ** (-8.30926)], rtol=5e-5
-    )
+    np.testing.assert_allclose(ch.mean_gain(uav), [10 ** (-7.94689), 10 ** (-8.30926)], rtol=5e-5)
 
 
 def test_shared_band_sinr_rate_by_hand():

@@ -55,11 +55,13 @@ TINY = Hyperparameters(
 def test_rewards_split_goal_and_safety() -> None:
     hp = Hyperparameters()
     g, s = rewards(hp, "", 1000.0, 980.0, 400.0)
-    assert g == pytest.approx(20.0 / hp.progress_scale_m) and s == 0.0
+    assert g == pytest.approx(20.0 / hp.progress_scale_m - hp.step_cost) and s == 0.0
+    circling, _ = rewards(hp, "", 1000.0, 1000.0, 400.0)
+    assert circling < 0.0
     g, s = rewards(hp, "", 1000.0, 980.0, hp.warn_separation_m / 2)
     assert s == pytest.approx(-hp.separation_weight * 0.25)
     g_goal, _ = rewards(hp, "goal", 60.0, 45.0, 400.0)
-    assert g_goal == pytest.approx(15.0 / hp.progress_scale_m + hp.arrival_reward)
+    assert g_goal == pytest.approx(15.0 / hp.progress_scale_m - hp.step_cost + hp.arrival_reward)
     for failure in ("collision", "out_of_bounds"):
         _, s_fail = rewards(hp, failure, 500.0, 490.0, 40.0)
         assert s_fail < -hp.failure_penalty
@@ -84,7 +86,7 @@ def _real_batch(n_obs_nearest: int, size: int, seed: int = 0) -> Batch:
         _, _, term, trunc, info = env.step(a)
         nxt = obs()
         r = rewards(hp, env.outcome, d0, info["distance_m"], info["min_separation_m"])
-        rows.append((o, a, r, nxt, float(term)))
+        rows.append((o, a, r, nxt, 0.0 if term else 0.99))
         o = nxt
         if term or trunc:
             env.reset(seed=seed + len(rows))
@@ -94,7 +96,7 @@ def _real_batch(n_obs_nearest: int, size: int, seed: int = 0) -> Batch:
         action=torch.as_tensor([r[1] for r in rows]),
         reward=torch.as_tensor(np.array([r[2] for r in rows], dtype=np.float32)),
         next_obs=torch.as_tensor(np.stack([r[3] for r in rows])),
-        done=torch.as_tensor([r[4] for r in rows]),
+        discount=torch.as_tensor([r[4] for r in rows]),
     )
 
 
@@ -107,13 +109,13 @@ def test_td_updates_reduce_the_loss_against_a_fixed_target(algo: str) -> None:
     target = {k: QNetwork(obs_dim(4), (32, 32)) for k in heads}
     before = {k: [p.clone() for p in q[k].parameters()] for k in heads}
     opt = torch.optim.Adam([p for k in heads for p in q[k].parameters()], lr=1e-3)
-    first = td_loss(algo, q, target, batch, 0.98).item()
+    first = td_loss(algo, q, target, batch).item()
     for _ in range(150):
-        loss = td_loss(algo, q, target, batch, 0.98)
+        loss = td_loss(algo, q, target, batch)
         opt.zero_grad()
         loss.backward()
         opt.step()
-    last = td_loss(algo, q, target, batch, 0.98).item()
+    last = td_loss(algo, q, target, batch).item()
     assert last < 0.5 * first
     for k in heads:
         assert any(not torch.equal(a, b) for a, b in zip(before[k], q[k].parameters(), strict=True))
@@ -122,13 +124,13 @@ def test_td_updates_reduce_the_loss_against_a_fixed_target(algo: str) -> None:
 def test_terminal_transitions_are_not_bootstrapped() -> None:
     torch.manual_seed(1)
     batch = _real_batch(4, 8)
-    batch.done[:] = 1.0
+    batch.discount[:] = 0.0
     q = {"q": QNetwork(obs_dim(4), (8,))}
     target = {"q": QNetwork(obs_dim(4), (8,))}
-    loss_a = td_loss("dqn", q, target, batch, 0.98).item()
+    loss_a = td_loss("dqn", q, target, batch).item()
     for p in target["q"].parameters():  # the target net must not matter at all
         p.data.mul_(-3.0)
-    assert td_loss("dqn", q, target, batch, 0.98).item() == pytest.approx(loss_a)
+    assert td_loss("dqn", q, target, batch).item() == pytest.approx(loss_a)
 
 
 @pytest.mark.parametrize("algo", ["dqn", "safe_dqn"])

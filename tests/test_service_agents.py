@@ -27,8 +27,9 @@ def tiny_env(seed: int = 0, access: str = "ofdma") -> ServiceEnv:
 
 def test_branching_dueling_network():
     torch.manual_seed(0)
-    net = d3qn.BranchingQNetwork(obs_dim=13, k=10, power_levels=6, hidden=40, layers=3,
-                                 dueling=True)  # fmt: skip
+    net = d3qn.BranchingQNetwork(
+        obs_dim=13, k=10, power_levels=6, hidden=40, layers=3, dueling=True
+    )
     hidden = [m for m in net.trunk if isinstance(m, torch.nn.Linear)]
     assert [(m.in_features, m.out_features) for m in hidden] == [(13, 40), (40, 40), (40, 40)]
     obs = torch.randn(5, 13)
@@ -57,8 +58,13 @@ def test_td_target_by_hand(double):
     actions = torch.tensor([[0, 1, 2], [6, 0, 0], [3, 2, 1], [1, 1, 1]])
     rewards = torch.tensor([1.0, 0.5, 0.0, 2.0])
     dones = torch.tensor([0.0, 0.0, 1.0, 0.0])
-    loss = d3qn._update(q, target, torch.optim.Adam(q.parameters(), lr=0.0),
-                        (obs, actions, rewards, next_obs, dones), cfg)  # fmt: skip
+    loss = d3qn._update(
+        q,
+        target,
+        torch.optim.Adam(q.parameters(), lr=0.0),
+        (obs, actions, rewards, next_obs, dones),
+        cfg,
+    )
     with torch.no_grad():
         mt, pt = target(next_obs)
         if double:
@@ -136,8 +142,6 @@ def test_episodes_to_converge():
     episode, final = episodes_to_converge(curve)
     assert final == pytest.approx(1.0)
     # running mean over 10 within 5 % of 1.0: from the episode where it reaches 0.95
-    smooth_ok = next(
-        i for i in range(200) if curve[max(0, i - 9) : i + 1].mean() >= 0.95
-    )
+    smooth_ok = next(i for i in range(200) if curve[max(0, i - 9) : i + 1].mean() >= 0.95)
     assert episode == smooth_ok + 1
     assert episodes_to_converge(np.ones(30))[0] == 1

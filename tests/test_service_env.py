@@ -89,9 +89,7 @@ def test_power_levels_scaled_to_p_max():
     # sums at most L - 1 are not scaled: l / (L - 1) of P_max each
     np.testing.assert_allclose(levels_to_power(np.array([1, 2, 0]), p_max, L), [0.4, 0.8, 0])
     # above that, proportional: [3, 4, 1] -> 2 * [3, 4, 1] / 8
-    np.testing.assert_allclose(
-        levels_to_power(np.array([3, 4, 1]), p_max, L), [0.75, 1.0, 0.25]
-    )
+    np.testing.assert_allclose(levels_to_power(np.array([3, 4, 1]), p_max, L), [0.75, 1.0, 0.25])
     levels = np.random.default_rng(0).integers(0, L, size=(1000, 10))
     assert (levels_to_power(levels, p_max, L).sum(axis=1) <= p_max + 1e-12).all()
 

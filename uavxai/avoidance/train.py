@@ -14,13 +14,16 @@ Rewards. The paper's eq 14 pays only at the end (goal 1, time-out 0.1, collision
 DQN cannot learn from in a few thousand episodes; both baselines are given the same, denser
 signal split in two parts, as Safe-DQN needs:
 
-- goal: progress towards the goal per step (metres closed over ``progress_scale_m``) plus
-  ``arrival_reward`` at the goal;
+- goal: progress towards the goal per step (metres closed over ``progress_scale_m``), less
+  ``step_cost`` per decision (so that circling is never free), plus ``arrival_reward`` at the
+  goal;
 - safety: a penalty growing as the separation falls below ``warn_separation_m`` (quadratic in
   the shortfall, up to ``separation_weight`` per step), and ``-failure_penalty`` for a
   collision or leaving the flight area.
 
-DQN learns one Q-network on their sum (double-DQN targets). Safe-DQN learns two, one per
+Targets are n-step returns (``n_step``), so that a collision's penalty reaches the decisions
+that could still have avoided it sooner than one step per update. DQN learns one Q-network
+on the sum of the parts (double-DQN targets). Safe-DQN learns two, one per
 part; both are bootstrapped on the action Safe-DQN itself would take next (the best
 ``Q_goal + Q_safety`` among actions with ``Q_safety`` at least the median), so their sum is
 the value of the policy that acts. A time-out is a truncation: it is bootstrapped, since the
@@ -67,20 +70,22 @@ class Hyperparameters:
     learning_rate: float = 5e-4
     buffer_size: int = 200_000
     batch_size: int = 128
-    gamma: float = 0.98
+    gamma: float = 0.99
+    n_step: int = 3  # returns over n steps: a collision's penalty reaches back faster
     tau: float = 0.01  # soft target update per gradient step
     start_e: float = 1.0
     end_e: float = 0.03
     exploration_fraction: float = 0.4  # of the episodes
     learning_starts: int = 5_000  # transitions before the first gradient step
-    train_frequency: int = 4  # transitions per gradient step
+    train_frequency: int = 2  # transitions per gradient step
     max_grad_norm: float = 10.0
     # rewards (see the module docstring)
     progress_scale_m: float = 500.0
     arrival_reward: float = 1.0
     warn_separation_m: float = 150.0
     separation_weight: float = 0.2
-    failure_penalty: float = 1.0
+    failure_penalty: float = 2.0
+    step_cost: float = 0.01  # per decision, in the goal part: circling is never free
     log_window: int = 100  # episodes in the rolling rates
 
 
@@ -91,7 +96,7 @@ def rewards(
     hp: Hyperparameters, outcome: str, d_before: float, d_after: float, min_sep: float
 ) -> tuple[float, float]:
     """(goal reward, safety reward) of one step."""
-    goal = (d_before - d_after) / hp.progress_scale_m
+    goal = (d_before - d_after) / hp.progress_scale_m - hp.step_cost
     if outcome == "goal":
         goal += hp.arrival_reward
     shortfall = max(0.0, 1.0 - min_sep / hp.warn_separation_m) if math.isfinite(min_sep) else 0.0
@@ -202,8 +207,20 @@ def train(
     buf_next = np.zeros((size, n_obs), np.float32)
     buf_act = np.zeros(size, np.int64)
     buf_rew = np.zeros((size, 2), np.float32)
-    buf_done = np.zeros(size, np.float32)
+    buf_discount = np.zeros(size, np.float32)  # gamma^k, 0 after a terminal state
     stored = cursor = 0
+
+    def store(window: list[tuple], next_obs: np.ndarray, terminated: bool) -> None:
+        """One n-step transition from the oldest step of ``window`` to ``next_obs``."""
+        nonlocal stored, cursor
+        ret = np.zeros(2)
+        for k, (_, _, r) in enumerate(window):
+            ret += hp.gamma**k * np.asarray(r)
+        buf_obs[cursor], buf_act[cursor] = window[0][0], window[0][1]
+        buf_rew[cursor], buf_next[cursor] = ret, next_obs
+        buf_discount[cursor] = 0.0 if terminated else hp.gamma ** len(window)
+        cursor = (cursor + 1) % size
+        stored = min(stored + 1, size)
 
     def act(obs: np.ndarray) -> np.ndarray:
         with torch.no_grad():
@@ -219,9 +236,9 @@ def train(
             action=torch.as_tensor(buf_act[idx]),
             reward=torch.as_tensor(buf_rew[idx]),
             next_obs=torch.as_tensor(buf_next[idx]),
-            done=torch.as_tensor(buf_done[idx]),
+            discount=torch.as_tensor(buf_discount[idx]),
         )
-        loss = td_loss(algo, q, target, batch, hp.gamma)
+        loss = td_loss(algo, q, target, batch)
         optimizer.zero_grad()
         loss.backward()
         torch.nn.utils.clip_grad_norm_(params, hp.max_grad_norm)
@@ -234,6 +251,7 @@ def train(
 
     slots = [_Episodes(scenario, hp, i) for i in range(hp.n_envs)]
     obs = np.stack([s.reset() for s in slots])
+    windows: list[list[tuple]] = [[] for _ in slots]  # the last n (obs, action, reward)
     returns = np.zeros((hp.n_envs, 2))
     episode_min_sep = np.full(hp.n_envs, math.inf)
     result = TrainResult(nets=q)
@@ -252,10 +270,15 @@ def train(
             _, _, terminated, truncated, info = env.step(int(actions[i]))
             nxt = slot.obs()
             r = rewards(hp, env.outcome, d_before, info["distance_m"], info["min_separation_m"])
-            buf_obs[cursor], buf_next[cursor], buf_act[cursor] = obs[i], nxt, actions[i]
-            buf_rew[cursor], buf_done[cursor] = r, float(terminated)
-            cursor = (cursor + 1) % size
-            stored = min(stored + 1, size)
+            window = windows[i]
+            window.append((obs[i].copy(), int(actions[i]), r))
+            if len(window) == hp.n_step:
+                store(window, nxt, terminated)
+                window.pop(0)
+            if terminated or truncated:  # flush the shorter returns of the last steps
+                while window:
+                    store(window, nxt, terminated)
+                    window.pop(0)
             transitions += 1
             returns[i] += r
             episode_min_sep[i] = min(episode_min_sep[i], info["min_separation_m"])
@@ -298,29 +321,26 @@ class Batch:
     obs: torch.Tensor  # (B, n_obs)
     action: torch.Tensor  # (B,) int64
     reward: torch.Tensor  # (B, 2): goal, safety
-    next_obs: torch.Tensor  # (B, n_obs)
-    done: torch.Tensor  # (B,) 1.0 where the episode terminated (no bootstrap)
+    next_obs: torch.Tensor  # (B, n_obs): the state n steps later
+    discount: torch.Tensor  # (B,) gamma^n, or 0 where the episode terminated (no bootstrap)
 
 
 def td_loss(
-    algo: str,
-    q: dict[str, QNetwork],
-    target: dict[str, QNetwork],
-    batch: Batch,
-    gamma: float,
+    algo: str, q: dict[str, QNetwork], target: dict[str, QNetwork], batch: Batch
 ) -> torch.Tensor:
-    """The Huber TD loss of one batch, summed over the algorithm's Q-networks."""
-    not_done = 1.0 - batch.done
+    """The Huber TD loss of one batch of n-step transitions, summed over the algorithm's
+    Q-networks."""
+    discount = batch.discount
     a = batch.action[:, None]
     with torch.no_grad():
         nxt = batch.next_obs
         if algo == "dqn":
             a_next = q["q"](nxt).argmax(dim=1, keepdim=True)  # double DQN
-            y = {"q": batch.reward.sum(dim=1) + gamma * not_done * _at(target["q"](nxt), a_next)}
+            y = {"q": batch.reward.sum(dim=1) + discount * _at(target["q"](nxt), a_next)}
         else:
             a_next = safe_action(q["goal"](nxt), q["safety"](nxt))[:, None]
             y = {
-                name: batch.reward[:, col] + gamma * not_done * _at(target[name](nxt), a_next)
+                name: batch.reward[:, col] + discount * _at(target[name](nxt), a_next)
                 for col, name in enumerate(("goal", "safety"))
             }
     return sum(
