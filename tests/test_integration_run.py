@@ -221,8 +221,12 @@ def test_recording_read_back(flown) -> None:
     ):
         assert p in paths, (p, sorted(paths))
     n_decisions = len((out / "decisions.jsonl").read_text().splitlines())
-    rows = sum(c.num_rows for c in chunks if c.entity_path == "/xai/explanation")
-    assert rows == n_decisions
+    for entity in ("/xai/tree", "/xai/explanation"):
+        seen: set[int] = set()
+        for c in chunks:
+            if c.entity_path == entity:
+                seen.update(c.to_record_batch().column("decision").to_pylist())
+        assert seen == set(range(n_decisions)), entity
 
 
 def test_explain_the_run(flown, capsys: pytest.CaptureFixture[str]) -> None:
