@@ -6,6 +6,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -18,7 +19,9 @@ from uavxai.avoidance.train import (
     CURVE_COLUMNS,
     Batch,
     Hyperparameters,
+    Situation,
     rewards,
+    situation,
     td_loss,
     train,
     train_command,
@@ -52,19 +55,47 @@ TINY = Hyperparameters(
 )
 
 
+def _at(d: float, error_deg: float = 0.0, conflict: float = 0.0) -> Situation:
+    return Situation(d, math.radians(error_deg), conflict)
+
+
 def test_rewards_split_goal_and_safety() -> None:
     hp = Hyperparameters()
-    g, s = rewards(hp, "", 1000.0, 980.0, 400.0)
-    assert g == pytest.approx(20.0 / hp.progress_scale_m - hp.step_cost) and s == 0.0
-    circling, _ = rewards(hp, "", 1000.0, 1000.0, 400.0)
+    w = hp.heading_weight
+    g, s = rewards(hp, "", _at(1000.0), _at(980.0), 400.0)
+    assert g == pytest.approx(20.0 / hp.progress_scale_m - hp.step_cost + (hp.gamma - 1) * w)
+    assert s == 0.0
+    circling, _ = rewards(hp, "", _at(1000.0), _at(1000.0), 400.0)
     assert circling < 0.0
-    g, s = rewards(hp, "", 1000.0, 980.0, hp.warn_separation_m / 2)
+    # Turning towards the goal pays at once (the shaping potential).
+    towards, _ = rewards(hp, "", _at(1000.0, 90.0), _at(1000.0, 60.0), 400.0)
+    away, _ = rewards(hp, "", _at(1000.0, 60.0), _at(1000.0, 90.0), 400.0)
+    assert towards > 0.0 > away
+    _, s = rewards(hp, "", _at(1000.0), _at(980.0), hp.warn_separation_m / 2)
     assert s == pytest.approx(-hp.separation_weight * 0.25)
-    g_goal, _ = rewards(hp, "goal", 60.0, 45.0, 400.0)
-    assert g_goal == pytest.approx(15.0 / hp.progress_scale_m - hp.step_cost + hp.arrival_reward)
+    _, s = rewards(hp, "", _at(1000.0), _at(980.0, conflict=0.5), 400.0)
+    assert s == pytest.approx(-hp.conflict_weight * 0.5)
+    g_goal, _ = rewards(hp, "goal", _at(60.0), _at(45.0), 400.0)
+    expected = 15.0 / hp.progress_scale_m - hp.step_cost - w + hp.arrival_reward
+    assert g_goal == pytest.approx(expected)
     for failure in ("collision", "out_of_bounds"):
-        _, s_fail = rewards(hp, failure, 500.0, 490.0, 40.0)
+        _, s_fail = rewards(hp, failure, _at(500.0), _at(490.0), 40.0)
         assert s_fail < -hp.failure_penalty
+
+
+def test_conflict_grows_as_a_collision_course_closes_in() -> None:
+    hp = Hyperparameters()
+    own = np.array([1000.0, 1000.0, 120.0, 20.0, 0.0, 0.0, 0.0])  # north at 20 m/s
+    goal = np.array([1000.0, 1800.0, 120.0])
+    vel = np.array([[0.0, -20.0, 0.0]])  # head-on, closing at 40 m/s
+    ahead = [situation(hp, own, np.array([[1000.0, 1000.0 + d, 120.0]]), vel, goal) for d in
+             (1200.0, 600.0, 200.0)]  # fmt: skip
+    assert ahead[0].conflict == 0.0  # 30 s away: beyond the horizon
+    assert 0.0 < ahead[1].conflict < ahead[2].conflict <= 1.0
+    offset = situation(hp, own, np.array([[1300.0, 1200.0, 120.0]]), vel, goal)
+    assert offset.conflict == 0.0  # passes 300 m abeam
+    assert ahead[0].heading_error_rad == pytest.approx(0.0)
+    assert ahead[0].distance_m == pytest.approx(800.0)
 
 
 def _real_batch(n_obs_nearest: int, size: int, seed: int = 0) -> Batch:
@@ -79,13 +110,17 @@ def _real_batch(n_obs_nearest: int, size: int, seed: int = 0) -> Batch:
         pos, vel = env.intruder_arrays()
         return observe(env.own, pos, vel, env.goal, env.config, n_obs_nearest)
 
+    def where() -> Situation:
+        pos, vel = env.intruder_arrays()
+        return situation(hp, env.own, pos, vel, env.goal)
+
     o = obs()
     while len(rows) < size:
         a = int(rng.integers(N_ACTIONS))
-        d0 = env.distance_to_goal()
+        before = where()
         _, _, term, trunc, info = env.step(a)
         nxt = obs()
-        r = rewards(hp, env.outcome, d0, info["distance_m"], info["min_separation_m"])
+        r = rewards(hp, env.outcome, before, where(), info["min_separation_m"])
         rows.append((o, a, r, nxt, 0.0 if term else 0.99))
         o = nxt
         if term or trunc:

@@ -16,10 +16,13 @@ signal split in two parts, as Safe-DQN needs:
 
 - goal: progress towards the goal per step (metres closed over ``progress_scale_m``), less
   ``step_cost`` per decision (so that circling is never free), plus ``arrival_reward`` at the
-  goal;
+  goal, plus a potential-based term on the heading error to the goal (it credits turning
+  towards the goal at once without changing the optimal policy);
 - safety: a penalty growing as the separation falls below ``warn_separation_m`` (quadratic in
-  the shortfall, up to ``separation_weight`` per step), and ``-failure_penalty`` for a
-  collision or leaving the flight area.
+  the shortfall, up to ``separation_weight`` per step), a cost per step on the worst
+  *predicted* conflict (closest approach at current velocities, see :func:`situation`), which
+  tells a turn that resolves a conflict from one that does not at once rather than seconds
+  later, and ``-failure_penalty`` for a collision or leaving the flight area.
 
 Targets are n-step returns (``n_step``), so that a collision's penalty reaches the decisions
 that could still have avoided it sooner than one step per update. DQN learns one Q-network
@@ -86,21 +89,66 @@ class Hyperparameters:
     separation_weight: float = 0.2
     failure_penalty: float = 2.0
     step_cost: float = 0.01  # per decision, in the goal part: circling is never free
+    heading_weight: float = 0.1  # potential on the cosine of the heading error to the goal
+    conflict_weight: float = 0.1  # per decision at the worst predicted conflict
+    conflict_horizon_s: float = 20.0
     log_window: int = 100  # episodes in the rolling rates
 
 
 DEFAULT_EPISODES = Hyperparameters.episodes
 
 
+@dataclass(frozen=True)
+class Situation:
+    """What the rewards look at in a state."""
+
+    distance_m: float  # to the goal
+    heading_error_rad: float  # between the heading and the bearing to the goal
+    conflict: float  # 0..1, the worst predicted loss of separation (see :func:`situation`)
+
+
+def situation(
+    hp: Hyperparameters, own: np.ndarray, pos: np.ndarray, vel: np.ndarray, goal: np.ndarray
+) -> Situation:
+    """The rewards' view of an encounter-model state row among intruders at ``pos``, ``vel``.
+
+    ``conflict`` is the largest, over intruders, of ``(1 - dcpa / warn) (1 - tcpa / horizon)``
+    for a closest approach within ``warn_separation_m`` and ``conflict_horizon_s`` at the
+    current velocities: 1 for a collision course now, 0 when nothing converges soon.
+    """
+    x, y, h, v, psi = (float(c) for c in own[:5])
+    dx, dy = float(goal[0]) - x, float(goal[1]) - y
+    error = math.atan2(dx, dy) - psi
+    error = math.atan2(math.sin(error), math.cos(error))
+    conflict = 0.0
+    if len(pos):
+        rel = pos - own[:3]
+        rv = vel - (v * math.sin(psi), v * math.cos(psi), 0.0)
+        tcpa = np.clip(
+            -np.sum(rel * rv, axis=1) / np.maximum(np.sum(rv * rv, axis=1), 1e-9),
+            0.0,
+            hp.conflict_horizon_s,
+        )
+        dcpa = np.sqrt(np.sum((rel + rv * tcpa[:, None]) ** 2, axis=1))
+        worst = (1.0 - dcpa / hp.warn_separation_m) * (1.0 - tcpa / hp.conflict_horizon_s)
+        conflict = float(np.clip(worst.max(), 0.0, 1.0))
+    return Situation(math.dist((x, y, h), goal), error, conflict)
+
+
 def rewards(
-    hp: Hyperparameters, outcome: str, d_before: float, d_after: float, min_sep: float
+    hp: Hyperparameters, outcome: str, before: Situation, after: Situation, min_sep: float
 ) -> tuple[float, float]:
-    """(goal reward, safety reward) of one step."""
-    goal = (d_before - d_after) / hp.progress_scale_m - hp.step_cost
+    """(goal reward, safety reward) of one step from ``before`` to ``after``; ``min_sep`` is
+    the smallest separation flown during the step."""
+    goal = (before.distance_m - after.distance_m) / hp.progress_scale_m - hp.step_cost
+    # Potential-based shaping (Ng et al. 1999): credit for turning towards the goal at once,
+    # with the optimal policy unchanged; a terminal state's potential is 0.
+    potential_after = 0.0 if outcome else hp.heading_weight * math.cos(after.heading_error_rad)
+    goal += hp.gamma * potential_after - hp.heading_weight * math.cos(before.heading_error_rad)
     if outcome == "goal":
         goal += hp.arrival_reward
     shortfall = max(0.0, 1.0 - min_sep / hp.warn_separation_m) if math.isfinite(min_sep) else 0.0
-    safety = -hp.separation_weight * shortfall**2
+    safety = -hp.separation_weight * shortfall**2 - hp.conflict_weight * after.conflict
     if outcome in ("collision", "out_of_bounds"):
         safety -= hp.failure_penalty
     return goal, safety
@@ -142,6 +190,10 @@ class _Episodes:
     def obs(self) -> np.ndarray:
         pos, vel = self.env.intruder_arrays()
         return observe(self.env.own, pos, vel, self.env.goal, self.config, self.hp.n_nearest)
+
+    def situation(self) -> Situation:
+        pos, vel = self.env.intruder_arrays()
+        return situation(self.hp, self.env.own, pos, vel, self.env.goal)
 
     def _random_route(self) -> tuple[Start, np.ndarray]:
         """A start and goal anywhere in the area, at least 600 m apart, 150 m off the walls."""
@@ -266,10 +318,10 @@ def train(
         actions = np.where(explore, rng.integers(0, N_ACTIONS, hp.n_envs), greedy)
         for i, slot in enumerate(slots):
             env = slot.env
-            d_before = env.distance_to_goal()
+            before = slot.situation()
             _, _, terminated, truncated, info = env.step(int(actions[i]))
             nxt = slot.obs()
-            r = rewards(hp, env.outcome, d_before, info["distance_m"], info["min_separation_m"])
+            r = rewards(hp, env.outcome, before, slot.situation(), info["min_separation_m"])
             window = windows[i]
             window.append((obs[i].copy(), int(actions[i]), r))
             if len(window) == hp.n_step:
