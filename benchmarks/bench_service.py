@@ -14,8 +14,9 @@ start; "search" is the best point visited while training, as the service stage r
 Episodes to converge: first episode from which the 10-episode running mean of the greedy
 objective stays within 5 % of its final level.
 
-    python benchmarks/bench_service.py                       # 20 layouts x 2 modes, ~1 h
-    python benchmarks/bench_service.py --layouts 3 --episodes 100   # a few minutes
+    python benchmarks/bench_service.py                       # 20 layouts x 2 modes, ~40 min
+    python benchmarks/bench_service.py --layouts 2 --episodes 100   # about 2 minutes
+    python benchmarks/bench_service.py --dqn                 # also DQN on every layout
 """
 
 from __future__ import annotations
@@ -31,13 +32,13 @@ import torch
 from uavxai.comms.channel import ENVIRONMENTS
 from uavxai.comms.service_env import ServiceEnv
 from uavxai.scenario import default_scenario
-from uavxai.service import d3qn
+from uavxai.service import d3qn, dqn
 from uavxai.service.grid import solve_grid
 from uavxai.service.stage import plan_service
 from uavxai.service.train import episodes_to_converge
 
 
-def bench_layout(access: str, seed: int, episodes: int) -> dict[str, float]:
+def bench_layout(access: str, seed: int, episodes: int, with_dqn: bool) -> dict[str, float]:
     environment = list(ENVIRONMENTS)[seed % len(ENVIRONMENTS)]
     sc = default_scenario(
         "bench", seed=seed, comms={"access": access, "fading": "none", "environment": environment}
@@ -52,6 +53,17 @@ def bench_layout(access: str, seed: int, episodes: int) -> dict[str, float]:
     search = max(greedy.objective, result.best.objective)
     shipped = plan_service(sc, "d3qn")
     opt, naive = grid.objective, env.naive_objective
+    extra = {}
+    if with_dqn:
+        base = dqn.train(env, dqn.DQNConfig(episodes=episodes, seed=seed))
+        greedy_dqn = d3qn.rollout(base.net, d3qn.fading_free(env))
+        extra = {
+            "dqn_over_opt": greedy_dqn.objective / opt,
+            "dqn_converge": episodes_to_converge([row["greedy_objective"] for row in base.curve])[
+                0
+            ],
+            "d3qn_final_return_over_dqn": _final(result.curve) / _final(base.curve),
+        }
     return {
         "seed": seed,
         "environment": environment,
@@ -64,7 +76,13 @@ def bench_layout(access: str, seed: int, episodes: int) -> dict[str, float]:
         "shipped_over_opt": shipped.objective / opt,
         "shipped_s": shipped.wall_s,
         "grid_s": grid_s,
+        **extra,
     }
+
+
+def _final(curve: list[dict[str, float]]) -> float:
+    """Mean reward per step over the last 10 % of training episodes (the paper's level)."""
+    return float(np.mean([row["return"] for row in curve[-max(1, len(curve) // 10) :]]))
 
 
 def main() -> None:
@@ -73,6 +91,7 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=300)
     parser.add_argument("--access", default="shared,ofdma")
     parser.add_argument("--seed", type=int, default=1000)
+    parser.add_argument("--dqn", action="store_true", help="also train DQN on every layout")
     parser.add_argument("--json", type=Path, help="also write every number here")
     args = parser.parse_args()
     torch.set_num_threads(1)
@@ -86,14 +105,19 @@ def main() -> None:
             "converge  train_s  service/opt service_s grid_s"
         )
         for i in range(args.layouts):
-            r = bench_layout(access, args.seed + i, args.episodes)
+            r = bench_layout(access, args.seed + i, args.episodes, args.dqn)
             rows[access].append(r)
             print(
                 f"{r['seed']:<5} {r['environment']:<16} {r['greedy_over_opt']:10.4f} "
                 f"{r['search_over_opt']:10.4f} {r['greedy_over_naive']:12.4f} "
                 f"{r['naive_over_opt']:9.4f} {r['episodes_to_converge']:8d} "
                 f"{r['train_s']:8.1f} {r['shipped_over_opt']:12.4f} {r['shipped_s']:9.1f} "
-                f"{r['grid_s']:6.1f}",
+                f"{r['grid_s']:6.1f}"
+                + (
+                    f"  dqn/opt {r['dqn_over_opt']:.4f} dqn_converge {r['dqn_converge']}"
+                    if args.dqn
+                    else ""
+                ),
                 flush=True,
             )
     print("\n== summary (mean [min, max] over layouts)")
@@ -113,6 +137,10 @@ def main() -> None:
         print(f"  `uavxai service` d3qn / optimum {stat('shipped_over_opt')}")
         print(f"  `uavxai service` d3qn wall, s   {stat('shipped_s')}")
         print(f"  grid optimum wall, s            {stat('grid_s')}")
+        if args.dqn:
+            print(f"  DQN greedy / grid optimum       {stat('dqn_over_opt')}")
+            print(f"  DQN episodes to converge        {stat('dqn_converge')}")
+            print(f"  D3QN / DQN final train reward   {stat('d3qn_final_return_over_dqn')}")
     if args.json:
         args.json.write_text(json.dumps(rows, indent=1) + "\n")
 

@@ -12,6 +12,7 @@ import csv
 import json
 import logging
 import math
+import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -403,6 +404,8 @@ def _report(summary: dict, out: Path, rerun_file: Path | None, spawn: bool) -> N
         if len(eps) > 1 and rerun_file is None:
             rrd = out / "episode-000" / "run.rrd"
         if rrd.exists():
-            console.print(f"recording: {rrd}  — open it with:  .venv/bin/rerun {rrd}")
+            viewer = Path(sys.executable).parent / "rerun"  # installed with rerun-sdk
+            viewer_cmd = str(viewer) if viewer.exists() else "rerun"
+            console.print(f"recording: {rrd}  — open it with:  {viewer_cmd} {rrd}")
     first = out if len(eps) == 1 else out / "episode-000"
     console.print(f"explain a decision:  uavxai explain {first} --decision 0")

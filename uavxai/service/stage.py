@@ -7,7 +7,8 @@ link at the chosen point. Planners:
 - ``d3qn`` — with ``service.checkpoint: null`` the model shipped for (K, L, access) is
   fine-tuned on this layout for ``FINETUNE_EPISODES`` search episodes (a few seconds) and then
   flown greedily; the service point is the best position visited by the whole search. With a
-  checkpoint from ``uavxai train`` the model is flown greedily as trained.
+  checkpoint from ``uavxai train`` (a path relative to the working directory) the model is
+  flown greedily as trained.
 - ``dqn`` — a checkpoint from ``uavxai train --algo dqn`` flown greedily (nothing is shipped).
 - ``random`` — ``service.steps`` random lattice points with random power levels.
 - ``grid`` — the exact optimum over the lattice and the discrete power levels.
@@ -24,7 +25,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import torch
 
 from uavxai.comms.channel import Channel
 from uavxai.comms.service_env import ServiceEnv, levels_to_power
@@ -99,7 +99,6 @@ def plan_service(scenario: Scenario, planner: str | None = None) -> ServiceResul
     name = planner or scenario.service.planner
     if name not in PLANNERS:
         raise UserError(f"service planner '{name}' is unknown; allowed: {', '.join(PLANNERS)}.")
-    torch.manual_seed(scenario.seed)
     env = ServiceEnv.from_scenario(scenario)
     extras: dict[str, Any] = {
         "access": scenario.comms.access,
@@ -126,15 +125,16 @@ def _learned_search(
 ) -> tuple[d3qn.Episode, dict[str, Any]]:
     net, info, shipped = resolve_checkpoint(scenario, algo)
     report: dict[str, Any] = {"checkpoint": info["path"]}
-    if shipped:
-        cfg = d3qn.D3QNConfig(**{**d3qn.config_dict(FINETUNE_CONFIG), "seed": scenario.seed})
-        result = d3qn.train(env, cfg, init=net)
-        report["finetune_episodes"] = cfg.episodes
-        net = result.net
-    greedy = d3qn.rollout(net, d3qn.fading_free(env))
-    if shipped and result.best is not None and result.best.objective > greedy.objective:
-        return result.best, report
-    return greedy, report
+    if not shipped:  # trained for this scenario by `uavxai train`: fly it as it is
+        return d3qn.rollout(net, d3qn.fading_free(env)), report
+    # The shipped model is a prior over layouts: adapt it to this one, and keep the best
+    # position the whole search visited (the fine-tune episodes and the final greedy flight).
+    cfg = d3qn.D3QNConfig(**{**d3qn.config_dict(FINETUNE_CONFIG), "seed": scenario.seed})
+    result = d3qn.train(env, cfg, init=net)
+    report["finetune_episodes"] = cfg.episodes
+    greedy = d3qn.rollout(result.net, d3qn.fading_free(env))
+    best = result.best if result.best.objective > greedy.objective else greedy
+    return best, report
 
 
 def shipped_checkpoint(k: int, power_levels: int, access: str) -> Path:
