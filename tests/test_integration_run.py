@@ -247,3 +247,31 @@ def test_same_seed_same_numbers(flown, tmp_path: Path) -> None:
     a = (out / "trajectory.csv").read_text()
     b = (again / "trajectory.csv").read_text()
     assert a == b
+
+
+def test_realtime_pacing(tmp_path: Path) -> None:
+    """--realtime X never lets simulated time run ahead of X times the wall clock."""
+    scenario = tmp_path / "paced.yaml"
+    scenario.write_text(
+        yaml.safe_dump({**SMALL, "avoidance": {**SMALL["avoidance"], "max_steps": 6}})
+    )
+    out = tmp_path / "paced"
+    assert main(["run", str(scenario), "--out", str(out), "--realtime", "8"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["flight_time_s"] == pytest.approx(6.0)
+    assert summary["sim_realtime_factor"] <= 8.0 + 1e-6
+
+
+def test_several_episodes(tmp_path: Path) -> None:
+    scenario = tmp_path / "multi.yaml"
+    scenario.write_text(
+        yaml.safe_dump({**SMALL, "avoidance": {**SMALL["avoidance"], "max_steps": 4}})
+    )
+    out = tmp_path / "multi"
+    assert main(["run", str(scenario), "--out", str(out), "--episodes", "2"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert [e["seed"] for e in summary["episodes"]] == [7, 8]
+    assert summary["episodes_run"] == 2 and 0 <= summary["goal_rate"] <= 1
+    for i in range(2):
+        assert (out / f"episode-{i:03d}" / "trajectory.csv").is_file()
+        assert (out / f"episode-{i:03d}" / "run.rrd").is_file()
