@@ -13,8 +13,8 @@ import socket
 import time
 
 import numpy as np
-from uavxai.bridges import CommandEncoder, MavlinkBridge
 
+from uavxai.bridges import CommandEncoder, MavlinkBridge
 from uavxai.dynamics.geodesy import LocalFrame
 from uavxai.dynamics.state import TrafficState
 

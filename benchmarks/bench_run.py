@@ -16,10 +16,9 @@ import tempfile
 import time
 from pathlib import Path
 
-from uavxai.service.stage import plan_service
-
 from uavxai.pipeline import run_episode
 from uavxai.scenario import default_scenario
+from uavxai.service.stage import plan_service
 
 
 def free_udp_port() -> int:

@@ -9,8 +9,10 @@ through the four Al-Hourani sets) it
 3. runs the `uavxai service` planner (shipped model, fine-tuned on the layout),
 
 and prints the objective R/2^lambda of each over the optimum and over the naive placement
-(users' centroid at 100 m, equal power). "greedy" is the trained policy flown once from the
-start; "search" is the best point visited while training, as the service stage reports it.
+(users' centroid at 100 m, equal power). "model" is the policy `uavxai train` saves (the
+best of those evaluated after each episode) flown greedily from the start; "final" is the last
+policy; "search" is the best point visited while training (the service point is the best
+position visited); "service" is what `uavxai service` returns for the layout.
 Episodes to converge: first episode from which the 10-episode running mean of the greedy
 objective stays within 5 % of its final level.
 
@@ -50,6 +52,7 @@ def bench_layout(access: str, seed: int, episodes: int, with_dqn: bool) -> dict[
     result = d3qn.train(env, d3qn.D3QNConfig(episodes=episodes, seed=seed))
     greedy = d3qn.rollout(result.net, d3qn.fading_free(env))
     converge, _ = episodes_to_converge([row["greedy_objective"] for row in result.curve])
+    model = result.best_greedy
     search = max(greedy.objective, result.best.objective)
     shipped = plan_service(sc, "d3qn")
     opt, naive = grid.objective, env.naive_objective
@@ -59,6 +62,7 @@ def bench_layout(access: str, seed: int, episodes: int, with_dqn: bool) -> dict[
         greedy_dqn = d3qn.rollout(base.net, d3qn.fading_free(env))
         extra = {
             "dqn_over_opt": greedy_dqn.objective / opt,
+            "dqn_model_over_opt": base.best_greedy / opt,
             "dqn_converge": episodes_to_converge([row["greedy_objective"] for row in base.curve])[
                 0
             ],
@@ -67,9 +71,10 @@ def bench_layout(access: str, seed: int, episodes: int, with_dqn: bool) -> dict[
     return {
         "seed": seed,
         "environment": environment,
+        "model_over_opt": model / opt,
         "greedy_over_opt": greedy.objective / opt,
         "search_over_opt": search / opt,
-        "greedy_over_naive": greedy.objective / naive,
+        "model_over_naive": model / naive,
         "naive_over_opt": naive / opt,
         "episodes_to_converge": converge,
         "train_s": result.wall_s,
@@ -101,20 +106,22 @@ def main() -> None:
         rows[access] = []
         print(f"== access {access}: {args.layouts} layouts, {args.episodes} episodes each")
         print(
-            "seed  environment      greedy/opt search/opt greedy/naive naive/opt "
+            "seed  environment      model/opt final/opt search/opt model/naive naive/opt "
             "converge  train_s  service/opt service_s grid_s"
         )
         for i in range(args.layouts):
             r = bench_layout(access, args.seed + i, args.episodes, args.dqn)
             rows[access].append(r)
             print(
-                f"{r['seed']:<5} {r['environment']:<16} {r['greedy_over_opt']:10.4f} "
-                f"{r['search_over_opt']:10.4f} {r['greedy_over_naive']:12.4f} "
+                f"{r['seed']:<5} {r['environment']:<16} {r['model_over_opt']:9.4f} "
+                f"{r['greedy_over_opt']:9.4f} {r['search_over_opt']:10.4f} "
+                f"{r['model_over_naive']:11.4f} "
                 f"{r['naive_over_opt']:9.4f} {r['episodes_to_converge']:8d} "
                 f"{r['train_s']:8.1f} {r['shipped_over_opt']:12.4f} {r['shipped_s']:9.1f} "
                 f"{r['grid_s']:6.1f}"
                 + (
-                    f"  dqn/opt {r['dqn_over_opt']:.4f} dqn_converge {r['dqn_converge']}"
+                    f"  dqn model/opt {r['dqn_model_over_opt']:.4f} final/opt "
+                    f"{r['dqn_over_opt']:.4f} converge {r['dqn_converge']}"
                     if args.dqn
                     else ""
                 ),
@@ -128,9 +135,10 @@ def main() -> None:
             return f"{v.mean():.4f} [{v.min():.4f}, {v.max():.4f}]"
 
         print(f"{access}:")
-        print(f"  D3QN greedy / grid optimum      {stat('greedy_over_opt')}   (goal >= 0.95)")
+        print(f"  D3QN model / grid optimum       {stat('model_over_opt')}   (goal >= 0.95)")
+        print(f"  D3QN final policy / optimum     {stat('greedy_over_opt')}")
         print(f"  D3QN search / grid optimum      {stat('search_over_opt')}")
-        print(f"  D3QN greedy / naive placement   {stat('greedy_over_naive')}")
+        print(f"  D3QN model / naive placement    {stat('model_over_naive')}")
         print(f"  naive / grid optimum            {stat('naive_over_opt')}")
         print(f"  episodes to converge            {stat('episodes_to_converge')}   (goal <= 300)")
         print(f"  training wall time, s           {stat('train_s')}")
@@ -138,7 +146,8 @@ def main() -> None:
         print(f"  `uavxai service` d3qn wall, s   {stat('shipped_s')}")
         print(f"  grid optimum wall, s            {stat('grid_s')}")
         if args.dqn:
-            print(f"  DQN greedy / grid optimum       {stat('dqn_over_opt')}")
+            print(f"  DQN model / grid optimum        {stat('dqn_model_over_opt')}")
+            print(f"  DQN final policy / optimum      {stat('dqn_over_opt')}")
             print(f"  DQN episodes to converge        {stat('dqn_converge')}")
             print(f"  D3QN / DQN final train reward   {stat('d3qn_final_return_over_dqn')}")
     if args.json:

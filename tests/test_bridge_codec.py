@@ -10,6 +10,7 @@ import random
 import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
+
 from uavxai.bridges import CommandEncoder, MavlinkBridge
 from uavxai.bridges.framing import FrameReader
 from uavxai.bridges.protocol import (
@@ -21,7 +22,6 @@ from uavxai.bridges.protocol import (
     roll_from_quaternion,
 )
 from uavxai.bridges.telemetry import RateGate, body_rates
-
 from uavxai.dynamics.geodesy import LocalFrame
 
 FRAME = LocalFrame(34.1230, 108.8370, 400.0)

@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
+
 from uavxai.bridges import CommandEncoder, MavlinkBridge
 from uavxai.bridges.protocol import ATTITUDE_ONLY_MASK
 from uavxai.bridges.telemetry import ICAO_BLOCK
-
 from uavxai.dynamics.geodesy import LocalFrame
 from uavxai.dynamics.state import TrafficState
 from uavxai.errors import UserError

@@ -52,6 +52,9 @@ TINY = Hyperparameters(
     batch_size=32,
     learning_starts=64,
     train_frequency=2,
+    validate_every=3,
+    validation_intruders=(5,),
+    validation_episodes=2,
 )
 
 
@@ -201,6 +204,10 @@ def test_training_changes_the_networks_and_repeats_with_the_seed() -> None:
     a = train(SCENARIO, "dqn", TINY)
     b = train(SCENARIO, "dqn", TINY)
     assert a.td_losses and np.all(np.isfinite(a.td_losses))
+    # Validated after episodes 3 and 6; the better snapshot is the one returned.
+    assert [v["episode"] for v in a.validation] == [3, 6]
+    assert a.best_episode in (3, 6)
+    assert a.validation == b.validation
     assert [r["outcome"] for r in a.curve] == [r["outcome"] for r in b.curve]
     for pa, pb in zip(a.nets["q"].parameters(), b.nets["q"].parameters(), strict=True):
         assert torch.equal(pa, pb)

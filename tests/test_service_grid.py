@@ -9,6 +9,7 @@ import pytest
 
 from uavxai.comms.channel import Channel
 from uavxai.comms.service_env import SearchSpace, levels_to_power
+from uavxai.errors import UserError
 from uavxai.scenario import default_scenario
 from uavxai.service.grid import optimal_levels, optimal_objective, solve_grid
 
@@ -77,3 +78,9 @@ def test_shared_band_optimum_puts_the_rest_on_one_user():
     assert sorted(levels.tolist()) == [1] * 9 + [5]
     equal = ch.evaluate(np.array([1000.0, 1000.0, 150.0]), ch.equal_power()).objective
     assert objective > 1.04 * float(equal)
+
+
+def test_grid_refuses_sizes_it_cannot_solve_in_time():
+    sc = default_scenario(comms={"users": {"count": 40}, "power_levels": 8})
+    with pytest.raises(UserError, match="takes up to K = 1[0-9] users"):
+        solve_grid(Channel.from_scenario(sc), SearchSpace.from_scenario(sc), 8)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import csv
 import json
 
 import numpy as np
@@ -14,6 +15,7 @@ from uavxai.paths import scenarios_dir, service_checkpoints_dir
 from uavxai.scenario import default_scenario, load_scenario
 from uavxai.service import d3qn
 from uavxai.service.stage import plan_service, run_service_stage
+from uavxai.service.train import train_command
 
 SPEC_FIELDS = ("service_point", "power_w", "sinr_db", "rate_bps", "sum_rate_bps", "qos_satisfied")
 
@@ -150,3 +152,26 @@ def test_cli_service_writes_the_summary(tmp_path, capsys):
     assert cli_main(["service", str(bad), "--out", str(tmp_path / "o2")]) == 2
     err = capsys.readouterr().err
     assert "nothing.pt: no such file" in err and "Traceback" not in err
+
+
+def test_train_command_writes_the_model_and_the_curves(tmp_path):
+    sc = small(6)
+    report = train_command(sc, "d3qn", 30, tmp_path)
+    assert {p.name for p in tmp_path.iterdir()} == {
+        "model.pt",
+        "learning_curve.csv",
+        "learning_curve.png",
+    }
+    with (tmp_path / "learning_curve.csv").open() as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == 3 * 30 and {r["algo"] for r in rows} == {"d3qn", "dqn", "random"}
+    assert (tmp_path / "learning_curve.png").stat().st_size > 10_000
+    assert json.loads(json.dumps(report)) == report
+    assert 1 <= report["episodes_to_converge"] <= 30
+    assert report["grid_objective"] >= report["model_objective"]
+    # model.pt is the best evaluated policy: flown by the stage it finds that same point
+    service = sc.service.model_copy(update={"checkpoint": str(tmp_path / "model.pt")})
+    flown = plan_service(sc.model_copy(update={"service": service}))
+    assert flown.objective == pytest.approx(report["model_objective"], rel=1e-12)
+    d3qn_rows = [float(r["greedy_objective"]) for r in rows if r["algo"] == "d3qn"]
+    assert report["model_objective"] == pytest.approx(max(d3qn_rows), rel=1e-5)

@@ -430,6 +430,35 @@ def plot_results(results: Sequence[dict], out: Path, title: str = "") -> list[Pa
     return paths
 
 
+def merge_campaigns(sources: Sequence[str | Path], out: str | Path, title: str = "") -> list[dict]:
+    """One campaign from several that ran different methods (or counts) of the same scenario
+    and seeds, e.g. on different machines: their ``results.csv`` and ``episodes.csv`` rows
+    side by side in ``out``, with the plots redrawn. A (method, intruders) pair found in two
+    sources is an error, since their episodes would overlap."""
+    out = Path(out)
+    results: list[dict] = []
+    episodes: list[dict] = []
+    for src in map(Path, sources):
+        for name, into in (("results.csv", results), ("episodes.csv", episodes)):
+            if not (src / name).is_file():
+                raise UserError(f"{src / name}: no such file; is {src} a campaign folder?")
+            with (src / name).open() as f:
+                into.extend(csv.DictReader(f))
+    seen: set[tuple[str, int]] = set()
+    for r in results:
+        key = (r["method"], int(r["intruders"]))
+        if key in seen:
+            raise UserError(f"{key[0]} at {key[1]} intruders appears in more than one source.")
+        seen.add(key)
+        for k in RESULT_COLUMNS[1:]:
+            r[k] = int(r[k]) if k in ("intruders", "episodes") else float(r[k])
+    out.mkdir(parents=True, exist_ok=True)
+    write_csv(out / "results.csv", RESULT_COLUMNS, results)
+    write_csv(out / "episodes.csv", EPISODE_COLUMNS, episodes)
+    plot_results(results, out, title)
+    return results
+
+
 def evaluate_command(
     scenario: Scenario,
     methods: list[str],

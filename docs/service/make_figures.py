@@ -1,8 +1,8 @@
 """Regenerate the figures of docs/service/README.md.
 
-    .venv/bin/python docs/service/make_figures.py            # objective_map.png (~1 min)
-    .venv/bin/uavxai train scenarios/demo.yaml --algo d3qn --out runs/train-demo
-    cp runs/train-demo/learning_curve.png docs/service/learning_curve_demo.png
+.venv/bin/python docs/service/make_figures.py            # objective_map.png (~1 min)
+.venv/bin/uavxai train scenarios/demo.yaml --algo d3qn --out runs/train-demo
+cp runs/train-demo/learning_curve.png docs/service/learning_curve_demo.png
 """
 
 from __future__ import annotations
@@ -48,13 +48,14 @@ def objective_map() -> None:
         ax.scatter(users[:, 0], users[:, 1], c="white", edgecolors="k", s=40, label="users")
         d3qn = plan_service(sc, "d3qn")
         naive = naive_placement(env.space, users)
-        marks = (
-            (best.position, "*", "red", f"grid optimum, h = {best.position[2]:.0f} m"),
-            (d3qn.service_point, "X", "orange", f"D3QN, h = {d3qn.service_point[2]:.0f} m"),
-            (naive, "s", "cyan", "naive (centroid, 100 m)"),
+        marks = (  # drawn in this order: the optimum on top
+            (naive, "s", "cyan", 220, "naive (centroid, 100 m)"),
+            (d3qn.service_point, "X", "orange", 160, f"D3QN, h = {d3qn.service_point[2]:.0f} m"),
+            (best.position, "*", "red", 200, f"grid optimum, h = {best.position[2]:.0f} m"),
         )
-        for point, marker, colour, label in marks:
-            ax.scatter(*point[:2], marker=marker, c=colour, edgecolors="k", s=160, label=label)
+        for z, (point, marker, colour, size, label) in enumerate(marks):
+            style = {"marker": marker, "c": colour, "edgecolors": "k", "s": size, "zorder": 3 + z}
+            ax.scatter(*point[:2], label=label, **style)
         ax.set(
             xlabel="x [m]",
             ylabel="y [m]",

@@ -11,12 +11,12 @@ every node it takes the child with the best UCT score ``Q + 2C sqrt(2 ln n / n_j
 never visited first, ties broken at random. ``Q`` is min-max normalised over the siblings
 before it enters the score (as in mctx): the leaf values ``1 - d/d_max`` of neighbouring actions
 differ by about 1 %, and against the paper's exploration term raw values would leave the
-visits uniform, the choice arbitrary and the confidence meaningless. A node met for the first time is expanded: its 9
-children are computed at once, vectorised, and kept (child states are deterministic, so every
-later simulation reuses them). The value at the end of the walk is 1 for the goal, 0 for a
-collision or leaving the map, 0.1 for a time-out and ``1 - d(o, g) / d_max`` otherwise (eqs
-13/14); it is backed up along the walk. Each tree level holds its action for
-``action_hold_s``.
+visits uniform, the choice arbitrary and the confidence meaningless. A node met for the
+first time is expanded: its 9 children are computed at once, vectorised, and kept (child
+states are deterministic, so every later simulation reuses them). The value at the end of
+the walk is 1 for the goal, 0 for a collision or leaving the map, 0.1 for a time-out and
+``1 - d(o, g) / d_max`` otherwise (eqs 13/14); it is backed up along the walk. Each tree
+level holds its action for ``action_hold_s``.
 """
 
 from __future__ import annotations

@@ -6,7 +6,7 @@ rewards in :func:`rewards`, then the loop in :func:`train`.
 
 Episodes are the scenario's (its start, goal, intruder behaviour, speeds and altitudes) with a
 fresh intruder count drawn from ``intruders`` each time, so that one network serves 5 or 40
-intruders; a share of episodes (``random_start_share``) starts and ends elsewhere in the
+intruders. A share of episodes (``random_start_share``) starts and ends elsewhere in the
 flight area, so that the policy has seen walls and goals from every side and does not just
 memorise the scenario's one route.
 
@@ -35,6 +35,7 @@ observation holds no clock.
 
 from __future__ import annotations
 
+import copy
 import csv
 import json
 import math
@@ -63,7 +64,7 @@ from uavxai.scenario import Scenario, Start
 
 @dataclass(frozen=True)
 class Hyperparameters:
-    episodes: int = 3000
+    episodes: int = 3500
     seed: int = 0
     intruders: tuple[int, int] = (5, 40)  # count drawn uniformly per episode, inclusive
     random_start_share: float = 0.5
@@ -93,6 +94,13 @@ class Hyperparameters:
     conflict_weight: float = 0.1  # per decision at the worst predicted conflict
     conflict_horizon_s: float = 20.0
     log_window: int = 100  # episodes in the rolling rates
+    # Model selection: DQN's greedy policy swings from one snapshot to the next, so every
+    # `validate_every` episodes it flies the scenario's route on held-out seeds and the
+    # snapshot with the best goal rate minus collision rate is the one kept.
+    validate_every: int = 250
+    validation_intruders: tuple[int, ...] = (5, 20, 40)
+    validation_episodes: int = 8  # per intruder count
+    validation_seed: int = 1_000_000  # campaigns use scenario.seed + 0, 1, ...
 
 
 DEFAULT_EPISODES = Hyperparameters.episodes
@@ -220,10 +228,47 @@ class _Episodes:
 # ---------------------------------------------------------------------------------- training
 @dataclass
 class TrainResult:
-    nets: dict[str, QNetwork]
+    nets: dict[str, QNetwork]  # the snapshot that validated best
     curve: list[dict] = field(default_factory=list)
     td_losses: list[float] = field(default_factory=list)
+    validation: list[dict] = field(default_factory=list)
+    best_episode: int = 0  # the episode count at the kept snapshot
     wall_s: float = 0.0
+
+
+def validate(
+    scenario: Scenario, hp: Hyperparameters, policy, config: PlannerConfig
+) -> dict[str, float]:
+    """Greedy episodes of the scenario's own route at each of ``validation_intruders``, on
+    seeds (``validation_seed`` + i) apart from any campaign's: goal and collision rates."""
+    from uavxai.avoidance.episode import episode_intruders
+
+    outcomes = []
+    goal = default_goal(scenario)
+    for n in hp.validation_intruders:
+        for i in range(hp.validation_episodes):
+            seed = hp.validation_seed + i
+            env = EncounterEnv(
+                config,
+                episode_intruders(scenario, seed, n),
+                goal,
+                scenario.ownship.start,
+                scenario=scenario,
+                n_nearest=hp.n_nearest,
+            )
+            env.reset(seed=seed)
+            while not env.outcome:
+                pos, vel = env.intruder_arrays()
+                obs = observe(env.own, pos, vel, env.goal, config, hp.n_nearest)
+                env.step(int(policy(obs[None])[0]))
+            outcomes.append(env.outcome)
+    k = len(outcomes)
+    goal_rate, collision_rate = outcomes.count("goal") / k, outcomes.count("collision") / k
+    return {
+        "goal_rate": goal_rate,
+        "collision_rate": collision_rate,
+        "score": goal_rate - collision_rate,
+    }
 
 
 def train(
@@ -307,6 +352,8 @@ def train(
     returns = np.zeros((hp.n_envs, 2))
     episode_min_sep = np.full(hp.n_envs, math.inf)
     result = TrainResult(nets=q)
+    best = (-math.inf, {k: copy.deepcopy(q[k].state_dict()) for k in heads})
+    config = PlannerConfig.from_scenario(scenario)
     recent: list[str] = []
     losses: list[float] = []
     transitions = 0
@@ -351,8 +398,19 @@ def train(
                     "goal_rate": recent.count("goal") / len(recent),
                     "collision_rate": recent.count("collision") / len(recent),
                     "transitions": transitions,
+                    "val_goal_rate": math.nan,
+                    "val_collision_rate": math.nan,
                 }
                 result.curve.append(row)
+                done = len(result.curve)
+                if done % hp.validate_every == 0 or done == hp.episodes:
+                    val = {"episode": done, **validate(scenario, hp, act, config)}
+                    result.validation.append(val)
+                    row["val_goal_rate"] = val["goal_rate"]
+                    row["val_collision_rate"] = val["collision_rate"]
+                    if val["score"] > best[0]:
+                        best = (val["score"], {k: copy.deepcopy(q[k].state_dict()) for k in heads})
+                        result.best_episode = done
                 if on_episode:
                     on_episode(row)
                 if len(result.curve) == hp.episodes:
@@ -363,7 +421,8 @@ def train(
             obs[i] = nxt
     result.td_losses = losses
     result.wall_s = time.perf_counter() - wall0
-    for net in q.values():
+    for k, net in q.items():
+        net.load_state_dict(best[1][k])
         net.eval()
     return result
 
@@ -418,6 +477,8 @@ CURVE_COLUMNS = (
     "goal_rate",
     "collision_rate",
     "transitions",
+    "val_goal_rate",
+    "val_collision_rate",
 )
 
 
@@ -494,6 +555,8 @@ def train_command(
         "final_goal_rate": sum(r["outcome"] == "goal" for r in last) / max(1, len(last)),
         "final_collision_rate": sum(r["outcome"] == "collision" for r in last) / max(1, len(last)),
         "final_window_episodes": len(last),
+        "kept_snapshot_episode": result.best_episode,
+        "validation": result.validation,
         "wall_s": round(result.wall_s, 1),
         "model": str(out / "model.pt"),
     }
@@ -534,6 +597,11 @@ def plot_learning_curve(curve: list[dict], path: Path, title: str) -> None:
     top.plot(ep, [r["goal_rate"] for r in curve], label="goal rate")
     top.plot(ep, [r["collision_rate"] for r in curve], label="collision rate")
     top.plot(ep, [r["epsilon"] for r in curve], label="epsilon", linestyle=":", color="grey")
+    val = [r for r in curve if not math.isnan(r["val_goal_rate"])]
+    top.plot([r["episode"] for r in val], [r["val_goal_rate"] for r in val], "o", color="tab:blue",
+             label="validation goal rate (greedy)")  # fmt: skip
+    top.plot([r["episode"] for r in val], [r["val_collision_rate"] for r in val], "o",
+             color="tab:orange", label="validation collision rate (greedy)")  # fmt: skip
     top.set_ylim(-0.02, 1.02)
     top.set_ylabel("rolling rate")
     top.legend(fontsize=8)

@@ -162,6 +162,8 @@ class TrainResult:
     curve: list[dict[str, float]] = field(default_factory=list)
     wall_s: float = 0.0
     best: Episode | None = None  # the best position visited while training (one layout)
+    best_greedy: float = -np.inf  # the best greedy objective of an evaluated policy ...
+    best_state: dict[str, torch.Tensor] | None = None  # ... and that policy's weights
 
 
 def linear_schedule(start: float, end: float, duration: int, t: int) -> float:
@@ -220,6 +222,9 @@ def train(
         if result.best is None or env_e.best["objective"] > result.best.objective:
             result.best = episode_of(env_e, ret)
         greedy = rollout(q, fading_free(env_e))
+        if greedy.objective > result.best_greedy:
+            result.best_greedy = greedy.objective
+            result.best_state = copy.deepcopy(q.state_dict())
         row = {
             "episode": episode + 1,
             "epsilon": epsilon,

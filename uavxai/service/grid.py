@@ -27,8 +27,10 @@ import numpy as np
 
 from uavxai.comms.channel import Channel
 from uavxai.comms.service_env import SearchSpace, levels_to_power
+from uavxai.errors import UserError
 
-BATCH = 16  # positions per vectorised DP call: small enough to stay in cache
+DP_BYTES_PER_CALL = 4_000_000  # positions per vectorised DP call: a few MB, stays in cache
+MAX_DP_COST = 20.0  # relative to K = 10, L = 6 (5 ms a position, 5-20 s a grid); beyond: hours
 INITIAL_BOX = 8  # lattice points per side of the first boxes
 
 
@@ -100,11 +102,18 @@ def _knapsack(
 def optimal_objective(channel: Channel, gain: np.ndarray, power_levels: int) -> np.ndarray:
     """The best objective over all discrete power levels for each row of ``gain (N, K)``."""
     gain = np.atleast_2d(gain)
+    s_max = channel.k * (power_levels - 1)
+    batch = max(1, DP_BYTES_PER_CALL // (8 * s_max * (s_max + 1) * (channel.k + 1)))
     out = np.empty(len(gain))
-    for i in range(0, len(gain), BATCH):
-        rates, fails = level_rates(channel, gain[i : i + BATCH], power_levels)
-        out[i : i + BATCH] = _knapsack(rates, fails)[0]
+    for i in range(0, len(gain), batch):
+        rates, fails = level_rates(channel, gain[i : i + batch], power_levels)
+        out[i : i + batch] = _knapsack(rates, fails)[0]
     return out
+
+
+def dp_cost(k: int, power_levels: int) -> float:
+    """Work of one position's DP relative to K = 10, L = 6: (K (L-1))^2 K^2 L."""
+    return (k * (power_levels - 1)) ** 2 * k**2 * power_levels / (50**2 * 10**2 * 6)
 
 
 def optimal_levels(
@@ -135,6 +144,16 @@ class GridResult:
 
 def solve_grid(channel: Channel, space: SearchSpace, power_levels: int) -> GridResult:
     """The exact optimum of position (on the lattice) and power levels, fading-free."""
+    cost = dp_cost(channel.k, power_levels)
+    if cost > MAX_DP_COST:
+        k_max = max(k for k in range(1, 65) if dp_cost(k, power_levels) <= MAX_DP_COST)
+        raise UserError(
+            f"service.planner grid: the exact power search for K = {channel.k} users and "
+            f"power_levels = {power_levels} costs {cost:.0f} times the default (K = 10, L = 6) "
+            f"per position, too slow for thousands of positions; with power_levels = "
+            f"{power_levels} the grid planner takes up to K = {k_max} users. Use planner "
+            "random or d3qn (after `uavxai train`) instead."
+        )
     xs, ys, hs = space.axes()
     mesh = np.stack(np.meshgrid(xs, ys, hs, indexing="ij"), axis=-1)  # (nx, ny, nh, 3)
     gains = channel.mean_gain(mesh)  # (nx, ny, nh, K)

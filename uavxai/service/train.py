@@ -4,7 +4,8 @@
 trains the requested algorithm on the scenario's user layout, and — for the comparison figure
 of the paper — the other one and the random baseline with the same budget, then writes
 
-- ``model.pt``: the requested model (load it with ``service.checkpoint``);
+- ``model.pt``: the requested model (load it with ``service.checkpoint``) — the policy, among
+  those evaluated after each episode, whose greedy flight found the best service point;
 - ``learning_curve.csv``: one row per algorithm and episode;
 - ``learning_curve.png``: left, the objective R/2^lambda of the service point each method
   would pick after every episode (the greedy policy for D3QN/DQN, the best of ``steps``
@@ -23,6 +24,7 @@ fading for every episode (so it is a prior, fine-tuned on the actual layout at r
 from __future__ import annotations
 
 import argparse
+import copy
 import csv
 import json
 import time
@@ -92,7 +94,7 @@ def train_command(scenario: Scenario, algo: str, episodes: int | None, out: Path
             result = d3qn.train(
                 env, configs[name], on_episode=_progress(progress, task, env.naive_objective)
             )
-            runs[name] = {"curve": result.curve, "wall_s": result.wall_s, "net": result.net}
+            runs[name] = {"curve": result.curve, "wall_s": result.wall_s, "result": result}
         task = progress.add_task("random", total=episodes, status="")
         runs["random"] = _random_curve(env, episodes, scenario.seed, progress, task)
         task = progress.add_task("grid", total=1, status="exact optimum ...")
@@ -100,12 +102,24 @@ def train_command(scenario: Scenario, algo: str, episodes: int | None, out: Path
         grid = solve_grid(d3qn.fading_free(env).channel, env.space, env.power_levels)
         progress.update(task, advance=1, status=f"{time.perf_counter() - t0:.1f} s")
 
+    # model.pt is the evaluated policy whose greedy flight found the best service point
+    # (the last one can be a little worse: learning goes on at epsilon = 0.1).
+    chosen: d3qn.TrainResult = runs[algo]["result"]
+    net = copy.deepcopy(chosen.net)
+    net.load_state_dict(chosen.best_state)
+    episode = 1 + int(np.argmax([row["greedy_objective"] for row in chosen.curve]))
     d3qn.save_checkpoint(
         out / "model.pt",
-        runs[algo]["net"],
+        net,
         algo,
         configs[algo],
-        {"scenario": scenario.name, "seed": scenario.seed, "access": scenario.comms.access},
+        {
+            "scenario": scenario.name,
+            "seed": scenario.seed,
+            "access": scenario.comms.access,
+            "episode": episode,
+            "greedy_objective": chosen.best_greedy,
+        },
     )
     _write_csv(out / "learning_curve.csv", runs)
     summary = {}
@@ -128,6 +142,9 @@ def train_command(scenario: Scenario, algo: str, episodes: int | None, out: Path
         "algo": algo,
         "episodes": episodes,
         "model": str(out / "model.pt"),
+        "model_episode": episode,
+        "model_objective": chosen.best_greedy,
+        "model_over_optimum": chosen.best_greedy / grid.objective,
         **mine,
         "grid_objective": grid.objective,
         "naive_objective": env.naive_objective,
