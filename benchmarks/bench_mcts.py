@@ -70,7 +70,7 @@ def main() -> None:
     ap.add_argument("--intruders", type=int, default=20)
     ap.add_argument("--simulations", type=int, default=200)
     ap.add_argument("--depth", type=int, default=4)
-    ap.add_argument("--repeats", type=int, default=2, help="timing repeats (best is kept)")
+    ap.add_argument("--repeats", type=int, default=5, help="timing repeats (best is kept)")
     args = ap.parse_args()
     if args.quick:
         args.encounters, args.episodes, args.repeats = 10, 4, 1

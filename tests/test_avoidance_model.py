@@ -16,6 +16,7 @@ from uavxai.avoidance.model import (
     G,
     Track,
     ownship_state,
+    place_children,
 )
 from uavxai.avoidance.types import Ownship, PlannerConfig
 
@@ -172,6 +173,34 @@ def test_memo_does_not_change_results():
         )
     warm = warm_model.fly_all_actions(state, goal, 4.0, track)
     np.testing.assert_array_equal(cold.end, warm.end)
+
+
+def test_children_placed_one_at_a_time_match_the_vectorised_placement():
+    """The tree search places a child it goes on from in plain Python, and all of them at
+    once when the tree is finished: both must be the state ``fly`` computes."""
+    cfg = PlannerConfig()
+    model = EncounterModel(cfg)
+    rng = np.random.default_rng(3)
+    goal = np.array([1500.0, 400.0, 100.0])
+    track = Track.of(np.zeros((9, 0, 3)))
+    blocks, states = [], []
+    for _ in range(20):
+        own = Ownship(
+            *rng.uniform(100, 1900, 2),
+            rng.uniform(100, 140),
+            rng.uniform(12, 30),
+            rng.uniform(0, 2 * np.pi),
+            bank=float(rng.choice([-0.35, 0.0, 0.175])),
+        )
+        state = ownship_state(own)
+        placed, seg = model.expand(state.tolist(), goal, 4.0, track)
+        assert seg.end is None
+        exact = model.fly(np.repeat(state[None], 9, 0), np.arange(9), goal, 4.0, track)
+        one_by_one = np.array([placed.state(a) for a in range(9)])
+        np.testing.assert_allclose(one_by_one, exact.end, rtol=0, atol=1e-5)
+        blocks.append(placed)
+        states.append(one_by_one)
+    np.testing.assert_allclose(place_children(blocks), np.concatenate(states), rtol=0, atol=1e-9)
 
 
 def test_track_shape_is_checked():

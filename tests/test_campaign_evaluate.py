@@ -6,6 +6,7 @@ from __future__ import annotations
 import csv
 import math
 import os
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -192,6 +193,12 @@ def test_jsbsim_episode_flies_the_same_encounter() -> None:
     assert kin["steps"] == 12
     # Same traffic, same planner, 12 s: the flown minimum separations agree to within metres.
     assert row["min_separation_m"] == pytest.approx(kin["min_separation_m"], rel=0.1)
+
+
+def test_missing_ray_says_how_to_install_it(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setitem(sys.modules, "ray", None)  # what `import ray` sees without Ray
+    with pytest.raises(UserError, match=r"pip install 'uavxai\[ray\]'"):
+        run_campaign(SCENARIO, ["none"], [3], 1, ray_address="local")
 
 
 @pytest.mark.slow

@@ -143,29 +143,39 @@ def test_shipped_checkpoints_are_small_and_documented() -> None:
         assert '"trained_on"' in info and algo in info
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="the shipped interim checkpoints avoid the intruder but fly out of the area instead "
-    "of reaching the goal (see docs/results); strict, so a model that passes flags this marker",
+HEAD_ON = default_scenario(
+    "head_on",
+    ownship={
+        "start": {"x": 200, "y": 1000, "h": 120, "heading_deg": 90, "speed_mps": 20},
+        "goal": [1800, 1000, 120],
+    },
+    intruders={"list": [{"x": 1500, "y": 1000, "h": 120, "heading_deg": 270, "speed_mps": 22}]},
+    avoidance={"max_steps": 200},
 )
-def test_dqn_avoids_a_head_on_intruder_better_than_flying_straight() -> None:
-    """A trained policy must steer off a collision course that holding course would fly."""
+
+
+def test_learned_planners_steer_off_a_head_on_collision_course() -> None:
+    """Holding course collides; the trained policies keep clear of the intruder."""
     from uavxai.avoidance.episode import run_episode
 
-    sc = default_scenario(
-        "head_on",
-        ownship={
-            "start": {"x": 200, "y": 1000, "h": 120, "heading_deg": 90, "speed_mps": 20},
-            "goal": [1800, 1000, 120],
-        },
-        intruders={"list": [{"x": 1500, "y": 1000, "h": 120, "heading_deg": 270, "speed_mps": 22}]},
-        avoidance={"max_steps": 200},
-    )
-    assert run_episode("none", sc, 0).outcome == "collision"
+    assert run_episode("none", HEAD_ON, 0).outcome == "collision"
     for name in ("dqn", "safe_dqn"):
-        r = run_episode(name, sc, 0)
-        assert r.outcome == "goal", name
-        assert r.min_separation_m > sc.avoidance.d_min_m
+        r = run_episode(name, HEAD_ON, 0)
+        assert r.outcome != "collision", name
+        assert r.min_separation_m > HEAD_ON.avoidance.d_min_m, name
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="the shipped checkpoints keep clear of the intruder but then wander and time out "
+    "short of the goal on this route, not the scenario route they were trained on (see "
+    "docs/results/README.md); strict, so a model that does reach it flags this marker",
+)
+def test_learned_planners_reach_the_goal_after_a_head_on_encounter() -> None:
+    from uavxai.avoidance.episode import run_episode
+
+    for name in ("dqn", "safe_dqn"):
+        assert run_episode(name, HEAD_ON, 0).outcome == "goal", name
 
 
 # ------------------------------------------------------------------------ checkpoint errors

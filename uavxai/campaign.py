@@ -401,6 +401,17 @@ PLOTS = (
 )
 
 
+# One look per method in every figure.
+_STYLE = {
+    "mcts": ("tab:blue", "o"),
+    "mcts_fast": ("tab:orange", "s"),
+    "exhaustive": ("tab:green", "^"),
+    "dqn": ("tab:purple", "v"),
+    "safe_dqn": ("tab:brown", "P"),
+    "none": ("tab:red", "D"),
+}
+
+
 def plot_results(results: Sequence[dict], out: Path, title: str = "") -> list[Path]:
     """Goal rate, collision rate and steps against the intruder count, one line per method."""
     import matplotlib
@@ -412,9 +423,20 @@ def plot_results(results: Sequence[dict], out: Path, title: str = "") -> list[Pa
     paths = []
     for key, label, name in PLOTS:
         fig, ax = plt.subplots(figsize=(6.0, 4.0), dpi=120)
-        for m in methods:
+        for i, m in enumerate(methods):
             rs = sorted((r for r in results if r["method"] == m), key=lambda r: r["intruders"])
-            ax.plot([r["intruders"] for r in rs], [r[key] for r in rs], marker="o", label=m)
+            colour, marker = _STYLE.get(m, (f"C{i % 10}", "o"))
+            # Methods often tie (several at zero collisions): distinct markers and shrinking
+            # sizes keep every one visible where lines lie on top of each other.
+            ax.plot(
+                [r["intruders"] for r in rs],
+                [r[key] for r in rs],
+                color=colour,
+                marker=marker,
+                markersize=9 - 1.0 * (i % 5),
+                linewidth=2.2 - 0.25 * (i % 5),
+                label=m,
+            )
         ax.set_xlabel("intruders")
         ax.set_ylabel(label)
         if key.endswith("_rate"):

@@ -13,22 +13,16 @@ MCTS tree. Cost grows as ``9^depth``; that is the point of the comparison.
 from __future__ import annotations
 
 import math
-import time
 from collections.abc import Sequence
 
 import numpy as np
 
-from uavxai.avoidance.mcts import TreeBuilder, chosen_action, decision_from_tree, predict_levels
-from uavxai.avoidance.model import EncounterModel, Track, ownship_state
+from uavxai.avoidance.mcts import TreeBuilder, TreePlanner
+from uavxai.avoidance.model import EncounterModel, Track
 from uavxai.avoidance.types import (
     N_ACTIONS,
-    Decision,
-    Goal,
-    Intruder,
-    Ownship,
     PlannerConfig,
     SearchTree,
-    check_plan_inputs,
 )
 
 
@@ -65,43 +59,22 @@ def exhaustive_search(
     return tree
 
 
-class ExhaustivePlanner:
+class ExhaustivePlanner(TreePlanner):
     """Exhaustive search over the planner API (SPEC §7); deterministic."""
 
+    sampled = False
+
     def __init__(self, config: PlannerConfig | None = None, *, name: str = "exhaustive") -> None:
-        self.config = config or PlannerConfig()
-        self.name = name
-        self.model = EncounterModel(self.config)
+        super().__init__(config, name=name)
 
-    def reset(self, seed: int) -> None:
-        """Nothing random to re-seed."""
-
-    def plan(
-        self, own: Ownship, intruders: Sequence[Intruder], goal: Goal, *, step: int = 0
-    ) -> Decision:
-        t_start = time.perf_counter()
-        check_plan_inputs(own, intruders, goal)
-        cfg, model = self.config, self.model
-        goal_xyz = np.asarray(goal, dtype=float)
-        tracks = predict_levels(model, intruders, cfg.depth, cfg.action_hold_s)
-        tree = exhaustive_search(
-            model,
-            ownship_state(own),
-            goal_xyz,
+    def search(
+        self, root: np.ndarray, goal: np.ndarray, tracks: list[Track], time_left_s: float
+    ) -> SearchTree:
+        return exhaustive_search(
+            self.model,
+            root,
+            goal,
             tracks,
-            hold_s=cfg.action_hold_s,
-            time_left_s=(cfg.max_steps - step) * cfg.decision_period_s,
+            hold_s=self.config.action_hold_s,
+            time_left_s=time_left_s,
         )
-        decision = decision_from_tree(
-            tree,
-            chosen_action(tree),
-            own,
-            intruders,
-            goal_xyz,
-            tracks,
-            model,
-            name=self.name,
-            sampled=False,
-        )
-        decision.ms = 1000.0 * (time.perf_counter() - t_start)
-        return decision

@@ -31,6 +31,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from uavxai.avoidance.mcts import intruder_arrays
 from uavxai.avoidance.model import (
     PHI_CMD,
     EncounterModel,
@@ -119,14 +120,6 @@ def observe_api(
     """:func:`observe` from the planner-API types (SPEC §7)."""
     pos, vel = intruder_arrays(intruders)
     return observe(ownship_state(own), pos, vel, np.asarray(goal, float), config, n_nearest)
-
-
-def intruder_arrays(intruders: Sequence[Intruder]) -> tuple[np.ndarray, np.ndarray]:
-    """(N, 3) positions and velocities of the planner-API intruders."""
-    if not intruders:
-        return np.zeros((0, 3)), np.zeros((0, 3))
-    a = np.array([(i.x, i.y, i.h, i.vx, i.vy, i.vh) for i in intruders], dtype=float)
-    return a[:, :3], a[:, 3:]
 
 
 # ------------------------------------------------------------------------------------ networks

@@ -33,11 +33,13 @@ from uavxai.avoidance.model import (
     OUTCOME_NAMES,
     TERMINAL_VALUE,
     TIMEOUT,
+    Children,
     EncounterModel,
     Track,
     accel_command,
     bank_command,
     ownship_state,
+    place_children,
 )
 from uavxai.avoidance.types import (
     N_ACTIONS,
@@ -135,17 +137,24 @@ def chosen_action(tree: SearchTree) -> int:
     return int(tree.action[child])
 
 
-class MCTSPlanner:
-    """The MCTS avoidance planner (SPEC §7). Same seed, same inputs: same decision."""
+class TreePlanner:
+    """What the tree planners share (SPEC §7): predict the intruders once per decision,
+    search, take the chosen root action and explain it. Subclasses give the search."""
 
-    def __init__(self, config: PlannerConfig | None = None, *, name: str = "mcts") -> None:
+    sampled = True  # visits count simulations (MCTS), not one per node (exhaustive)
+
+    def __init__(self, config: PlannerConfig | None = None, *, name: str) -> None:
         self.config = config or PlannerConfig()
         self.name = name
         self.model = EncounterModel(self.config)
-        self._rng = np.random.default_rng(self.config.seed)
 
     def reset(self, seed: int) -> None:
-        self._rng = np.random.default_rng(seed)
+        """Nothing random to re-seed."""
+
+    def search(
+        self, root: np.ndarray, goal: np.ndarray, tracks: list[Track], time_left_s: float
+    ) -> SearchTree:
+        raise NotImplementedError
 
     def plan(
         self, own: Ownship, intruders: Sequence[Intruder], goal: Goal, *, step: int = 0
@@ -155,22 +164,48 @@ class MCTSPlanner:
         cfg, model = self.config, self.model
         goal_xyz = np.asarray(goal, dtype=float)
         tracks = predict_levels(model, intruders, cfg.depth, cfg.action_hold_s)
-        tree = search(
-            model,
-            ownship_state(own),
+        time_left_s = (cfg.max_steps - step) * cfg.decision_period_s
+        tree = self.search(ownship_state(own), goal_xyz, tracks, time_left_s)
+        decision = decision_from_tree(
+            tree,
+            chosen_action(tree),
+            own,
+            intruders,
             goal_xyz,
+            tracks,
+            model,
+            name=self.name,
+            sampled=self.sampled,
+        )
+        decision.ms = 1000.0 * (time.perf_counter() - t_start)
+        return decision
+
+
+class MCTSPlanner(TreePlanner):
+    """The MCTS avoidance planner. Same seed, same inputs: same decision."""
+
+    def __init__(self, config: PlannerConfig | None = None, *, name: str = "mcts") -> None:
+        super().__init__(config, name=name)
+        self._rng = np.random.default_rng(self.config.seed)
+
+    def reset(self, seed: int) -> None:
+        self._rng = np.random.default_rng(seed)
+
+    def search(
+        self, root: np.ndarray, goal: np.ndarray, tracks: list[Track], time_left_s: float
+    ) -> SearchTree:
+        cfg = self.config
+        return search(
+            self.model,
+            root,
+            goal,
             tracks,
             simulations=cfg.simulations,
             c=cfg.c,
             hold_s=cfg.action_hold_s,
             rng=self._rng,
-            time_left_s=(cfg.max_steps - step) * cfg.decision_period_s,
+            time_left_s=time_left_s,
         )
-        decision = decision_from_tree(
-            tree, chosen_action(tree), own, intruders, goal_xyz, tracks, model, name=self.name
-        )
-        decision.ms = 1000.0 * (time.perf_counter() - t_start)
-        return decision
 
 
 def intruder_arrays(intruders: Sequence[Intruder]) -> tuple[np.ndarray, np.ndarray]:
@@ -354,7 +389,8 @@ class TreeBuilder:
         self.block_parent = [-1]
         self.block_depth = [0]
         self.codes = [np.array([NONE], dtype=np.int8)]
-        self.states = [np.asarray(root, dtype=float)[None]]
+        self.root = np.asarray(root, dtype=float).tolist()
+        self.placed: list[Children] = []  # block b's children are placed by placed[b - 1]
         self.min_sep = [np.array([np.inf])]
         self.closest = [np.array([-1])]
         self.t_closest = [np.array([math.nan])]
@@ -363,9 +399,8 @@ class TreeBuilder:
         """Compute the 9 children of ``node``; returns the index of the first."""
         block, row = ((node + 8) // 9, (node - 1) % 9) if node else (0, 0)
         d = self.block_depth[block]
-        seg = self.model.fly_all_actions(
-            self.states[block][row], self.goal, self.hold_s, self.tracks[d]
-        )
+        state = self.placed[block - 1].state(row) if node else self.root
+        placed, seg = self.model.expand(state, self.goal, self.hold_s, self.tracks[d])
         code = seg.event
         if (d + 1) * self.hold_s >= self.time_left_s - 1e-9:
             code = np.where(code == NONE, TIMEOUT, code).astype(np.int8)
@@ -391,7 +426,7 @@ class TreeBuilder:
         self.block_parent.append(node)
         self.block_depth.append(d + 1)
         self.codes.append(code)
-        self.states.append(seg.end)
+        self.placed.append(placed)
         self.min_sep.append(seg.min_sep)
         self.closest.append(seg.closest)
         self.t_closest.append(seg.t_closest)
@@ -399,12 +434,12 @@ class TreeBuilder:
 
     def leaf_value(self, node: int) -> float:
         """Eq 13 at an open node: 1 - d(o, g) / d_max."""
-        x, y, h = self.states[(node + 8) // 9][(node - 1) % 9, :3].tolist()
-        return 1.0 - math.dist((x, y, h), self.goal) / self.model.config.d_max
+        xyz = self.placed[(node - 1) // 9].position((node - 1) % 9)
+        return 1.0 - math.dist(xyz, self.goal) / self.model.config.d_max
 
     def finish(self) -> SearchTree:
         blocks = len(self.block_parent) - 1
-        states = np.concatenate(self.states)
+        states = np.concatenate([np.array([self.root]), place_children(self.placed)])
         depth = np.concatenate([[0], np.repeat(self.block_depth[1:], N_ACTIONS)]).astype(int)
         # Segment times count from the parent; the tree's from the decision.
         t_closest = np.concatenate(self.t_closest) + np.maximum(depth - 1, 0) * self.hold_s

@@ -189,7 +189,7 @@ class Segment:
     reports ``min_sep`` inf and ``closest`` -1.
     """
 
-    end: np.ndarray  # (B, 7) states at the end
+    end: np.ndarray | None  # (B, 7) states at the end (None from EncounterModel.expand)
     min_sep: np.ndarray  # (B,) smallest 3-D distance to an intruder, m (see module docstring)
     closest: np.ndarray  # (B,) index of that intruder
     t_closest: np.ndarray  # (B,) seconds from the segment's start to that closest approach
@@ -221,6 +221,51 @@ class _BodyMotion:
     step_max: float = 0.0  # longest horizontal sub-step chord of any row
     template: np.ndarray | None = None  # (B, 7) end states with V, PHI, PHI_CMD filled in
     z_end: np.ndarray | None = None  # (B,) the last column of z
+    rows: tuple = ()  # per row (z_end, dpsi, v_end, phi_end, phi_cmd) as Python numbers
+
+
+@dataclass(slots=True)
+class Children:
+    """Where the 9 children of one state end, kept as the parent's placement of the
+    memoised body motion; :meth:`state` places one child in plain Python and
+    :func:`place_children` places many at once."""
+
+    origin: complex  # the parent's x + iy
+    rot: complex  # e^{-i psi}: body frame to world
+    h_end: float
+    psi: float
+    body: _BodyMotion
+
+    def state(self, action: int) -> list[float]:
+        """The child's state row (as a list)."""
+        z_end, dpsi, v_end, phi_end, phi_cmd = self.body.rows[action]
+        p = self.origin + z_end * self.rot
+        return [p.real, p.imag, self.h_end, v_end, (self.psi + dpsi) % _TAU, phi_end, phi_cmd]
+
+    def position(self, action: int) -> tuple[float, float, float]:
+        p = self.origin + self.body.rows[action][0] * self.rot
+        return p.real, p.imag, self.h_end
+
+
+_TAU = 2.0 * math.pi
+
+
+def place_children(blocks: Sequence[Children]) -> np.ndarray:
+    """(9 * len(blocks), 7) end states of every child of ``blocks``, in order, vectorised."""
+    if not blocks:
+        return np.zeros((0, STATE_DIM))
+    origin = np.array([b.origin for b in blocks])
+    rot = np.array([b.rot for b in blocks])
+    h_end = np.array([b.h_end for b in blocks])
+    psi = np.array([b.psi for b in blocks])
+    body = [b.body for b in blocks]
+    xy = origin[:, None] + np.stack([b.z_end for b in body]) * rot[:, None]
+    end = np.stack([b.template for b in body])
+    end[:, :, X] = xy.real
+    end[:, :, Y] = xy.imag
+    end[:, :, H] = h_end[:, None]
+    end[:, :, PSI] = np.mod(psi[:, None] + np.stack([b.dpsi for b in body]), _TAU)
+    return end.reshape(-1, STATE_DIM)
 
 
 @dataclass(slots=True)
@@ -354,12 +399,22 @@ class EncounterModel:
     ) -> Segment:
         """The 9 children of one state, in action order: ``fly`` with every action, memoised.
 
-        The tree search's hot path. When nothing (intruder, goal, wall) is within reach, the
-        sub-step positions are not computed: ``xy``, ``hs`` and ``samples`` are then None.
+        When nothing (intruder, goal, wall) is within reach, the sub-step positions are not
+        computed: ``xy``, ``hs`` and ``samples`` are then None.
         """
+        placed, seg = self.expand(state.tolist(), goal, duration, track)
+        seg.end = place_children([placed])
+        return seg
+
+    def expand(
+        self, state: Sequence[float], goal: Sequence[float], duration: float, track: Track
+    ) -> tuple[Children, Segment]:
+        """:meth:`fly_all_actions` as a tree search needs it, the hot path: the children's end
+        states come as a :class:`Children` placement (``Segment.end`` is None), because a
+        search goes on from few of the children it scores."""
         cfg = self.config
         n = self._check(duration, track)
-        x, y, h, v, psi, phi, cmd = state.tolist()
+        x, y, h, v, psi, phi, cmd = state
         # Keys are rounded far below any physical effect so that states reached along
         # different float paths (20 + 4 - 4) share an entry; the motion is computed from the
         # key itself, so the answer never depends on what the memo already holds.
@@ -370,24 +425,25 @@ class EncounterModel:
                 self._memo.clear()
             v_, phi_, cmd_ = (np.full(N_ACTIONS, k) for k in key[:3])
             body = self._memo[key] = self._body(v_, phi_, cmd_, ALL_ACTIONS, duration, n)
+        origin = complex(x, y)
         rot = complex(math.cos(psi), -math.sin(psi))
         climb = cfg.climb_rate_mps * duration
         h_end = h + min(max(goal[2] - h, -climb), climb)
-        end = self._end(complex(x, y) + body.z_end * rot, h_end, psi, body)
+        placed = Children(origin, rot, h_end, psi, body)
 
-        c = complex(x, y) + body.ball * rot
+        c = origin + body.ball * rot
         box = (c.real, c.imag, 0.5 * (h + h_end), body.ball_r, 0.5 * abs(h_end - h))
         near = track.near(box[:3], math.hypot(box[3], box[4]) + cfg.d_min_m)
         if not near.size and not self._near_goal(box, goal) and not self._near_wall(box):
-            return Segment(end, *self._quiet, xy=None, hs=None)  # no sample was needed
-        xy = complex(x, y) + body.z * rot
+            return placed, Segment(None, *self._quiet, xy=None, hs=None)  # no sample needed
+        xy = origin + body.z * rot
         if h_end == h:
             hs = np.full((1, n + 1), h)
         else:
             hs = h + np.clip(goal[2] - h, *self._climb_window(duration, n))[None]
         own_step = self._own_step(body, duration / n)
         seen = _Intruders.of(track, near)
-        return self._events(end, xy, hs, goal, seen, box, duration / n, own_step, False)
+        return placed, self._events(None, xy, hs, goal, seen, box, duration / n, own_step, False)
 
     def fly_commanded(
         self, states: np.ndarray, bank_cmd: np.ndarray, duration: float
@@ -502,6 +558,16 @@ class EncounterModel:
             step_max=float(chord.max()),
             template=template,
             z_end=z[:, -1].copy(),
+            rows=tuple(
+                zip(
+                    z[:, -1].tolist(),
+                    psi[:, -1].tolist(),
+                    v_end.tolist(),
+                    phi_end.tolist(),
+                    phi_cmd.tolist(),
+                    strict=True,
+                )
+            ),
         )
 
     def _end(self, xy_end, h_end, psi, body: _BodyMotion) -> np.ndarray:
@@ -515,7 +581,7 @@ class EncounterModel:
     # -------------------------------------------------------------------------------- events
     def _events(
         self,
-        end: np.ndarray,
+        end: np.ndarray | None,
         xy: np.ndarray,
         hs: np.ndarray,
         goal: np.ndarray,
@@ -569,11 +635,16 @@ class EncounterModel:
 
         # The first event wins; at equal sub-steps collision beats leaving the map beats the
         # goal (the conservative reading of a sub-step that holds two of them).
-        first = np.stack([k_hit, k_out, k_goal])
-        kind = np.argmin(first, axis=0)
-        k_event = first[kind, rows]
-        happened = k_event < n
-        event = np.where(happened, _EVENT_CODES[kind], NONE).astype(np.int8)
+        if k_out is never and k_goal is never:  # the usual case in a search: skip the sort
+            k_event = k_hit
+            happened = k_event < n
+            event = np.where(happened, COLLISION, NONE).astype(np.int8)
+        else:
+            first = np.stack([k_hit, k_out, k_goal])
+            kind = np.argmin(first, axis=0)
+            k_event = first[kind, rows]
+            happened = k_event < n
+            event = np.where(happened, _EVENT_CODES[kind], NONE).astype(np.int8)
         t_event = np.where(happened, k_event * dt, np.nan)
         if sep2 is None:
             return Segment(
