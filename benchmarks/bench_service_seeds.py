@@ -25,6 +25,7 @@ With ``--plot PNG`` it draws the mean greedy curves with their 95 % bands.
 from __future__ import annotations
 
 import argparse
+import json
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
@@ -36,7 +37,7 @@ from uavxai.comms.service_env import ServiceEnv
 from uavxai.scenario import Scenario, load_scenario
 from uavxai.service import d3qn, dqn
 from uavxai.service.grid import solve_grid
-from uavxai.service.train import episodes_to_converge
+from uavxai.service.train import SMOOTHING_EPISODES, episodes_to_converge, running_mean
 
 CONFIGS = {"d3qn": d3qn.D3QNConfig, "dqn": dqn.DQNConfig}
 METRICS = ("auc", "final", "model", "converge", "reward")
@@ -79,6 +80,7 @@ def main() -> None:
     ap.add_argument("--access", choices=("shared", "ofdma"), help="override comms.access")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--plot", type=Path, help="write the mean greedy curves here")
+    ap.add_argument("--json", type=Path, help="write every run's numbers and curve here")
     args = ap.parse_args()
 
     scenario = load_scenario(args.scenario)
@@ -119,32 +121,46 @@ def main() -> None:
             f"  {key:<9} d3qn {interval(a)}   dqn {interval(b)}   d3qn - dqn {interval(diff)}"
             f"   d3qn better in {wins}/{len(diff)} seeds"
         )
+    if args.json:
+        runs = [{**r, "curve": r["curve"].tolist()} for r in rows]
+        args.json.write_text(json.dumps(runs) + "\n")
     if args.plot:
         plot(by, args.plot, scenario, args.episodes)
         print(f"wrote {args.plot}")
 
 
 def plot(by: dict, path: Path, scenario: Scenario, episodes: int) -> None:
+    """Left: running means (10 episodes) of the greedy curves, mean over seeds and 95 % band.
+    Right: each seed's episodes to converge."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(7, 4))
+    fig, (ax, bx) = plt.subplots(
+        1, 2, figsize=(9, 4), gridspec_kw={"width_ratios": [3, 1]}, constrained_layout=True
+    )
     x = np.arange(1, episodes + 1)
-    for algo, colour in (("d3qn", "tab:blue"), ("dqn", "tab:orange")):
-        curves = np.array([r["curve"] for r in by[algo]])
+    for i, (algo, colour) in enumerate((("d3qn", "tab:blue"), ("dqn", "tab:orange"))):
+        curves = np.array([running_mean(r["curve"], SMOOTHING_EPISODES) for r in by[algo]])
         m = curves.mean(axis=0)
         half = stats.t.ppf(0.975, len(curves) - 1) * stats.sem(curves, axis=0)
-        ax.plot(x, m, color=colour, label=f"{algo.upper()} (mean of {len(curves)} seeds)")
+        ax.plot(x, m, color=colour, label=f"{algo.upper()} ({len(curves)} seeds)")
         ax.fill_between(x, m - half, m + half, color=colour, alpha=0.2, linewidth=0)
+        conv = [r["converge"] for r in by[algo]]
+        bx.scatter(np.full(len(conv), i) + np.linspace(-0.12, 0.12, len(conv)), conv, c=colour)
+        bx.hlines(np.mean(conv), i - 0.25, i + 0.25, color=colour)
     ax.axhline(1.0, color="k", linestyle="--", linewidth=1, label="grid optimum")
+    ax.set_ylim(0.5, 1.03)
     ax.set_xlabel("episode")
-    ax.set_ylabel("greedy objective / optimum")
+    ax.set_ylabel(f"greedy objective / optimum ({SMOOTHING_EPISODES}-episode mean)")
     ax.set_title(f"{scenario.name}: {scenario.comms.access}, {scenario.comms.environment}")
     ax.legend(loc="lower right")
     ax.grid(alpha=0.3)
-    fig.tight_layout()
+    bx.set_xticks([0, 1], ["D3QN", "DQN"])
+    bx.set_xlim(-0.5, 1.5)
+    bx.set_ylabel("episodes to converge (within 5 %)")
+    bx.grid(alpha=0.3, axis="y")
     fig.savefig(path, dpi=120)
 
 

@@ -25,10 +25,12 @@ Intruders come as a :class:`Track`: their positions at the segment's sub-step in
 
 Speed (a tree search calls this hundreds of times per decision): the ownship's motion
 relative to its start, in its body frame, depends only on (speed, bank, bank command) and the
-action, so :meth:`EncounterModel.fly_all_actions` memoises it together with a circle bounding
-all nine paths; intruders (found through a grid, see :class:`Track`), goal and walls out of
-that circle's reach are skipped. Horizontal positions are complex numbers ``x + iy`` so that
-a rotation is one multiplication.
+action, so :meth:`EncounterModel.expand` memoises it together with a circle bounding all nine
+paths; intruders (found through a grid, see :class:`Track`), goal and walls out of that
+circle's reach are skipped, and the children's end states are only placed (:class:`Children`)
+when the search goes on from one, or all at once when it is done (a search continues from
+about one child in nine). Horizontal positions are complex numbers ``x + iy`` so that a
+rotation is one multiplication.
 """
 
 from __future__ import annotations
