@@ -10,7 +10,7 @@ Times are the process's CPU time per decision (less disturbed by other processes
 time, which is printed too).
 
     .venv/bin/python benchmarks/bench_mcts.py [--quick] [--encounters 40] [--episodes 20]
-        [--intruders 20] [--simulations 200] [--depth 4]
+        [--intruders 20] [--simulations 200] [--depth 4] [--repeats 5]
 """
 
 from __future__ import annotations

@@ -9,6 +9,7 @@ import pytest
 
 from uavxai.avoidance import Intruder, MCTSPlanner, Ownship, PlannerConfig
 from uavxai.avoidance.exhaustive import ExhaustivePlanner
+from uavxai.avoidance.model import GOAL as GOAL_CODE
 from uavxai.avoidance.model import NONE, TERMINAL_VALUE, EncounterModel, ownship_state
 
 GOAL = (1000.0, 1500.0, 120.0)
@@ -82,3 +83,35 @@ def test_mcts_never_picks_a_collision_when_exhaustive_sees_a_way_out():
         )
         assert values[d.action] > 0.0
         assert values[d.action] == pytest.approx(values.max(), abs=0.01)
+
+
+def test_goal_sooner_breaks_ties_and_nothing_else():
+    """Lines that reach the goal all score about 1; the sooner one must win, or re-planning
+    can put the goal off for ever. The tie-break only orders goal lines among themselves."""
+    cfg = PlannerConfig(depth=3)
+    own = Ownship(1000.0, 1000.0, 120.0, 20.0, 0.0)  # 120 m short of the goal, heading at it
+    goal = (1000.0, 1120.0, 120.0)
+    d = ExhaustivePlanner(cfg).plan(own, [], goal)
+    tree = d.tree
+    reached = tree.terminal == GOAL_CODE
+    assert reached.any() and (tree.depth[reached] > 1).any()
+    q = {c.action: c.q for c in d.children}
+    goal_first = {int(tree.action[n]) for n in tree.children_of(0) if tree.terminal[n] == GOAL_CODE}
+    assert goal_first  # some actions reach it in the first level ...
+    assert d.action in goal_first  # ... and one of them is taken
+    later = [a for a in q if a not in goal_first and q[a] > 0.99]
+    assert later  # and some reach it only in the second level
+    assert all(q[a] < q[d.action] for a in later)  # reaching it later scores (a little) less
+    assert all(q[a] > 1.0 - 1e-3 for a in later)  # ... but only a little
+    assert q[d.action] == 1.0
+
+
+def test_exhaustive_does_not_orbit_the_goal():
+    """Seed 110 of the demo campaign with 5 intruders: before the tie-break the planner
+    circled about 200 m from the goal until it timed out (400 decisions)."""
+    from uavxai.avoidance.episode import run_episode
+    from uavxai.scenario import default_scenario
+
+    r = run_episode("exhaustive", default_scenario("demo"), 110, 5)
+    assert r.outcome == "goal"
+    assert r.steps < 100
