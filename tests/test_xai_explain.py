@@ -96,3 +96,21 @@ def test_cli_explain(run_dir, tmp_path, capsys):
     assert main(["explain", str(tmp_path / "nope")]) == 2
     err = capsys.readouterr().err
     assert "no such run folder" in err and "Traceback" not in err
+
+
+def test_equal_values_are_not_called_lower():
+    """Near the goal every line reaches it (Q 1.000 for all): the sentence must say the
+    actions tie and what decided, not that holding course "scores lower"."""
+    own = Ownship(1000, 1000, 120, 20, 0.0)
+    not_hold = 0
+    for seed in range(8):
+        d = MCTSPlanner(PlannerConfig(seed=seed, depth=3)).plan(own, [], (1000, 1090, 120))
+        assert {f"{c.q:.3f}" for c in d.children} == {"1.000"}  # the situation under test
+        assert "scores lower" not in d.explanation
+        assert "as good (Q 1.000 both)" in d.counterfactual
+        if d.action != 4:
+            not_hold += 1
+            assert "holding course is as good (Q 1.000), this one had more simulations" in (
+                d.explanation
+            )
+    assert not_hold  # the tie-break picked something other than holding at least once

@@ -40,7 +40,7 @@ def explain(decision: Decision) -> tuple[str, str]:
     parts: list[str] = []
     hold = by_action.get(HOLD)
     if hold is not None and decision.action != HOLD:
-        parts.append(_reference(hold, chosen, decision.d_min_m))
+        parts.append(_reference(hold, chosen, decision))
     parts.append(f"{_short(decision.action)} {_keeps(chosen, decision.d_min_m)}")
     parts.append(_support(decision))
     sentence = f"{verb}: " + "; ".join(parts)
@@ -56,9 +56,14 @@ def counterfactual(decision: Decision) -> str:
     head = f"why not {_short(runner.action)}"
     if _conflict(runner, decision.d_min_m):
         return f"{head}: it {_meets(runner)}, a collision"
-    reason = f"Q {runner.q:.3f} against {chosen.q:.3f}"
+    if _tied(runner, chosen):
+        reason = f"as good (Q {chosen.q:.3f} both)"
+    else:
+        reason = f"Q {runner.q:.3f} against {chosen.q:.3f}"
     if decision.planner != "exhaustive":  # there every sequence is scored once
         reason += f" ({runner.visits} simulations against {chosen.visits}{_risk(runner)})"
+    elif _tied(runner, chosen):
+        reason += ", the tie goes to the first in action order"
     if math.isfinite(runner.predicted_min_separation_m) and runner.closest_intruder is not None:
         reason += (
             f"; it passes {_name(runner.closest_intruder)} at "
@@ -85,12 +90,24 @@ def is_avoidance(children: Sequence[ChildStats], action: int, d_min_m: float) ->
     return any(_conflict(c, d_min_m) for c in children)
 
 
-def _reference(hold: ChildStats, chosen: ChildStats, d_min: float) -> str:
-    if _conflict(hold, d_min):
+def _reference(hold: ChildStats, chosen: ChildStats, decision: Decision) -> str:
+    if _conflict(hold, decision.d_min_m):
         return f"holding course {_meets(hold)}"
     if hold.outcome in ("out_of_bounds", "timeout"):
         return f"holding course ends {hold.outcome.replace('_', ' ')}"
+    if _tied(hold, chosen):  # e.g. near the goal, where every line reaches it
+        if decision.planner == "exhaustive":
+            return f"holding course is as good (Q {chosen.q:.3f}), the tie goes to action order"
+        return (
+            f"holding course is as good (Q {chosen.q:.3f}), this one had more simulations "
+            f"({chosen.visits} against {hold.visits})"
+        )
     return f"holding course scores lower (Q {hold.q:.3f} against {chosen.q:.3f}{_risk(hold)})"
+
+
+def _tied(a: ChildStats, b: ChildStats) -> bool:
+    """Equal as printed (3 decimals): saying "lower" about 1.000 against 1.000 would mislead."""
+    return f"{a.q:.3f}" == f"{b.q:.3f}"
 
 
 def _risk(c: ChildStats) -> str:
