@@ -495,14 +495,8 @@ def evaluate_command(
     ``results.csv``, ``episodes.csv`` and the plots into ``out``; return a short report."""
     import torch
     from rich.console import Console
-    from rich.progress import (
-        BarColumn,
-        MofNCompleteColumn,
-        Progress,
-        TextColumn,
-        TimeElapsedColumn,
-        TimeRemainingColumn,
-    )
+
+    from uavxai.progress import progress_bar
 
     torch.set_num_threads(1)
     _check(scenario, methods, intruders, episodes, dynamics, workers)
@@ -512,15 +506,7 @@ def evaluate_command(
     total = len(methods) * len(intruders) * episodes
     console = Console(stderr=True)
     wall0 = time.perf_counter()
-    with Progress(
-        TextColumn("[bold]{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        TimeRemainingColumn(),
-        console=console,
-        transient=False,
-    ) as progress:
+    with progress_bar(console) as progress:
         bar = progress.add_task(f"{scenario.name} ({dynamics})", total=total)
 
         def done(row: dict) -> None:

@@ -497,15 +497,7 @@ def train_command(
     A checkpoint named in the scenario (``avoidance.checkpoint``) is the starting point
     (it must be a model of ``algo``); without one the networks start from scratch.
     """
-    from rich.console import Console
-    from rich.progress import (
-        BarColumn,
-        MofNCompleteColumn,
-        Progress,
-        TextColumn,
-        TimeElapsedColumn,
-        TimeRemainingColumn,
-    )
+    from uavxai.progress import progress_bar
 
     if algo not in ALGOS:
         raise UserError(f"--algo {algo}: the avoidance stage trains {', '.join(ALGOS)}.")
@@ -523,15 +515,7 @@ def train_command(
             )
     torch.set_num_threads(1)
     out.mkdir(parents=True, exist_ok=True)
-    console = Console(stderr=True)
-    with Progress(
-        TextColumn("[bold]{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        TimeRemainingColumn(),
-        console=console,
-    ) as progress:
+    with progress_bar() as progress:
         bar = progress.add_task(f"{algo} on {scenario.name}", total=hp.episodes)
 
         def on_episode(row: dict) -> None:
