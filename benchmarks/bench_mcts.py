@@ -22,9 +22,10 @@ import time
 import numpy as np
 
 from uavxai.avoidance import PlannerConfig, make_planner
-from uavxai.avoidance.episode import EncounterEnv, default_goal, episode_intruders, run_episode
+from uavxai.avoidance.episode import EncounterEnv, default_goal, episode_intruders
 from uavxai.avoidance.types import Ownship
 from uavxai.scenario import default_scenario
+from uavxai.sim.build import run_kinematic as run_episode
 
 
 def encounters(scenario, count: int, n_intruders: int) -> list[tuple[Ownship, list, tuple]]:

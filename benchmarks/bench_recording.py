@@ -11,14 +11,17 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 import tempfile
 import time
 from pathlib import Path
 
 import rerun as rr
 
-from uavxai.recording import synthetic
-from uavxai.recording.recorder import RunRecorder
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # test fixtures
+import synthetic  # noqa: E402
+
+from uavxai.recording.recorder import RunRecorder  # noqa: E402
 
 RATE_HZ = 10.0
 JSBSIM_STEP_S = 15e-6  # one FGFDMExec.run() of a light aircraft (DEPENDENCY-NOTES)

@@ -9,11 +9,12 @@ import numpy as np
 import pytest
 
 from uavxai.avoidance import Ownship, PlannerConfig, make_planner
-from uavxai.avoidance.episode import EncounterEnv, default_goal, run_episode
+from uavxai.avoidance.episode import EncounterEnv, default_goal
 from uavxai.avoidance.observation import observation_size, observe
 from uavxai.avoidance.planners import PLANNERS
 from uavxai.errors import UserError
 from uavxai.scenario import IntruderSpec, default_scenario
+from uavxai.sim.build import run_kinematic as run_episode
 
 HOLD = 4
 
@@ -21,7 +22,10 @@ HOLD = 4
 def small_scenario(**avoidance):
     return default_scenario(
         "episode-test",
-        ownship={"start": {"x": 700, "y": 700, "h": 120, "heading_deg": 45, "speed_mps": 20}},
+        ownship={
+            "start": {"x": 700, "y": 700, "h": 120, "heading_deg": 45, "speed_mps": 20},
+            "goal": [1000, 1000, 100],
+        },
         avoidance={"mcts": {"simulations": 40, "depth": 2, "action_hold_s": 3.0}, **avoidance},
     )
 
@@ -47,9 +51,11 @@ def test_planner_object_is_reset_to_the_episode_seed():
 
 
 def test_kinematic_predictions_match_what_is_flown():
-    # Straight intruders and the same model: the next-period prediction is exact.
+    # Straight intruders and the same model: the next-period prediction is exact up to the
+    # chords: the planner's sub-steps are 0.5 s, the engine samples at 10 Hz, and a 0.5 s arc
+    # at 20 m/s and 30 deg bank strays 0.18 m from its chord.
     r = run_episode("none", small_scenario(), seed=2, n_intruders=10)
-    assert r.separation_error_m and max(r.separation_error_m) < 1e-6
+    assert r.separation_error_m and max(r.separation_error_m) < 0.2
 
 
 def test_env_goal_reward_and_termination():

@@ -109,8 +109,8 @@ def test_goal_sooner_breaks_ties_and_nothing_else():
 def test_exhaustive_does_not_orbit_the_goal():
     """Seed 110 of the demo campaign with 5 intruders: before the tie-break the planner
     circled about 200 m from the goal until it timed out (400 decisions)."""
-    from uavxai.avoidance.episode import run_episode
     from uavxai.scenario import default_scenario
+    from uavxai.sim.build import run_kinematic as run_episode
 
     r = run_episode("exhaustive", default_scenario("demo"), 110, 5)
     assert r.outcome == "goal"

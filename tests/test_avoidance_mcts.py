@@ -71,7 +71,7 @@ def test_first_decision_turns_or_slows_away_and_says_why(name):
     assert hold.outcome == "collision" and hold.predicted_min_separation_m < 50.0
     assert chosen.outcome != "collision" and chosen.predicted_min_separation_m >= 50.0
     assert chosen.q > hold.q
-    assert "holding course meets intruder 1" in decision.explanation
+    assert "holding bank and speed meets intruder 1" in decision.explanation
     assert decision.counterfactual.startswith("why not")
 
 

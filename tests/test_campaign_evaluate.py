@@ -16,7 +16,6 @@ from uavxai.campaign import (
     EPISODE_COLUMNS,
     RESULT_COLUMNS,
     TIMING_COLUMNS,
-    closest_approach,
     evaluate_command,
     merge_campaigns,
     rerun_row,
@@ -26,6 +25,7 @@ from uavxai.campaign import (
 )
 from uavxai.cli import main
 from uavxai.errors import UserError
+from uavxai.geometry import closest_approach
 from uavxai.scenario import default_scenario
 
 SCENARIO = default_scenario("campaign-test")

@@ -156,7 +156,7 @@ HEAD_ON = default_scenario(
 
 def test_learned_planners_steer_off_a_head_on_collision_course() -> None:
     """Holding course collides; the trained policies keep clear of the intruder."""
-    from uavxai.avoidance.episode import run_episode
+    from uavxai.sim.build import run_kinematic as run_episode
 
     assert run_episode("none", HEAD_ON, 0).outcome == "collision"
     for name in ("dqn", "safe_dqn"):
@@ -172,7 +172,7 @@ def test_learned_planners_steer_off_a_head_on_collision_course() -> None:
     "docs/results/README.md); strict, so a model that does reach it flags this marker",
 )
 def test_learned_planners_reach_the_goal_after_a_head_on_encounter() -> None:
-    from uavxai.avoidance.episode import run_episode
+    from uavxai.sim.build import run_kinematic as run_episode
 
     for name in ("dqn", "safe_dqn"):
         assert run_episode(name, HEAD_ON, 0).outcome == "goal", name

@@ -188,7 +188,7 @@ def test_train_command_writes_a_loadable_model(tmp_path: Path, algo: str) -> Non
     assert json.loads((tmp_path / "model.json").read_text())["algo"] == algo
 
     # The checkpoint drives a planner, through the scenario as a user would name it.
-    from uavxai.avoidance.episode import run_episode
+    from uavxai.sim.build import run_kinematic as run_episode
 
     sc = SCENARIO.model_copy(
         update={

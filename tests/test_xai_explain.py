@@ -7,10 +7,10 @@ import json
 import pytest
 
 from uavxai.avoidance import Intruder, MCTSPlanner, Ownship, PlannerConfig
-from uavxai.avoidance.episode import run_episode
 from uavxai.cli import main
 from uavxai.errors import UserError
 from uavxai.scenario import default_scenario
+from uavxai.sim.build import run_kinematic as run_episode
 from uavxai.xai.explain import explain_command, is_avoidance
 
 HEAD_ON = (Ownship(1000, 400, 120, 20, 0.0), [Intruder(7, 1000, 800, 120, 0.0, -20.0)])
@@ -37,7 +37,7 @@ def test_sentence_names_the_threat_the_choice_and_the_support():
     own, intruders = HEAD_ON
     d = MCTSPlanner(PlannerConfig(seed=0)).plan(own, intruders, (1000, 1800, 120))
     assert d.explanation.startswith("banked ")
-    assert "holding course meets intruder 7 at" in d.explanation
+    assert "holding bank and speed meets intruder 7 at" in d.explanation
     assert f"{round(100 * d.confidence)}% of simulations agree" in d.explanation
     runner = max((c for c in d.children if c.action != d.action), key=lambda c: (c.visits, c.q))
     assert d.counterfactual.startswith("why not ")
@@ -110,7 +110,7 @@ def test_equal_values_are_not_called_lower():
         assert "as good (Q 1.000 both)" in d.counterfactual
         if d.action != 4:
             not_hold += 1
-            assert "holding course is as good (Q 1.000), this one had more simulations" in (
+            assert "holding bank and speed is as good (Q 1.000), this one had more simulations" in (
                 d.explanation
             )
     assert not_hold  # the tie-break picked something other than holding at least once

@@ -10,16 +10,16 @@ meet the same encounters (the same start, goal and intruders) and any row of
 
 (scenario file, method, intruders, seed; ``dynamics='jsbsim'`` for a JSBSim row).
 
+Every episode is flown by the one episode engine (:func:`uavxai.sim.build.fly`), on the
+kinematic encounter model or in JSBSim, with the planner's commands going straight to the
+autopilot (no MAVLink, no recording); the goal is the scenario's (``ownship.goal``, else the
+service point of the campaign's scenario), the same for every episode and as ``uavxai run``.
+
 Episodes run in this process (``workers=1``), in local worker processes (``workers>1``; the
 ``forkserver`` context, one torch thread each) or as Ray tasks (``ray_address``: ``local``
 starts a private Ray instance on this machine, ``auto`` joins the cluster this machine belongs
 to, ``ray://host:port`` a remote one whose nodes have uavxai installed). Wherever an episode
 runs, its numbers are the same: only the ``decision_ms`` timings differ.
-
-``dynamics='kinematic'`` flies the episode on the encounter model
-(:func:`uavxai.avoidance.episode.run_episode`); ``'jsbsim'`` flies the same start, goal and
-intruders in the JSBSim world (:func:`run_jsbsim_episode`: no MAVLink, no recording; the
-planner's commands go straight to the ownship's autopilot).
 """
 
 from __future__ import annotations
@@ -35,12 +35,13 @@ from pathlib import Path
 
 import numpy as np
 
+from uavxai.avoidance.planners import PLANNERS
 from uavxai.errors import UserError
 from uavxai.scenario import Scenario
+from uavxai.sim.build import DYNAMICS as _DYNAMICS
 
-METHODS = ("mcts", "mcts_fast", "exhaustive", "dqn", "safe_dqn", "none")
-DYNAMICS = ("kinematic", "jsbsim")
-OUTCOMES = ("goal", "collision", "timeout", "out_of_bounds")
+METHODS = tuple(PLANNERS)  # the planner registry's names, not a copy of them
+DYNAMICS = tuple(_DYNAMICS)
 RESULT_COLUMNS = (
     "method",
     "intruders",
@@ -66,7 +67,6 @@ EPISODE_COLUMNS = (
 )
 # The columns whose values depend on the machine, not on the seed.
 TIMING_COLUMNS = ("decision_ms_p50",)
-JSBSIM_SAMPLE_HZ = 10.0  # collision checks between samples at this rate, by closest approach
 
 # One planner per (method, scenario) per process: loading a network or building a model once.
 _PLANNERS: dict[tuple[str, str], object] = {}
@@ -92,33 +92,35 @@ def run_campaign_episode(
     n_intruders: int,
     seed: int,
     dynamics: str = "kinematic",
+    goal: Sequence[float] | None = None,
 ) -> dict:
-    """Fly one campaign episode and return its ``episodes.csv`` row (without ``episode``),
-    plus ``decision_ms`` (every decision's planner time, for the pooled median)."""
+    """Fly one campaign episode on the episode engine (the commands go straight to the
+    autopilot, no recording) and return its ``episodes.csv`` row (without ``episode``), plus
+    ``decision_ms`` (every decision's planner time, for the pooled median). ``goal``: the
+    campaign's goal (None: the scenario's, see :func:`uavxai.sim.build.episode_goal`)."""
+    from uavxai.dynamics.traffic import draw_intruders
+    from uavxai.sim.build import DYNAMICS, episode_goal, fly
+
     if method not in METHODS:
         raise UserError(f"method '{method}' is not one of {', '.join(METHODS)}.")
     if dynamics not in DYNAMICS:
         raise UserError(f"dynamics '{dynamics}' is not one of {', '.join(DYNAMICS)}.")
-    planner = _planner(scenario, method)
-    planner.reset(seed)
-    if dynamics == "kinematic":
-        from uavxai.avoidance.episode import run_episode
-
-        r = run_episode(planner, scenario, seed, n_intruders)
-        outcome, steps = r.outcome, r.steps
-        min_sep, flight_time, ms = r.min_separation_m, r.flight_time_s, list(r.decision_ms)
-    else:
-        outcome, steps, min_sep, flight_time, ms = run_jsbsim_episode(
-            planner, scenario, seed, n_intruders
-        )
+    sc = scenario.with_seed(seed)
+    # The campaign's goal: the same for every episode (its scenario's, not the episode seed's).
+    goal = episode_goal(scenario) if goal is None else tuple(goal)
+    intruders = draw_intruders(sc, np.random.default_rng(seed), n_intruders)
+    r = fly(sc, _planner(scenario, method), goal, dynamics=dynamics, intruders=intruders)
+    ms = r.decision_ms
     return {
         "method": method,
         "intruders": int(n_intruders),
         "seed": int(seed),
-        "outcome": outcome,
-        "steps": int(steps),
-        "min_separation_m": round(float(min_sep), 3) if math.isfinite(min_sep) else math.inf,
-        "flight_time_s": round(float(flight_time), 3),
+        "outcome": r.outcome.value,
+        "steps": int(r.steps),
+        "min_separation_m": round(float(r.min_separation_m), 3)
+        if math.isfinite(r.min_separation_m)
+        else math.inf,
+        "flight_time_s": round(float(r.flight_time_s), 3),
         "decision_ms_p50": round(float(np.median(ms)), 4) if ms else math.nan,
         "decision_ms": ms,
     }
@@ -139,73 +141,6 @@ def rerun_row(
     return row
 
 
-def run_jsbsim_episode(
-    planner, scenario: Scenario, seed: int, n_intruders: int
-) -> tuple[str, int, float, float, list[float]]:
-    """The kinematic episode's start, goal and intruders, flown in the JSBSim world.
-
-    The planner decides every ``decision_period_s`` from the world's state; its bank and
-    acceleration commands go straight to the ownship's autopilot. Collisions are checked by
-    the closest approach between 10 Hz samples, both aircraft moving linearly in between, so a
-    pass-through between samples counts. Returns (outcome, steps, min separation m, flight
-    time s, planner ms per decision).
-    """
-    from uavxai.avoidance.episode import default_goal, episode_intruders
-    from uavxai.dynamics.world import JSBSimWorld
-    from uavxai.pipeline import planner_inputs
-
-    av, world_box = scenario.avoidance, scenario.world
-    goal = np.asarray(default_goal(scenario), dtype=float)
-    specs = episode_intruders(scenario, seed, n_intruders)
-    samples = max(1, round(av.decision_period_s * JSBSIM_SAMPLE_HZ))
-    sample_s = av.decision_period_s / samples
-    outcome, steps, min_sep, ms = "timeout", 0, math.inf, []
-    with JSBSimWorld(scenario, intruders=specs, seed=seed) as world:
-        world.command_ownship(alt_target_m=float(goal[2]))
-        state = world.state()
-        min_sep = state.min_separation()
-        while steps < av.max_steps and outcome == "timeout":
-            own, intruders = planner_inputs(state, world.ownship_command()["bank_cmd_rad"])
-            decision = planner.plan(own, intruders, tuple(goal), step=steps)
-            ms.append(decision.ms)
-            world.command_ownship(
-                bank_cmd_rad=decision.bank_cmd_rad, accel_cmd_mps2=decision.accel_mps2
-            )
-            steps += 1
-            for _ in range(samples):
-                prev = state
-                world.advance(sample_s)
-                state = world.state()
-                if world.failure():
-                    outcome = "out_of_bounds"  # the aircraft left its envelope: a failure
-                    break
-                flown = closest_approach(prev.pos[0], state.pos[0], prev.pos[1:], state.pos[1:])
-                min_sep = min(min_sep, flown)
-                p = state.pos[0]
-                if flown < av.d_min_m:
-                    outcome = "collision"
-                elif not world_box.contains(float(p[0]), float(p[1]), float(p[2])):
-                    outcome = "out_of_bounds"
-                elif float(np.linalg.norm(p - goal)) < av.goal_radius_m:
-                    outcome = "goal"
-                if outcome != "timeout":
-                    break
-        flight_time = state.t
-    return outcome, steps, min_sep, flight_time, ms
-
-
-def closest_approach(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndarray) -> float:
-    """Smallest distance between the ownship moving p0 -> p1 and each intruder moving
-    q0 -> q1 (N, 3), all linearly over the same interval; inf with no intruders."""
-    if len(q0) == 0:
-        return math.inf
-    d0 = q0 - p0
-    dv = (q1 - p1) - d0
-    a = np.einsum("ij,ij->i", dv, dv)
-    s = np.clip(-np.einsum("ij,ij->i", d0, dv) / np.where(a > 0, a, 1.0), 0.0, 1.0)
-    return float(np.min(np.linalg.norm(d0 + s[:, None] * dv, axis=1)))
-
-
 # ------------------------------------------------------------------------------- campaigns
 Task = tuple[str, int, int]  # method, intruders, episode index
 
@@ -221,16 +156,16 @@ def _init_worker() -> None:
     torch.set_num_threads(1)
 
 
-def _run_task(scenario: Scenario, task: Task, dynamics: str) -> dict:
+def _run_task(scenario: Scenario, task: Task, dynamics: str, goal: Sequence[float]) -> dict:
     method, n, i = task
-    row = run_campaign_episode(scenario, method, n, scenario.seed + i, dynamics)
+    row = run_campaign_episode(scenario, method, n, scenario.seed + i, dynamics, goal)
     row["episode"] = i
     return row
 
 
-def _ray_task(scenario: Scenario, task: Task, dynamics: str) -> dict:
+def _ray_task(scenario: Scenario, task: Task, dynamics: str, goal: Sequence[float]) -> dict:
     _init_worker()
-    return _run_task(scenario, task, dynamics)
+    return _run_task(scenario, task, dynamics, goal)
 
 
 def run_campaign(
@@ -243,36 +178,41 @@ def run_campaign(
     workers: int = 1,
     ray_address: str | None = None,
     on_done: Callable[[dict], None] | None = None,
+    goal: Sequence[float] | None = None,
 ) -> list[dict]:
     """Fly a campaign; returns the episode rows in (method, intruders, episode) order.
 
-    ``on_done`` is called with each row as it finishes (for a progress bar).
+    ``on_done`` is called with each row as it finishes (for a progress bar). ``goal``: where
+    every episode flies (None: :func:`uavxai.sim.build.episode_goal` of ``scenario``).
     """
+    from uavxai.sim.build import episode_goal
+
     _check(scenario, methods, intruders, episodes, dynamics, workers)
     tasks = campaign_tasks(methods, intruders, episodes)
+    common = (dynamics, tuple(episode_goal(scenario) if goal is None else goal))
     # Heavy tasks first (many intruders, tree search) so that workers finish together.
     order = sorted(range(len(tasks)), key=lambda k: -tasks[k][1])
     if ray_address is not None:
-        rows = _run_ray(scenario, tasks, order, dynamics, ray_address, workers, on_done)
+        rows = _run_ray(scenario, tasks, order, common, ray_address, workers, on_done)
     elif workers == 1:
         rows = {}
         for k in order:
-            rows[k] = _run_task(scenario, tasks[k], dynamics)
+            rows[k] = _run_task(scenario, tasks[k], *common)
             if on_done:
                 on_done(rows[k])
     else:
-        rows = _run_pool(scenario, tasks, order, dynamics, workers, on_done)
+        rows = _run_pool(scenario, tasks, order, common, workers, on_done)
     return [rows[k] for k in range(len(tasks))]
 
 
-def _run_pool(scenario, tasks, order, dynamics, workers, on_done) -> dict[int, dict]:
+def _run_pool(scenario, tasks, order, common, workers, on_done) -> dict[int, dict]:
     context = multiprocessing.get_context(
         "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
     )
     rows: dict[int, dict] = {}
     with ProcessPoolExecutor(workers, mp_context=context, initializer=_init_worker) as pool:
         pending: dict[Future, int] = {
-            pool.submit(_run_task, scenario, tasks[k], dynamics): k for k in order
+            pool.submit(_run_task, scenario, tasks[k], *common): k for k in order
         }
         try:
             while pending:
@@ -289,7 +229,7 @@ def _run_pool(scenario, tasks, order, dynamics, workers, on_done) -> dict[int, d
     return rows
 
 
-def _run_ray(scenario, tasks, order, dynamics, address, workers, on_done) -> dict[int, dict]:
+def _run_ray(scenario, tasks, order, common, address, workers, on_done) -> dict[int, dict]:
     try:
         import ray
     except ImportError:
@@ -314,7 +254,7 @@ def _run_ray(scenario, tasks, order, dynamics, address, workers, on_done) -> dic
     try:
         remote = ray.remote(num_cpus=1)(_ray_task)
         scenario_ref = ray.put(scenario)
-        pending = {remote.remote(scenario_ref, tasks[k], dynamics): k for k in order}
+        pending = {remote.remote(scenario_ref, tasks[k], *common): k for k in order}
         rows: dict[int, dict] = {}
         while pending:
             done, _ = ray.wait(list(pending), num_returns=1)
@@ -497,6 +437,7 @@ def evaluate_command(
     from rich.console import Console
 
     from uavxai.progress import progress_bar
+    from uavxai.sim.build import episode_goal
 
     torch.set_num_threads(1)
     _check(scenario, methods, intruders, episodes, dynamics, workers)
@@ -506,6 +447,9 @@ def evaluate_command(
     total = len(methods) * len(intruders) * episodes
     console = Console(stderr=True)
     wall0 = time.perf_counter()
+    goal = episode_goal(scenario)
+    where = "ownship.goal" if scenario.ownship.goal is not None else "the service point"
+    console.print(f"goal ({where}): ({goal[0]:.0f}, {goal[1]:.0f}, {goal[2]:.0f}) m")
     with progress_bar(console) as progress:
         bar = progress.add_task(f"{scenario.name} ({dynamics})", total=total)
 
@@ -523,6 +467,7 @@ def evaluate_command(
             workers=workers,
             ray_address=ray_address,
             on_done=done,
+            goal=goal,
         )
     results = summarise(rows)
     out.mkdir(parents=True, exist_ok=True)

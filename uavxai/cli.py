@@ -288,7 +288,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 def cmd_run(args: argparse.Namespace) -> int:
     sc = _load(args)
     out = prepare_out_dir(args.out or Path("runs") / sc.name, args.force)
-    from uavxai.pipeline import run_command
+    from uavxai.sim.run import run_command
 
     run_command(
         sc,

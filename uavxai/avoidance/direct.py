@@ -71,9 +71,10 @@ class DirectPlanner:
             accel_mps2=float(accel_command(action, cfg)),
             action=action,
             children=[],
-            explanation=(
+            words=(
                 f"no avoidance: steering for the goal ({math.degrees(error):+.0f} deg off "
-                f"the nose, {math.dist((own.x, own.y, own.h), goal):.0f} m away)"
+                f"the nose, {math.dist((own.x, own.y, own.h), goal):.0f} m away)",
+                "",
             ),
             plan=seg.samples[0],
             predicted_min_separation_m=float(seg.min_sep[0]),

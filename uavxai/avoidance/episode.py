@@ -1,10 +1,10 @@
-"""Kinematic encounter episodes: a Gymnasium environment and a one-call episode runner.
+"""The kinematic encounter as a Gymnasium environment, for training learned planners.
 
 :class:`EncounterEnv` flies the ownship and the intruders on the encounter model
-(:mod:`uavxai.avoidance.model`) one decision period per step, over the 9 actions. It is the
-ground truth of the kinematic campaigns and the training ground of the learned planners.
-:func:`run_episode` flies one seeded episode of a scenario with any planner and returns an
-:class:`EpisodeResult`.
+(:mod:`uavxai.avoidance.model`) one decision period per step, over the 9 actions: the
+training ground of the learned planners (Gymnasium API). Episodes of a scenario with any
+planner are flown by the episode engine (:func:`uavxai.sim.build.run_kinematic`,
+:func:`uavxai.sim.build.fly`), on :class:`uavxai.sim.kinematic.KinematicWorld`.
 
 Intruders are flown by the same pilots as in the JSBSim world
 (:func:`uavxai.dynamics.behaviours.make_pilots`): each decision period a pilot gives a bank
@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
 from typing import Any
 
 import gymnasium as gym
@@ -30,7 +29,6 @@ import numpy as np
 from gymnasium import spaces
 
 from uavxai.avoidance.model import (
-    GOAL,
     NONE,
     OUTCOME_NAMES,
     PHI_CMD,
@@ -46,11 +44,9 @@ from uavxai.avoidance.model import (
 from uavxai.avoidance.observation import observation_size, observe
 from uavxai.avoidance.types import (
     N_ACTIONS,
-    Decision,
     Goal,
     Intruder,
     Ownship,
-    Planner,
     PlannerConfig,
 )
 from uavxai.errors import UserError
@@ -255,98 +251,3 @@ class EncounterEnv(gym.Env):
         if len(self.traffic) == 0:
             return np.zeros((self.model.substeps(duration) + 1, 0, 3)), self.traffic
         return self.model.fly_commanded(self.traffic, cmd, duration)
-
-
-# ------------------------------------------------------------------------------ episodes
-@dataclass
-class EpisodeResult:
-    """One kinematic episode. ``separation_error_m`` is, per decision, |predicted - flown|
-    minimum separation over the next decision period (the "trust" figure)."""
-
-    planner: str
-    seed: int
-    n_intruders: int
-    outcome: str  # goal | collision | timeout | out_of_bounds
-    steps: int
-    min_separation_m: float
-    flight_time_s: float
-    final_distance_m: float
-    decision_ms: list[float] = field(default_factory=list)
-    separation_error_m: list[float] = field(default_factory=list)
-    path: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))  # ownship, per decision
-    decisions: list[Decision] = field(default_factory=list)  # with keep_decisions
-    records: list[dict] = field(default_factory=list)  # decisions.jsonl lines, likewise
-
-    def row(self) -> dict[str, Any]:
-        """The scalar fields, for a CSV row."""
-        ms = self.decision_ms
-        return {
-            "planner": self.planner,
-            "seed": self.seed,
-            "intruders": self.n_intruders,
-            "outcome": self.outcome,
-            "steps": self.steps,
-            "min_separation_m": self.min_separation_m,
-            "flight_time_s": self.flight_time_s,
-            "final_distance_m": self.final_distance_m,
-            "decision_ms_p50": float(np.median(ms)) if ms else math.nan,
-        }
-
-
-def run_episode(
-    planner: str | Planner,
-    scenario: Scenario,
-    seed: int,
-    n_intruders: int | None = None,
-    *,
-    keep_decisions: bool = False,
-) -> EpisodeResult:
-    """Fly one seeded kinematic episode of ``scenario`` with ``planner`` (a name from
-    :data:`uavxai.avoidance.planners.PLANNERS` or a planner object, which is reset to
-    ``seed``). ``n_intruders`` draws that many intruders (None: the scenario's). The same
-    seed gives the same episode."""
-    from uavxai.avoidance.planners import make_planner
-    from uavxai.xai.explain import decision_record
-
-    config = PlannerConfig.from_scenario(scenario, seed=seed)
-    if isinstance(planner, str):
-        planner = make_planner(planner, config, checkpoint=scenario.avoidance.checkpoint)
-    planner.reset(seed)
-    specs = episode_intruders(scenario, seed, n_intruders)
-    goal = default_goal(scenario)
-    env = EncounterEnv(config, specs, goal, scenario.ownship.start, scenario=scenario)
-    env.reset(seed=seed)
-    result = EpisodeResult(
-        planner=planner.name,
-        seed=seed,
-        n_intruders=len(specs),
-        outcome="",
-        steps=0,
-        min_separation_m=math.inf,
-        flight_time_s=0.0,
-        final_distance_m=env.distance_to_goal(),
-    )
-    path = [env.own[:3].copy()]
-    while not env.outcome:
-        own, intruders = env.ownship, env.intruders
-        decision = planner.plan(own, intruders, goal, step=env.steps)
-        t = env.t
-        _, _, _, _, info = env.step(decision.action)
-        flown = info["min_separation_m"]
-        result.decision_ms.append(decision.ms)
-        result.min_separation_m = min(result.min_separation_m, flown)
-        if env.outcome == "" or env.outcome == OUTCOME_NAMES[TIMEOUT]:
-            predicted = decision.predicted_min_separation_m
-            if math.isfinite(predicted) and math.isfinite(flown):
-                result.separation_error_m.append(abs(predicted - flown))
-        if keep_decisions:
-            result.decisions.append(decision)
-            result.records.append(decision_record(t, own, intruders, decision))
-        path.append(env.own[:3].copy())
-    result.outcome = env.outcome
-    result.steps = env.steps
-    result.flight_time_s = env.t
-    result.final_distance_m = env.distance_to_goal()
-    result.path = np.array(path)
-    assert result.outcome in OUTCOME_NAMES[GOAL:], result.outcome
-    return result

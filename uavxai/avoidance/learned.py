@@ -330,12 +330,11 @@ class LearnedPlanner:
             accel_mps2=float(accel_command(action, cfg)),
             action=action,
             children=children,
-            explanation=sentence,
+            words=(sentence, counterfactual),
             plan=np.concatenate([root[None, :3], seg.samples[action, 1:]]),
             predicted_min_separation_m=float(next_seg.min_sep[0]),
             branch_min_separation_m=float(seg.min_sep[action]),
             ms=1000.0 * (time.perf_counter() - t0),
-            counterfactual=counterfactual,
             planner=self.name,
             d_min_m=cfg.d_min_m,
         )

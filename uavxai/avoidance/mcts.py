@@ -243,8 +243,6 @@ def decision_from_tree(
     Shared by the tree planners; ``sampled``: visits count simulations (MCTS), so the share
     of each action's simulations that collided is reported too.
     """
-    from uavxai.xai.explain import explain  # xai reads planner types; import late, no cycle
-
     cfg = model.config
     ids = [i.id for i in intruders]
     root_children = tree.children_of(0)
@@ -283,7 +281,6 @@ def decision_from_tree(
         accel_mps2=float(accel_command(action, cfg)),
         action=action,
         children=children,
-        explanation="",
         tree=tree,
         plan=np.concatenate(plan),
         predicted_min_separation_m=float(next_seg.min_sep[0]),
@@ -292,7 +289,6 @@ def decision_from_tree(
         planner=name,
         d_min_m=cfg.d_min_m,
     )
-    decision.explanation, decision.counterfactual = explain(decision)
     return decision
 
 

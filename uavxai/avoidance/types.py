@@ -14,27 +14,14 @@ from typing import TYPE_CHECKING, Protocol, runtime_checkable
 import numpy as np
 
 from uavxai.errors import UserError
+from uavxai.vocabulary import ACCEL_SIGNS, BANK_SIGNS, N_ACTIONS, action_name
 
 if TYPE_CHECKING:
     from uavxai.scenario import Scenario
 
-# The 9 actions: index = 3 * bank_index + accel_index.
-BANK_CHOICES = (-1, 0, +1)  # left, hold, right: one bank_step_deg change of the bank command
-ACCEL_CHOICES = (+1, 0, -1)  # speed up, hold, slow down: times accel_mps2
-BANK_NAMES = ("left", "hold", "right")
-ACCEL_NAMES = ("speed up", "hold speed", "slow down")
-N_ACTIONS = 9
-
-
-def action_parts(a: int) -> tuple[int, int]:
-    """(bank sign, accel sign) of action index ``a``."""
-    return BANK_CHOICES[a // 3], ACCEL_CHOICES[a % 3]
-
-
-def action_name(a: int) -> str:
-    b, c = a // 3, a % 3
-    bank = {0: "bank left", 1: "hold bank", 2: "bank right"}[b]
-    return f"{bank}, {ACCEL_NAMES[c]}"
+# The 9 actions and their names live in uavxai.vocabulary (one table for every layer).
+BANK_CHOICES = BANK_SIGNS  # left, hold, right: one bank_step_deg change of the bank command
+ACCEL_CHOICES = ACCEL_SIGNS  # speed up, hold, slow down: times accel_mps2
 
 
 @dataclass(frozen=True)
@@ -57,6 +44,14 @@ class Intruder:
     vx: float  # east, m/s
     vy: float  # north, m/s
     vh: float = 0.0  # up, m/s
+    turn_rate: float = 0.0  # rad/s, + = clockwise (turning right); surveillance estimate
+    sigma_m: float = 0.0  # 1-sigma horizontal position uncertainty, m (0: exact)
+    sigma_v: float = 0.0  # 1-sigma horizontal velocity uncertainty, m/s
+    age_s: float = 0.0  # time since the state was measured, s
+    turn_rate: float = 0.0  # rad/s, + turning right (clockwise), as estimated
+    sigma_m: float = 0.0  # 1-sigma horizontal position uncertainty, m
+    sigma_v: float = 0.0  # 1-sigma velocity uncertainty, m/s
+    age_s: float = 0.0  # age of the report the estimate rests on, s
 
 
 @dataclass(frozen=True)
@@ -264,16 +259,32 @@ class Decision:
     accel_mps2: float
     action: int
     children: list[ChildStats]
-    explanation: str
     tree: SearchTree | None = None
     plan: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))  # (P, 3) chosen branch
     predicted_min_separation_m: float = math.inf
     confidence: float = 0.0  # share of root visits that went to the chosen action
     ms: float = 0.0  # planner wall time
-    counterfactual: str = ""  # why not the runner-up
     branch_min_separation_m: float = math.inf  # along the chosen line, depth x action_hold_s
     planner: str = ""  # which planner decided (mcts, exhaustive, none, ...)
     d_min_m: float = 50.0  # the collision distance the planner worked with
+    # (explanation, counterfactual) in words. Planners return evidence and leave this None;
+    # the words are made on first use by the narrator uavxai.xai registers (set_narrator).
+    words: tuple[str, str] | None = None
+
+    @property
+    def explanation(self) -> str:
+        """The decision in one sentence (SPEC §7)."""
+        return self._narrated()[0]
+
+    @property
+    def counterfactual(self) -> str:
+        """Why not the runner-up."""
+        return self._narrated()[1]
+
+    def _narrated(self) -> tuple[str, str]:
+        if self.words is None:
+            self.words = _NARRATOR[0](self) if _NARRATOR else ("", "")
+        return self.words
 
     def to_json(self) -> dict:
         """The per-decision fields of decisions.jsonl that come from the planner."""
@@ -314,6 +325,15 @@ class Decision:
 
 
 Goal = tuple[float, float, float]
+
+# Who turns a decision's evidence into words: registered by uavxai.xai (a layer above), so
+# that planners stay free of prose and xai free of planners' internals.
+_NARRATOR: list = []
+
+
+def set_narrator(narrate) -> None:
+    """Register ``narrate(decision) -> (explanation, counterfactual)``."""
+    _NARRATOR[:] = [narrate]
 
 
 def check_plan_inputs(own: Ownship, intruders: Sequence[Intruder], goal: Goal) -> None:

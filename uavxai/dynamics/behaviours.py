@@ -13,9 +13,11 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from uavxai.geometry import bearing, wrap_angle
 from uavxai.scenario import IntruderSpec, Scenario
 
 BEHAVIOURS = ("straight", "random_turns", "goal_seeking")
+PILOT_PERIOD_S = 1.0  # how often intruder pilots decide, in every world
 
 # random_turns: hold each bank command this long, s
 TURN_HOLD_S = (5.0, 20.0)
@@ -25,11 +27,6 @@ LEVEL_SHARE = 0.3
 # reached and the next one is drawn
 HEADING_GAIN = 1.0
 GOAL_REACHED_M = 100.0
-
-
-def _wrap(angle: float) -> float:
-    """Angle in (-pi, pi]."""
-    return math.atan2(math.sin(angle), math.cos(angle))
 
 
 class IntruderPilot:
@@ -76,8 +73,7 @@ class IntruderPilot:
         if math.hypot(dx, dy) < GOAL_REACHED_M:
             self.goal = self._draw_goal()
             dx, dy = self.goal[0] - pos[0], self.goal[1] - pos[1]
-        bearing = math.atan2(dx, dy)  # clockwise from north
-        bank = HEADING_GAIN * _wrap(bearing - psi)
+        bank = HEADING_GAIN * wrap_angle(bearing(dx, dy) - psi)
         return max(-self.bank_limit_rad, min(self.bank_limit_rad, bank))
 
     def _draw_goal(self) -> tuple[float, float]:

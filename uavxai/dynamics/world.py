@@ -16,7 +16,7 @@ import jsbsim
 import numpy as np
 
 from uavxai.dynamics.aircraft import FT, Aircraft, heading_from_deg
-from uavxai.dynamics.behaviours import make_pilots
+from uavxai.dynamics.behaviours import PILOT_PERIOD_S, make_pilots
 from uavxai.dynamics.geodesy import LocalFrame
 from uavxai.dynamics.state import OWNSHIP_ID, TrafficState, intruder_id
 from uavxai.dynamics.traffic import draw_intruders
@@ -24,8 +24,6 @@ from uavxai.errors import UserError
 from uavxai.scenario import IntruderSpec, Scenario
 
 log = logging.getLogger(__name__)
-
-PILOT_PERIOD_S = 1.0  # how often intruder pilots decide
 
 # The end of a run. The ground: below this height the aircraft is on or in the terrain (its
 # wheels hang 0.22 m below the centre of gravity). The envelope: far outside anything the

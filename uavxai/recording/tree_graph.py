@@ -14,9 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from uavxai.avoidance.types import Decision
-
-_BANK = ("left", "hold", "right")
-_ACCEL = ("faster", "same", "slower")
+from uavxai.vocabulary import ACTIONS
 
 CHOSEN_COLOR = (46, 204, 113)
 OTHER_COLOR = (120, 144, 156)
@@ -29,7 +27,7 @@ LEVEL_SPACING = 150.0  # between depths; fits the widest label
 
 
 def short_action(a: int) -> str:
-    return f"{_BANK[a // 3]}/{_ACCEL[a % 3]}"
+    return ACTIONS[a].short
 
 
 @dataclass

@@ -15,24 +15,19 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
-from uavxai.avoidance.types import ChildStats, Decision, Intruder, Ownship
+from uavxai.avoidance.types import ChildStats, Decision, Intruder, Ownship, set_narrator
 from uavxai.errors import UserError
-
-HOLD = 4  # hold bank, hold speed: "holding course", the natural reference
-_BANK = ("left", "holding", "right")
-_ACCEL = (" and faster", "", " and slower")
-_VERB = ("banked left", "held its bank", "banked right")
-_VERB_ACCEL = (" and sped up", "", " and slowed down")
+from uavxai.vocabulary import ACTIONS, HOLD
 
 
 # ----------------------------------------------------------------------------- one decision
 def explain(decision: Decision) -> tuple[str, str]:
     """(sentence, counterfactual) for a decision, e.g.
 
-    "banked right: holding course meets intruder 7 at 34 m in 9 s; right keeps 180 m;
+    "banked right: holding bank and speed meets intruder 7 at 34 m in 9 s; right keeps 180 m;
     71% of simulations agree" and "why not left: its best line meets intruder 3 at 41 m ...".
     """
-    verb = _VERB[decision.action // 3] + _VERB_ACCEL[decision.action % 3]
+    verb = ACTIONS[decision.action].verb
     by_action = {c.action: c for c in decision.children}
     chosen = by_action.get(decision.action)
     if chosen is None:  # a planner without a search behind it
@@ -91,18 +86,19 @@ def is_avoidance(children: Sequence[ChildStats], action: int, d_min_m: float) ->
 
 
 def _reference(hold: ChildStats, chosen: ChildStats, decision: Decision) -> str:
+    held = ACTIONS[HOLD].phrase
     if _conflict(hold, decision.d_min_m):
-        return f"holding course {_meets(hold)}"
+        return f"{held} {_meets(hold)}"
     if hold.outcome in ("out_of_bounds", "timeout"):
-        return f"holding course ends {hold.outcome.replace('_', ' ')}"
+        return f"{held} ends {hold.outcome.replace('_', ' ')}"
     if _tied(hold, chosen):  # e.g. near the goal, where every line reaches it
         if decision.planner == "exhaustive":
-            return f"holding course is as good (Q {chosen.q:.3f}), the tie goes to action order"
+            return f"{held} is as good (Q {chosen.q:.3f}), the tie goes to action order"
         return (
-            f"holding course is as good (Q {chosen.q:.3f}), this one had more simulations "
+            f"{held} is as good (Q {chosen.q:.3f}), this one had more simulations "
             f"({chosen.visits} against {hold.visits})"
         )
-    return f"holding course scores lower (Q {hold.q:.3f} against {chosen.q:.3f}{_risk(hold)})"
+    return f"{held} scores lower (Q {hold.q:.3f} against {chosen.q:.3f}{_risk(hold)})"
 
 
 def _tied(a: ChildStats, b: ChildStats) -> bool:
@@ -146,10 +142,7 @@ def _meets(c: ChildStats) -> str:
 
 
 def _short(action: int) -> str:
-    bank, accel = _BANK[action // 3], _ACCEL[action % 3]
-    if action == HOLD:
-        return "holding course"
-    return bank + accel
+    return ACTIONS[action].phrase
 
 
 def _name(intruder_id: Any) -> str:
@@ -341,3 +334,6 @@ def _num(x: Any, fmt: str = ".0f") -> str:
 
 def _deg(x: Any) -> str:
     return f"{math.degrees(x):.0f} deg" if isinstance(x, int | float) else "?"
+
+
+set_narrator(explain)  # every Decision's words come from here

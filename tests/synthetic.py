@@ -13,16 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
-from uavxai.avoidance.types import (
-    ACCEL_CHOICES,
-    BANK_CHOICES,
-    N_ACTIONS,
-    ChildStats,
-    Decision,
-    SearchTree,
-    action_name,
-)
+from uavxai.avoidance.types import ChildStats, Decision, SearchTree
 from uavxai.dynamics.state import OWNSHIP_ID, TrafficState, intruder_id
+from uavxai.vocabulary import ACCEL_SIGNS, BANK_SIGNS, N_ACTIONS, action_name
 
 G = 9.80665
 BOUNDS = {"x": (0.0, 2000.0), "y": (0.0, 2000.0), "h": (50.0, 300.0)}
@@ -98,8 +91,8 @@ def decision(state: TrafficState, k: int, seed: int = 0, simulations: int = 200)
     children = [
         ChildStats(
             action=a,
-            bank_cmd_rad=math.radians(10.0) * BANK_CHOICES[a // 3],
-            accel_mps2=1.0 * ACCEL_CHOICES[a % 3],
+            bank_cmd_rad=math.radians(10.0) * BANK_SIGNS[a // 3],
+            accel_mps2=1.0 * ACCEL_SIGNS[a % 3],
             visits=int(visits[1 + a]),
             q=float(q[1 + a]),
             predicted_min_separation_m=float(min_sep[1 + a]),

@@ -1,0 +1,182 @@
+"""Putting an episode together: the world (by dynamics name), the goal, the command path.
+
+``fly`` is the one entry point behind ``uavxai run`` and both kinds of ``uavxai evaluate``;
+what differs between them is only which dynamics, which command path and which observers.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from functools import lru_cache
+
+import numpy as np
+
+from uavxai.avoidance.types import Planner
+from uavxai.scenario import IntruderSpec, Scenario
+from uavxai.sim.clock import Clock
+from uavxai.sim.command import CommandPath, DirectPath, Dynamics
+from uavxai.sim.episode import Episode, EpisodeResult, Observer
+from uavxai.sim.judge import Judge
+from uavxai.sim.kinematic import KinematicWorld
+
+
+def _jsbsim(scenario: Scenario, intruders, seed: int) -> Dynamics:
+    from uavxai.dynamics.world import JSBSimWorld  # jsbsim only when it flies
+
+    return JSBSimWorld(scenario, intruders=intruders, seed=seed)
+
+
+def _kinematic(scenario: Scenario, intruders, seed: int) -> Dynamics:
+    return KinematicWorld(scenario, intruders=intruders, seed=seed)
+
+
+# The dynamics by name: `uavxai evaluate --dynamics NAME`.
+DYNAMICS: dict[str, Callable[[Scenario, list[IntruderSpec] | None, int], Dynamics]] = {
+    "jsbsim": _jsbsim,
+    "kinematic": _kinematic,
+}
+
+
+def episode_goal(scenario: Scenario, service_point: Sequence[float] | None = None):
+    """Where the episode flies: ``ownship.goal`` if the scenario names one, else the service
+    point (planned here when not given)."""
+    if scenario.ownship.goal is not None:
+        return tuple(float(v) for v in scenario.ownship.goal)
+    if service_point is None:
+        return _service_point(scenario.model_dump_json())
+    return tuple(float(v) for v in np.asarray(service_point, dtype=float))
+
+
+@lru_cache(maxsize=32)
+def _service_point(scenario_json: str) -> tuple[float, float, float]:
+    """The planned service point of a scenario, once per process (campaign episodes and
+    tests fly the same scenario many times; the plan is deterministic)."""
+    from uavxai.service.stage import plan_service
+
+    point = plan_service(Scenario.model_validate_json(scenario_json)).service_point
+    return tuple(float(v) for v in np.asarray(point, dtype=float))
+
+
+def fly(
+    scenario: Scenario,
+    planner: Planner,
+    goal: Sequence[float],
+    *,
+    dynamics: str = "jsbsim",
+    intruders: list[IntruderSpec] | None = None,
+    path: Callable[[Dynamics], CommandPath] = DirectPath,
+    observers: Sequence[Observer] = (),
+) -> EpisodeResult:
+    """Fly one seeded episode of ``scenario`` (its seed) and return its result; the world is
+    closed and every observer closed whatever happens."""
+    seed = scenario.seed
+    world = command = None
+    try:
+        world = DYNAMICS[dynamics](scenario, intruders, seed)
+        world.command_ownship(alt_target_m=float(goal[2]))
+        av = scenario.avoidance
+        planner.reset(seed)
+        command = path(world)
+        episode = Episode(
+            world,
+            planner,
+            command,
+            Judge(scenario.world, av.d_min_m, goal, av.goal_radius_m),
+            Clock.from_scenario(scenario),
+            goal=goal,
+            max_steps=av.max_steps,
+            observers=observers,
+            label={"scenario": scenario.name, "seed": seed, "dynamics": dynamics},
+        )
+        return episode.run()
+    finally:
+        for o in observers:
+            o.close()
+        if command is not None:
+            command.close()
+        if world is not None:
+            world.close()
+
+
+# ----------------------------------------------------------------------- kinematic runner
+@dataclass
+class KinematicResult:
+    """One kinematic episode, as the library and the tests look at it."""
+
+    planner: str
+    seed: int
+    n_intruders: int
+    outcome: str
+    steps: int
+    min_separation_m: float
+    flight_time_s: float
+    final_distance_m: float
+    decision_ms: list[float]
+    separation_error_m: list[float]  # per decision: |predicted - flown| over its period
+    path: np.ndarray  # (steps + 1, 3) ownship at every decision and at the end
+    decisions: list = field(default_factory=list)  # with keep_decisions
+    records: list[dict] = field(default_factory=list)  # decisions.jsonl lines, likewise
+
+
+class _Keep(Observer):
+    def __init__(self, keep: bool) -> None:
+        self.keep = keep
+        self.path: list[np.ndarray] = []
+        self.decisions: list = []
+        self.records: list[dict] = []
+
+    def on_decision(self, ep: Episode, event) -> None:
+        self.path.append(event.truth.pos[0].copy())
+        if self.keep:
+            from uavxai.xai.explain import decision_record
+
+            self.decisions.append(event.decision)
+            self.records.append(
+                decision_record(event.t, event.own, event.intruders, event.decision)
+            )
+
+    def on_end(self, ep: Episode, summary: dict) -> None:
+        self.path.append(ep.state.pos[0].copy())
+
+
+def run_kinematic(
+    planner: str | Planner,
+    scenario: Scenario,
+    seed: int,
+    n_intruders: int | None = None,
+    *,
+    goal: Sequence[float] | None = None,
+    keep_decisions: bool = False,
+) -> KinematicResult:
+    """Fly one seeded kinematic episode of ``scenario`` with ``planner`` (a registered name
+    or a planner object). ``n_intruders`` draws that many intruders (None: the scenario's);
+    ``goal`` None: :func:`episode_goal`. The same seed gives the same episode."""
+    from uavxai.avoidance.planners import make_planner
+    from uavxai.avoidance.types import PlannerConfig
+    from uavxai.dynamics.traffic import draw_intruders
+    from uavxai.sim.observers import Trust
+
+    sc = scenario.with_seed(seed)
+    if isinstance(planner, str):
+        config = PlannerConfig.from_scenario(sc)
+        planner = make_planner(planner, config, checkpoint=sc.avoidance.checkpoint)
+    goal = episode_goal(sc) if goal is None else tuple(float(g) for g in goal)
+    intruders = draw_intruders(sc, np.random.default_rng(seed), n_intruders)
+    trust, keep = Trust(), _Keep(keep_decisions)
+    r = fly(sc, planner, goal, dynamics="kinematic", intruders=intruders, observers=[trust, keep])
+    return KinematicResult(
+        planner=planner.name,
+        seed=seed,
+        n_intruders=len(intruders),
+        outcome=r.outcome.value,
+        steps=r.steps,
+        min_separation_m=r.min_separation_m,
+        flight_time_s=r.flight_time_s,
+        final_distance_m=float(np.linalg.norm(keep.path[-1] - np.asarray(goal))),
+        decision_ms=r.decision_ms,
+        separation_error_m=trust.errors,
+        path=np.array(keep.path),
+        decisions=keep.decisions,
+        records=keep.records,
+    )

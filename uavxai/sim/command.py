@@ -1,0 +1,94 @@
+"""How a decision reaches the autopilot: one interface, two paths.
+
+:class:`MavlinkPath` (``uavxai run``): the decision becomes MAVLink 2 bytes (stamped with
+simulated ``time_boot_ms``), the bridge decodes them and writes the autopilot setpoints, and
+publishes telemetry and ADS-B every sample — an external peer on the link is obeyed the same
+way. :class:`DirectPath` (campaigns): the setpoints go straight to the autopilot, carried at
+the precision MAVLink carries them (float32 fields, the bank as a quaternion's roll), so that
+the same seed flies the same to the millimetre through either path.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+import numpy as np
+
+from uavxai.avoidance.types import Decision
+from uavxai.bridges.protocol import roll_from_quaternion, roll_quaternion
+from uavxai.dynamics.state import TrafficState
+
+
+class Dynamics(Protocol):
+    """What the engine needs of a world (JSBSimWorld, KinematicWorld)."""
+
+    dt: float
+
+    def step(self, n: int = 1) -> None: ...
+    def state(self) -> TrafficState: ...
+    def command_ownship(
+        self,
+        bank_cmd_rad: float | None = None,
+        accel_cmd_mps2: float | None = None,
+        speed_target_mps: float | None = None,
+        alt_target_m: float | None = None,
+    ) -> None: ...
+    def ownship_command(self) -> dict[str, float]: ...
+    def failure(self) -> str | None: ...
+    def close(self) -> None: ...
+
+
+class CommandPath(Protocol):
+    def send(self, decision: Decision, t: float) -> None:
+        """Deliver the decision's setpoints at simulated time ``t``."""
+
+    def on_sample(self, state: TrafficState) -> None:
+        """After every sample: read the link, publish what is due."""
+
+    def close(self) -> dict[str, int] | None:
+        """Finish; returns the link's counters for summary.json (None: no link)."""
+
+
+def wire_values(bank_cmd_rad: float, accel_mps2: float) -> tuple[float, float]:
+    """The setpoints as MAVLink carries them: float32 fields, the bank as a quaternion."""
+    q = np.asarray(roll_quaternion(bank_cmd_rad), dtype=np.float32)
+    return roll_from_quaternion(q.tolist()), float(np.float32(accel_mps2))
+
+
+class DirectPath:
+    """Setpoints straight to the autopilot (no bytes, no bridge)."""
+
+    def __init__(self, world: Dynamics) -> None:
+        self._world = world
+        self.commands = 0
+
+    def send(self, decision: Decision, t: float) -> None:
+        bank, accel = wire_values(decision.bank_cmd_rad, decision.accel_mps2)
+        self._world.command_ownship(bank_cmd_rad=bank, accel_cmd_mps2=accel)
+        self.commands += 2
+
+    def on_sample(self, state: TrafficState) -> None:
+        pass
+
+    def close(self) -> None:
+        return None
+
+
+class MavlinkPath:
+    """The planner as a companion computer: its commands are bytes through the bridge."""
+
+    def __init__(self, bridge, encoder) -> None:
+        self.bridge = bridge
+        self._encoder = encoder
+
+    def send(self, decision: Decision, t: float) -> None:
+        self.bridge.feed(self._encoder.encode(decision.bank_cmd_rad, decision.accel_mps2, t))
+
+    def on_sample(self, state: TrafficState) -> None:
+        self.bridge.poll()
+        self.bridge.publish(state)
+
+    def close(self) -> dict[str, int]:
+        counters = dict(self.bridge.counters)
+        self.bridge.close()
+        return counters

@@ -1,0 +1,227 @@
+"""One episode: decide -> advance (sample by sample, judged) -> ... -> finish.
+
+The engine knows nothing of files, recordings or ground stations: everything that watches an
+episode is an :class:`~uavxai.sim.observers.Observer` subscribed to its events (start,
+decision, sample, period, end). The dynamics (JSBSim or kinematic) and the command path
+(MAVLink bytes or direct) are arguments, so ``uavxai run`` and ``uavxai evaluate`` fly the
+same loop, and the same scenario and seed give the same flight through either path.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from uavxai.avoidance.types import Decision, Intruder, Ownship, Planner
+from uavxai.dynamics.state import TrafficState
+from uavxai.sim.clock import Clock
+from uavxai.sim.command import CommandPath, Dynamics
+from uavxai.sim.judge import Judge
+from uavxai.vocabulary import Outcome
+
+
+def truth_picture(state: TrafficState) -> list[Intruder]:
+    """Every intruder's exact position and velocity (``surveillance.model: truth``)."""
+    return [
+        Intruder(
+            id=state.ids[i],
+            x=float(state.pos[i, 0]),
+            y=float(state.pos[i, 1]),
+            h=float(state.pos[i, 2]),
+            vx=float(state.vel[i, 0]),
+            vy=float(state.vel[i, 1]),
+            vh=float(state.vel[i, 2]),
+        )
+        for i in range(1, state.n)
+    ]
+
+
+def ownship_view(state: TrafficState, bank_cmd: float) -> Ownship:
+    """The ownship as the planner sees it: its own navigation state and bank command."""
+    return Ownship(
+        x=float(state.pos[0, 0]),
+        y=float(state.pos[0, 1]),
+        h=float(state.pos[0, 2]),
+        speed=float(state.airspeed[0]),
+        heading=float(state.att[0, 2]),
+        bank=float(bank_cmd),
+        phi=float(state.att[0, 0]),
+    )
+
+
+Picture = Callable[[TrafficState], list[Intruder]]
+
+
+@dataclass
+class DecisionEvent:
+    step: int
+    t: float
+    own: Ownship
+    intruders: list[Intruder]
+    decision: Decision
+    truth: TrafficState
+
+
+@dataclass
+class EpisodeResult:
+    outcome: Outcome
+    steps: int
+    flight_time_s: float
+    min_separation_m: float
+    decision_ms: list[float]
+    wall_s: float
+    failure: str | None = None
+    summary: dict = field(default_factory=dict)
+
+
+class Observer:
+    """Subscribe to an episode's events; every method is optional. ``close`` is always
+    called, also when the episode is interrupted, so files end whole."""
+
+    def on_start(self, ep: Episode) -> None: ...
+    def on_decision(self, ep: Episode, event: DecisionEvent) -> None: ...
+    def on_sample(self, ep: Episode, state: TrafficState) -> None: ...
+    def on_period(self, ep: Episode, event: DecisionEvent, flown_min_m: float) -> None: ...
+    def on_end(self, ep: Episode, summary: dict) -> None: ...
+    def close(self) -> None: ...
+
+
+class Episode:
+    """An episode of ``world`` flown by ``planner`` through ``path`` towards ``goal``."""
+
+    def __init__(
+        self,
+        world: Dynamics,
+        planner: Planner,
+        path: CommandPath,
+        judge: Judge,
+        clock: Clock,
+        *,
+        goal: Sequence[float],
+        max_steps: int,
+        observers: Sequence[Observer] = (),
+        picture: Picture = truth_picture,
+        label: dict | None = None,
+    ) -> None:
+        self.world = world
+        self.planner = planner
+        self.path = path
+        self.judge = judge
+        self.clock = clock
+        self.goal = tuple(float(g) for g in goal)
+        self.max_steps = max_steps
+        self.observers = list(observers)
+        self.picture = picture
+        self.label = dict(label or {})  # scenario, seed, ...: the head of the summary
+        self.state = world.state()
+        self.steps = 0
+        self.min_separation_m = self.state.min_separation()
+        self.decision_ms: list[float] = []
+        self.sample_metrics: dict[str, float] = {}  # per-sample scratch observers share
+        self.wall0 = time.perf_counter()
+
+    # ---------------------------------------------------------------------------- phases
+    def decide(self) -> DecisionEvent:
+        """Plan from what the ownship knows now and send the command."""
+        state = self.state
+        own = ownship_view(state, self.world.ownship_command()["bank_cmd_rad"])
+        intruders = self.picture(state)
+        decision = self.planner.plan(own, intruders, self.goal, step=self.steps)
+        self.path.send(decision, state.t)
+        self.decision_ms.append(decision.ms)
+        event = DecisionEvent(self.steps, state.t, own, intruders, decision, state)
+        self.steps += 1
+        for o in self.observers:
+            o.on_decision(self, event)
+        return event
+
+    def advance(self, event: DecisionEvent) -> Outcome | None:
+        """Fly one decision period sample by sample, judging each; the outcome or None."""
+        flown_min, outcome = math.inf, None
+        for _ in range(self.clock.samples_per_decision):
+            prev = self.state
+            self.world.step(self.clock.sample_ticks)
+            self.state = self.world.state()
+            self.path.on_sample(self.state)
+            sep = self.judge.separation(prev, self.state)
+            flown_min = min(flown_min, sep)
+            self.min_separation_m = min(self.min_separation_m, sep)
+            for o in self.observers:
+                o.on_sample(self, self.state)
+            outcome = self.judge.judge(self.state, sep, self.world.failure())
+            if outcome is not None:
+                break
+        for o in self.observers:
+            o.on_period(self, event, flown_min)
+        return outcome
+
+    def run(self) -> EpisodeResult:
+        """Fly to the end; observers are closed whatever happens."""
+        outcome: Outcome = Outcome.TIMEOUT
+        try:
+            for o in self.observers:
+                o.on_start(self)
+            try:
+                while self.steps < self.max_steps:
+                    ended = self.advance(self.decide())
+                    if ended is not None:
+                        outcome = ended
+                        break
+            except KeyboardInterrupt:
+                outcome = Outcome.INTERRUPTED
+            return self.finish(outcome)
+        finally:
+            for o in self.observers:
+                o.close()
+
+    def finish(self, outcome: Outcome) -> EpisodeResult:
+        wall = time.perf_counter() - self.wall0
+        failure = self.world.failure()
+        sep = self.min_separation_m
+        summary = {
+            **self.label,
+            "outcome": outcome.value,
+            "min_separation_m": sep if math.isfinite(sep) else None,
+            "steps": self.steps,
+            "flight_time_s": round(self.state.t, 3),
+            "goal": list(self.goal),
+            "decision_ms": stats(self.decision_ms),
+            "sim_realtime_factor": self.state.t / wall if wall > 0 else None,
+            "avoidance_planner": self.planner.name,
+            "intruders": self.state.n - 1,
+        }
+        if failure:
+            summary["failure"] = failure
+        counters = self.path.close()
+        if counters is not None:
+            summary["bridge"] = counters
+        for o in self.observers:
+            o.on_end(self, summary)
+        return EpisodeResult(
+            outcome=outcome,
+            steps=self.steps,
+            flight_time_s=self.state.t,
+            min_separation_m=sep,
+            decision_ms=self.decision_ms,
+            wall_s=wall,
+            failure=failure,
+            summary=summary,
+        )
+
+
+def stats(values: Sequence[float], keys=("mean", "p50", "p95", "max")) -> dict:
+    """Mean, median, 95th percentile and maximum (None for no values)."""
+    if not len(values):
+        return dict.fromkeys(keys)
+    a = np.asarray(values, dtype=float)
+    table = {
+        "mean": float(a.mean()),
+        "p50": float(np.percentile(a, 50)),
+        "p95": float(np.percentile(a, 95)),
+        "max": float(a.max()),
+    }
+    return {k: table[k] for k in keys}

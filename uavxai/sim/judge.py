@@ -1,0 +1,51 @@
+"""One judge for every episode: the outcome rules, applied after every sample.
+
+Order matters and is fixed: a dynamics failure first (nothing after it is physics), then a
+collision (the closest approach between two samples, both aircraft moving linearly, so a
+pass-through between samples counts), then leaving the flight area, then the goal.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from uavxai.dynamics.state import TrafficState
+from uavxai.geometry import closest_approach
+from uavxai.scenario import World
+from uavxai.vocabulary import Outcome
+
+
+class Judge:
+    def __init__(
+        self,
+        world: World,
+        d_min_m: float,
+        goal: Sequence[float] | None,
+        goal_radius_m: float,
+    ) -> None:
+        self.world = world
+        self.d_min_m = d_min_m
+        self.goal = None if goal is None else np.asarray(goal, dtype=float)
+        self.goal_radius_m = goal_radius_m
+
+    def separation(self, prev: TrafficState, now: TrafficState) -> float:
+        """Smallest ownship-intruder distance between two samples (inf without intruders)."""
+        if now.n < 2 or prev.n != now.n:
+            return now.min_separation()
+        return closest_approach(prev.pos[0], now.pos[0], prev.pos[1:], now.pos[1:])
+
+    def judge(self, now: TrafficState, flown_min_m: float, failure: str | None) -> Outcome | None:
+        """The outcome the episode ends with after this sample, or None to go on."""
+        if failure:
+            return Outcome.FDM_FAILURE
+        if flown_min_m < self.d_min_m:
+            return Outcome.COLLISION
+        x, y, h = (float(v) for v in now.pos[0])
+        if not self.world.contains(x, y, h):
+            return Outcome.OUT_OF_BOUNDS
+        if self.goal is not None and math.dist((x, y, h), self.goal) < self.goal_radius_m:
+            return Outcome.GOAL
+        return None

@@ -1,0 +1,198 @@
+"""The kinematic world: the encounter model flying the same aircraft the JSBSim world flies,
+behind the same interface, so that one episode engine runs both.
+
+The ownship follows its autopilot commands the way the planners predict it (bank command
+reached at the roll-rate limit, coordinated turn, along-track acceleration within the speed
+limits, climb towards the height target at a bounded rate: :class:`EncounterModel`);
+intruders are flown by the same pilots as in the JSBSim world (:func:`make_pilots`), at
+constant speed and altitude. It never fails: :meth:`failure` is always None.
+
+Commands are taken as the JSBSim world takes them (``command_ownship``); a speed target is
+flown as the largest allowed acceleration towards it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from uavxai.avoidance.model import PHI, PHI_CMD, PSI, STATE_DIM, EncounterModel, Track, V
+from uavxai.avoidance.types import PlannerConfig
+from uavxai.dynamics.behaviours import PILOT_PERIOD_S, make_pilots
+from uavxai.dynamics.state import OWNSHIP_ID, TrafficState, intruder_id
+from uavxai.dynamics.traffic import draw_intruders
+from uavxai.errors import UserError
+from uavxai.scenario import IntruderSpec, Scenario
+from uavxai.vocabulary import HOLD
+
+_FAR = 1e12  # a goal nobody reaches: the model's goal only sets the height target here
+
+
+class KinematicWorld:
+    """Ownship (row 0) and intruders (rows 1..N) on the encounter model; the interface of
+    :class:`uavxai.dynamics.world.JSBSimWorld`."""
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        intruders: list[IntruderSpec] | None = None,
+        seed: int | None = None,
+    ) -> None:
+        self.scenario = scenario
+        self.seed = scenario.seed if seed is None else int(seed)
+        self.dt = 1.0 / scenario.dynamics.rate_hz
+        if intruders is None:
+            intruders = draw_intruders(scenario, np.random.default_rng(self.seed))
+        self.intruders = list(intruders)
+        self.ids = (OWNSHIP_ID, *(intruder_id(i + 1) for i in range(len(self.intruders))))
+        self.config = PlannerConfig.from_scenario(scenario)
+        self._models: dict[float, EncounterModel] = {}
+        start = scenario.ownship.start
+        self._own = np.array(
+            [start.x, start.y, start.h, start.speed_mps, math.radians(start.heading_deg), 0, 0],
+            dtype=float,
+        )
+        self._traffic = np.array(
+            [[s.x, s.y, s.h, s.speed_mps, math.radians(s.heading_deg), 0, 0] for s in intruders],
+            dtype=float,
+        ).reshape(len(self.intruders), STATE_DIM)
+        self._vh = 0.0
+        self._accel = 0.0
+        self._speed_target: float | None = None
+        self._alt_target = float(start.h)
+        self._pilots = make_pilots(scenario, self.intruders, self.seed)
+        self._pilot_period = max(1, round(PILOT_PERIOD_S / self.dt))
+        self._steps = 0
+        self._cached: TrafficState | None = None
+        self._fly_pilots()
+
+    # ------------------------------------------------------------------------------ time
+    @property
+    def t(self) -> float:
+        return self._steps * self.dt
+
+    @property
+    def n(self) -> int:
+        return len(self.ids)
+
+    def step(self, n: int = 1) -> None:
+        """Advance by ``n`` ticks; pilots decide on their period, as in the JSBSim world."""
+        left = int(n)
+        while left > 0:
+            chunk = min(left, self._pilot_period - self._steps % self._pilot_period)
+            self._fly(chunk * self.dt)
+            self._steps += chunk
+            left -= chunk
+            self._cached = None
+            if self._steps % self._pilot_period == 0:
+                self._fly_pilots()
+
+    def advance(self, seconds: float) -> None:
+        self.step(round(seconds / self.dt))
+
+    def _model(self, accel: float) -> EncounterModel:
+        key = abs(float(accel))
+        model = self._models.get(key)
+        if model is None:
+            model = self._models[key] = EncounterModel(
+                dataclasses.replace(self.config, accel_mps2=key)
+            )
+        return model
+
+    def _fly(self, duration: float) -> None:
+        accel = self._accel
+        if self._speed_target is not None:
+            gap = self._speed_target - self._own[V]
+            accel = math.copysign(min(abs(gap) / duration, self.config.accel_mps2), gap)
+        model = self._model(accel)
+        # The bank command is written straight into the state; "hold bank" then flies it.
+        action = HOLD + (0 if accel == 0 else (-1 if accel > 0 else 1))
+        empty = Track.of(np.zeros((model.substeps(duration) + 1, 0, 3)))
+        h0 = float(self._own[2])
+        goal = np.array([_FAR, _FAR, self._alt_target])
+        seg = model.fly(self._own[None], np.array([action]), goal, duration, empty, cull=False)
+        self._own = seg.end[0].copy()
+        self._vh = (float(self._own[2]) - h0) / duration
+        if len(self._traffic):
+            _, self._traffic = model.fly_commanded(
+                self._traffic, self._traffic[:, PHI_CMD], duration
+            )
+
+    def _fly_pilots(self) -> None:
+        if not self._pilots:
+            return
+        s = self.state()
+        for i, pilot in enumerate(self._pilots):
+            bank, speed = pilot.command(s.t, s.pos[i + 1], s.vel[i + 1], float(s.att[i + 1, 2]))
+            self._traffic[i, PHI_CMD] = bank
+            self._traffic[i, V] = speed  # the pilot's speed target, held
+
+    # ----------------------------------------------------------------------------- state
+    def state(self) -> TrafficState:
+        if self._cached is None:
+            rows = np.vstack([self._own[None], self._traffic])
+            v, psi = rows[:, V], rows[:, PSI]
+            vel = np.stack([v * np.sin(psi), v * np.cos(psi), np.zeros_like(v)], axis=1)
+            vel[0, 2] = self._vh
+            att = np.stack([rows[:, PHI], np.zeros_like(v), np.mod(psi, 2 * math.pi)], axis=1)
+            self._cached = TrafficState(
+                t=self.t, ids=self.ids, pos=rows[:, :3].copy(), vel=vel, att=att, airspeed=v.copy()
+            )
+        return self._cached
+
+    # -------------------------------------------------------------------------- commands
+    def command_ownship(
+        self,
+        bank_cmd_rad: float | None = None,
+        accel_cmd_mps2: float | None = None,
+        speed_target_mps: float | None = None,
+        alt_target_m: float | None = None,
+    ) -> None:
+        """As the JSBSim world: the bank command is clamped to the bank limit, the speed
+        target to the speed range; an acceleration command cancels a speed target."""
+        for key, value in (
+            ("bank_cmd_rad", bank_cmd_rad),
+            ("accel_cmd_mps2", accel_cmd_mps2),
+            ("speed_target_mps", speed_target_mps),
+            ("alt_target_m", alt_target_m),
+        ):
+            if value is not None and not math.isfinite(value):
+                raise UserError(f"command_ownship: {key} must be a finite number, got {value}")
+        lim = self.config.bank_limit_rad
+        if bank_cmd_rad is not None:
+            self._own[PHI_CMD] = min(max(float(bank_cmd_rad), -lim), lim)
+        if accel_cmd_mps2 is not None:
+            self._accel = float(accel_cmd_mps2)
+            self._speed_target = None
+        if speed_target_mps is not None:
+            lo, hi = self.config.speed_mps
+            self._speed_target = min(max(float(speed_target_mps), lo), hi)
+            self._accel = 0.0
+        if alt_target_m is not None:
+            self._alt_target = float(alt_target_m)
+        self._cached = None
+
+    def ownship_command(self) -> dict[str, float]:
+        return {
+            "bank_cmd_rad": float(self._own[PHI_CMD]),
+            "accel_cmd_mps2": self._accel,
+            "speed_target_mps": float(
+                self._own[V] if self._speed_target is None else self._speed_target
+            ),
+            "alt_target_m": self._alt_target,
+        }
+
+    # --------------------------------------------------------------------------- failure
+    def failure(self) -> str | None:
+        return None
+
+    def close(self) -> None:
+        self._pilots = []
+
+    def __enter__(self) -> KinematicWorld:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

@@ -1,0 +1,170 @@
+"""What watches an episode: files, the recording, metrics, pacing, progress.
+
+Each is an :class:`~uavxai.sim.episode.Observer`; adding an output is adding one here, not
+editing the loop. Per-sample work is buffered and written in blocks (trajectory rows, channel
+evaluation), so watching costs little beside the flight itself.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from uavxai.dynamics.state import TrafficState
+from uavxai.sim.episode import DecisionEvent, Episode, Observer, stats
+
+TRAJECTORY_FIELDS = ("t", "id", "x", "y", "h", "vx", "vy", "vh", "phi", "theta", "psi", "airspeed")
+_FLUSH_SAMPLES = 100
+# t, id, then position, velocity (mm, mm/s), angles (1e-5 rad), airspeed
+_ROW = ("{},{}" + ",{:.3f}" * 6 + ",{:.5f}" * 3 + ",{:.3f}\n").format
+
+
+class TrajectoryCSV(Observer):
+    """``trajectory.csv``: one row per aircraft per sample (SPEC §4), written in blocks."""
+
+    def __init__(self, path: Path) -> None:
+        self._f = path.open("w", newline="")
+        self._f.write(",".join(TRAJECTORY_FIELDS) + "\n")
+        self._block: list[TrafficState] = []
+
+    def on_start(self, ep: Episode) -> None:
+        self._block.append(ep.state)
+
+    def on_sample(self, ep: Episode, state: TrafficState) -> None:
+        self._block.append(state)
+        if len(self._block) >= _FLUSH_SAMPLES:
+            self._flush()
+
+    def _flush(self) -> None:
+        lines = []
+        for s in self._block:
+            cols = np.column_stack([s.pos, s.vel, s.att, s.airspeed])
+            t = f"{s.t:.4f}".rstrip("0").rstrip(".") or "0"
+            for ident, row in zip(s.ids, cols.tolist(), strict=True):
+                lines.append(_ROW(t, ident, *row))
+        self._f.write("".join(lines))
+        self._block.clear()
+
+    def close(self) -> None:
+        if not self._f.closed:
+            self._flush()
+            self._f.close()
+
+
+class DecisionsJSONL(Observer):
+    """``decisions.jsonl``: one line per decision, what the planner saw and chose (SPEC §4)."""
+
+    def __init__(self, path: Path) -> None:
+        self._f = path.open("w")
+
+    def on_decision(self, ep: Episode, event: DecisionEvent) -> None:
+        from uavxai.xai.explain import decision_record
+
+        record = decision_record(event.t, event.own, event.intruders, event.decision)
+        self._f.write(json.dumps({"step": event.step, **record}, allow_nan=False) + "\n")
+
+    def close(self) -> None:
+        self._f.close()
+
+
+class Trust(Observer):
+    """How far the planner's predicted minimum separation for the next decision period was
+    from what was then flown (``summary.trust``)."""
+
+    def __init__(self) -> None:
+        self.errors: list[float] = []
+
+    def on_period(self, ep: Episode, event: DecisionEvent, flown_min_m: float) -> None:
+        predicted = event.decision.predicted_min_separation_m
+        if math.isfinite(predicted) and math.isfinite(flown_min_m):
+            self.errors.append(abs(predicted - flown_min_m))
+
+    def on_end(self, ep: Episode, summary: dict) -> None:
+        summary["trust"] = {"separation_error_m": stats(self.errors, ("mean", "p95", "max"))}
+
+
+class Throughput(Observer):
+    """The sum rate the service allocation gives from where the UAV flies, on the mean channel
+    (no fading: the curve shows geometry), integrated over the flight; evaluated in blocks."""
+
+    def __init__(self, channel, power_w: np.ndarray) -> None:
+        self.channel = channel
+        self.power_w = np.asarray(power_w, dtype=float)
+        self.bits = 0.0
+
+    def sum_rate(self, positions: np.ndarray) -> np.ndarray:
+        return np.asarray(self.channel.evaluate(positions, self.power_w).sum_rate_bps)
+
+    def on_sample(self, ep: Episode, state: TrafficState) -> None:
+        rate = float(self.sum_rate(state.pos[0]))
+        ep.sample_metrics["sum_rate_bps"] = rate
+        self.bits += rate * ep.clock.sample_s
+
+    def on_end(self, ep: Episode, summary: dict) -> None:
+        summary["throughput_in_flight_bits"] = self.bits
+
+
+class Rerun(Observer):
+    """The rerun recording: traffic every sample, tree/plan/explanation every decision,
+    scalar metrics (SPEC §5)."""
+
+    def __init__(self, recorder, setup: dict) -> None:
+        self.recorder = recorder
+        self._setup = setup
+        self._ms = 0.0
+        self._ids: list[str] = []
+
+    def on_start(self, ep: Episode) -> None:
+        self._ids = list(ep.state.ids[1:])
+        self.recorder.log_setup(intruder_ids=self._ids, goal=np.asarray(ep.goal), **self._setup)
+
+    def on_decision(self, ep: Episode, event: DecisionEvent) -> None:
+        self._ms = event.decision.ms
+        self.recorder.log_decision(event.step, event.t, event.decision, self._ids)
+
+    def on_sample(self, ep: Episode, state: TrafficState) -> None:
+        self.recorder.log_traffic(state)
+        self.recorder.log_metrics(
+            state.t,
+            sum_rate_bps=ep.sample_metrics.get("sum_rate_bps", math.nan),
+            min_separation_m=min(state.min_separation(), 1e4),
+            bank_deg=math.degrees(float(state.att[0, 0])),
+            airspeed_mps=float(state.airspeed[0]),
+            decision_ms=self._ms,
+        )
+
+    def close(self) -> None:
+        self.recorder.close()
+
+
+class Pacing(Observer):
+    """Holds simulated time to ``factor`` times the wall clock (``--realtime``)."""
+
+    def __init__(self, factor: float) -> None:
+        self.factor = factor
+
+    def on_sample(self, ep: Episode, state: TrafficState) -> None:
+        lag = state.t / self.factor - (time.perf_counter() - ep.wall0)
+        if lag > 0:
+            time.sleep(lag)
+
+
+class ProgressBar(Observer):
+    """One task of a rich progress bar, advanced per decision."""
+
+    def __init__(self, progress, name: str, total: int) -> None:
+        self.progress = progress
+        self.name = name
+        self.task = progress.add_task(name, total=total)
+
+    def on_period(self, ep: Episode, event: DecisionEvent, flown_min_m: float) -> None:
+        self.progress.update(self.task, advance=1, description=f"{self.name} t={ep.state.t:5.0f}s")
+
+    def on_end(self, ep: Episode, summary: dict) -> None:
+        self.progress.update(
+            self.task, completed=ep.max_steps, description=f"{self.name}: {summary['outcome']}"
+        )

@@ -1,0 +1,235 @@
+"""`uavxai run`: the whole co-simulation, one seeded episode at a time.
+
+scenario -> service point -> JSBSim world -> avoidance planner -> MAVLink bytes -> bridge ->
+JSBSim autopilot -> recordings. The planner never touches the aircraft: its decision is
+encoded as MAVLink 2 messages, decoded by the bridge, and only the bridge writes the
+autopilot's setpoints — the same path an external peer on ``--mavlink`` uses.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+from rich.console import Console
+
+from uavxai import __version__
+from uavxai.scenario import Scenario
+from uavxai.sim.build import episode_goal, fly
+from uavxai.sim.command import MavlinkPath
+from uavxai.sim.observers import DecisionsJSONL, Pacing, ProgressBar, Rerun, Throughput, Trust
+
+console = Console(stderr=True, soft_wrap=True)
+
+
+def mavlink_path(scenario: Scenario, link: str | None):
+    """The command path of ``uavxai run``: encoder -> bytes -> bridge -> autopilot."""
+    from uavxai.bridges.bridge import MavlinkBridge
+    from uavxai.bridges.protocol import CommandEncoder
+    from uavxai.dynamics.geodesy import LocalFrame
+
+    sc, av = scenario, scenario.avoidance
+    key = bytes.fromhex(sc.bridge.signing_key_hex) if sc.bridge.signing_key_hex else None
+    params = {
+        "UAVX_DMIN_M": av.d_min_m,
+        "UAVX_SIMS": float(av.mcts.simulations),
+        "UAVX_DEPTH": float(av.mcts.depth),
+        "UAVX_C": av.mcts.c,
+        "UAVX_HOLD_S": av.mcts.action_hold_s,
+        "UAVX_BANK_LIM": av.bank_limit_deg,
+        "UAVX_PERIOD_S": av.decision_period_s,
+        "UAVX_TIMEOUT_S": sc.bridge.command_timeout_s,
+    }
+    start = sc.ownship.start
+
+    def build(world) -> MavlinkPath:
+        bridge = MavlinkBridge(
+            sc.bridge.system_id,
+            LocalFrame.from_origin(sc.world.origin),
+            world,
+            link=link,
+            signing_key=key,
+            command_timeout_s=sc.bridge.command_timeout_s,
+            params=params,
+            home=(start.x, start.y, start.h),
+        )
+        encoder = CommandEncoder(sc.bridge.system_id, sc.bridge.system_id, signing_key=key)
+        return MavlinkPath(bridge, encoder)
+
+    return build
+
+
+def run_episode(
+    scenario: Scenario,
+    out: Path,
+    *,
+    service,
+    rerun_file: Path | None = None,
+    spawn: bool = False,
+    mavlink: str | None = None,
+    realtime: float | None = None,
+    record: bool | None = None,
+    progress=None,
+) -> dict:
+    """Fly one seeded episode through MAVLink in JSBSim; write trajectory.csv,
+    decisions.jsonl and run.rrd into ``out``; return its summary (SPEC §4)."""
+    from uavxai.avoidance.planners import make_planner
+    from uavxai.avoidance.types import PlannerConfig
+    from uavxai.comms.channel import Channel
+    from uavxai.sim.observers import TrajectoryCSV
+
+    sc = scenario
+    goal = episode_goal(sc, service.service_point)
+    planner = make_planner(
+        sc.avoidance.planner, PlannerConfig.from_scenario(sc), checkpoint=sc.avoidance.checkpoint
+    )
+    observers = [
+        Throughput(Channel.from_scenario(sc, users=service.users), service.power_w),
+        Trust(),
+        TrajectoryCSV(out / "trajectory.csv"),
+        DecisionsJSONL(out / "decisions.jsonl"),
+    ]
+    record = sc.log.rerun if record is None else record
+    if record or spawn or rerun_file is not None:
+        observers.append(_rerun(sc, service, None if spawn else (rerun_file or out / "run.rrd")))
+    if realtime:
+        observers.append(Pacing(realtime))
+    if progress is not None:
+        observers.append(ProgressBar(progress, sc.name, sc.avoidance.max_steps))
+    result = fly(
+        sc,
+        planner,
+        goal,
+        dynamics="jsbsim",
+        path=mavlink_path(sc, mavlink if mavlink is not None else sc.bridge.mavlink),
+        observers=observers,
+    )
+    summary = result.summary
+    summary.update(service.to_summary())
+    summary["goal_is_service_point"] = sc.ownship.goal is None
+    summary["versions"] = versions()
+    return summary
+
+
+def _rerun(sc: Scenario, service, path: Path | None) -> Rerun:
+    from uavxai.recording.recorder import RunRecorder
+
+    recorder = RunRecorder(
+        path,
+        spawn=path is None,
+        recording_name="uavxai",
+        recording_id=f"{sc.name}-seed{sc.seed}",
+    )
+    setup = {
+        "bounds": {"x": sc.world.x, "y": sc.world.y, "h": sc.world.h},
+        "users": service.users,
+        "service_point": service.service_point,
+        "search_path": service.visited,
+    }
+    return Rerun(recorder, setup)
+
+
+def versions() -> dict[str, str]:
+    import jsbsim
+    import torch
+
+    return {"uavxai": __version__, "jsbsim": jsbsim.__version__, "torch": torch.__version__}
+
+
+def aggregate(episodes: list[dict]) -> dict:
+    """Rates and means over several episodes of one run."""
+    from uavxai.vocabulary import Outcome
+
+    n = len(episodes)
+    outcomes = [e["outcome"] for e in episodes]
+    seps = [e["min_separation_m"] for e in episodes if e["min_separation_m"] is not None]
+    rates = {f"{o.value}_rate": outcomes.count(o.value) / n for o in Outcome}
+    return {
+        "episodes_run": n,
+        **rates,
+        "mean_steps": float(np.mean([e["steps"] for e in episodes])),
+        "mean_min_separation_m": float(np.mean(seps)) if seps else None,
+    }
+
+
+def run_command(
+    scenario: Scenario,
+    *,
+    out: Path,
+    episodes: int = 1,
+    rerun_file: Path | None = None,
+    spawn: bool = False,
+    mavlink: str | None = None,
+    realtime: float | None = None,
+) -> dict:
+    """`uavxai run`: one episode writes into ``out``; several write ``out/episode-NNN/`` each
+    and a summary.json with the list and the aggregates."""
+    from uavxai.progress import progress_bar
+    from uavxai.service.stage import plan_service
+
+    results = []
+    with progress_bar(console) as progress:
+        for i in range(episodes):
+            sc = scenario.with_seed(scenario.seed + i)
+            ep_out = out if episodes == 1 else out / f"episode-{i:03d}"
+            ep_out.mkdir(parents=True, exist_ok=True)
+            rrd = rerun_file
+            if rerun_file and episodes > 1:
+                rrd = rerun_file.with_name(f"{rerun_file.stem}-{i:03d}{rerun_file.suffix}")
+            summary = run_episode(
+                sc,
+                ep_out,
+                service=plan_service(sc),
+                rerun_file=rrd,
+                spawn=spawn,
+                mavlink=mavlink,
+                realtime=realtime,
+                progress=progress,
+            )
+            (ep_out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+            results.append(summary)
+            if summary["outcome"] == "interrupted":
+                break
+    if episodes == 1:
+        final = results[0]
+    else:
+        final = {
+            "scenario": scenario.name,
+            "seed": scenario.seed,
+            "episodes": results,
+            **aggregate(results),
+        }
+        (out / "summary.json").write_text(json.dumps(final, indent=2) + "\n")
+    report(final, out, rerun_file, spawn)
+    return final
+
+
+def report(summary: dict, out: Path, rerun_file: Path | None, spawn: bool) -> None:
+    eps = summary.get("episodes", [summary])
+    for e in eps:
+        sep = e["min_separation_m"]
+        where = (
+            "at the service point"
+            if e.get("goal_is_service_point", True)
+            else "at the service point (not flown: the scenario names its own goal)"
+        )
+        console.print(
+            f"[bold]{e['scenario']}[/] seed {e['seed']}: [bold]{e['outcome']}[/] after "
+            f"{e['steps']} decisions, {e['flight_time_s']:.0f} s flown; min separation "
+            f"{'-' if sep is None else f'{sep:.0f} m'}; sum rate {e['sum_rate_bps'] / 1e6:.2f} "
+            f"Mbit/s {where}; decision p50 {e['decision_ms']['p50'] or 0:.1f} ms; "
+            f"{e['sim_realtime_factor'] or 0:.1f}x real time"
+        )
+    console.print(f"outputs in {out}/ (summary.json, trajectory.csv, decisions.jsonl)")
+    if not spawn:
+        rrd = rerun_file or out / "run.rrd"
+        if len(eps) > 1 and rerun_file is None:
+            rrd = out / "episode-000" / "run.rrd"
+        if rrd.exists():
+            viewer = Path(sys.executable).parent / "rerun"  # installed with rerun-sdk
+            viewer_cmd = str(viewer) if viewer.exists() else "rerun"
+            console.print(f"recording: {rrd}  — open it with:  {viewer_cmd} {rrd}")
+    first = out if len(eps) == 1 else out / "episode-000"
+    console.print(f"explain a decision:  uavxai explain {first} --decision 0")

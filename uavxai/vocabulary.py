@@ -1,0 +1,89 @@
+"""The words every layer shares, written once: the avoidance actions and the episode outcomes.
+
+Planners, the encounter model, explanations, the tree graph, the recorder and the campaigns
+all read the action table and the outcome enum from here, so an action is called the same
+thing in a search tree, a sentence, a recording and a results table.
+
+Actions (the paper's 9): index ``3 * bank_index + accel_index`` with bank (left, hold,
+right) and acceleration (up, hold, down). A bank action moves the *bank command* one
+``bank_step_deg`` step (hold keeps the current command, which may be a turn); an
+acceleration action commands ``accel_mps2`` along the track.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import StrEnum
+
+
+@dataclass(frozen=True)
+class Action:
+    index: int
+    bank: int  # -1 left, 0 hold the bank command, +1 right (steps of bank_step_deg)
+    accel: int  # +1 speed up, 0 hold speed, -1 slow down (times accel_mps2)
+    short: str  # tree-graph label, e.g. "left/faster"
+    name: str  # "bank left, speed up"
+    phrase: str  # how an explanation names the option: "left and faster", "holding bank and speed"
+    verb: str  # what the aircraft did: "banked left and sped up"
+
+
+_BANK = (
+    (-1, "left", "bank left", "banked left"),
+    (0, "hold", "hold bank", "held its bank"),
+    (+1, "right", "bank right", "banked right"),
+)
+_ACCEL = (
+    (+1, "faster", "speed up", " and faster", " and sped up"),
+    (0, "same", "hold speed", "", ""),
+    (-1, "slower", "slow down", " and slower", " and slowed down"),
+)
+
+
+def _table() -> tuple[Action, ...]:
+    out = []
+    for b, (bank, b_short, b_name, b_verb) in enumerate(_BANK):
+        for c, (accel, a_short, a_name, a_phrase, a_verb) in enumerate(_ACCEL):
+            phrase = {-1: "left", 0: "holding", 1: "right"}[bank] + a_phrase
+            if bank == 0 and accel == 0:
+                phrase = "holding bank and speed"
+            out.append(
+                Action(
+                    index=3 * b + c,
+                    bank=bank,
+                    accel=accel,
+                    short=f"{b_short}/{a_short}",
+                    name=f"{b_name}, {a_name}",
+                    phrase=phrase,
+                    verb=b_verb + a_verb,
+                )
+            )
+    return tuple(out)
+
+
+ACTIONS: tuple[Action, ...] = _table()
+N_ACTIONS = len(ACTIONS)
+HOLD = 4  # hold the bank command, hold speed: the reference every other option is compared to
+BANK_SIGNS = tuple(a.bank for a in ACTIONS[::3])  # (-1, 0, +1) by bank index
+ACCEL_SIGNS = tuple(a.accel for a in ACTIONS[:3])  # (+1, 0, -1) by accel index
+assert ACTIONS[HOLD].bank == 0 and ACTIONS[HOLD].accel == 0
+
+
+def action_name(a: int) -> str:
+    """'bank left, speed up' for action index ``a``."""
+    return ACTIONS[a].name
+
+
+class Outcome(StrEnum):
+    """How an episode ends (SPEC §4). The values are what files and tables say."""
+
+    GOAL = "goal"  # a transit-only episode reached its goal
+    COMPLETED = "completed"  # a mission flown to its end
+    COLLISION = "collision"  # 3-D separation below d_min at any instant
+    TIMEOUT = "timeout"  # max_steps decisions without any other end
+    OUT_OF_BOUNDS = "out_of_bounds"  # the ownship left the flight area
+    BATTERY = "battery"  # the battery reached its reserve away from home
+    FDM_FAILURE = "fdm_failure"  # the flight dynamics gave up (NaN, ground strike, envelope)
+    INTERRUPTED = "interrupted"  # stopped by a signal; the files are whole but the run is partial
+
+
+OUTCOMES = tuple(o.value for o in Outcome)
