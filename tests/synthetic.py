@@ -106,17 +106,17 @@ def decision(state: TrafficState, k: int, seed: int = 0, simulations: int = 200)
         accel_mps2=chosen.accel_mps2,
         action=best,
         children=children,
-        explanation=(
+        words=(
             f"Chose '{action_name(best)}': it keeps {chosen.predicted_min_separation_m:.0f} m "
             f"from intruder-{chosen.closest_intruder + 1}, with {chosen.visits} of "
-            f"{simulations} simulations."
+            f"{simulations} simulations.",
+            "",
         ),
         tree=tree,
         plan=_plan(state),
         predicted_min_separation_m=chosen.predicted_min_separation_m,
         confidence=chosen.visits / simulations,
         ms=float(rng.uniform(5.0, 15.0)),
-        counterfactual="",
     )
 
 

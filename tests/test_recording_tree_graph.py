@@ -58,7 +58,7 @@ def hand_made_tree() -> tuple[SearchTree, list[int]]:
 
 
 def decision_with(tree: SearchTree | None, action: int, children=()) -> Decision:
-    return Decision(0.0, 0.0, action, list(children), "because", tree=tree)
+    return Decision(0.0, 0.0, action, list(children), tree=tree, words=("because", ""))
 
 
 def test_shows_visited_actions_and_two_expanded_branches():

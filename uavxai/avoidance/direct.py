@@ -24,6 +24,7 @@ from uavxai.avoidance.types import (
     PlannerConfig,
     check_plan_inputs,
 )
+from uavxai.geometry import bearing, wrap_angle
 
 HEADING_GAIN = 1.0  # rad of bank per rad of heading error
 HOLD_SPEED = 1  # accel index of "hold speed"
@@ -46,8 +47,7 @@ class DirectPlanner:
         t0 = time.perf_counter()
         check_plan_inputs(own, intruders, goal)
         cfg = self.config
-        bearing = math.atan2(goal[0] - own.x, goal[1] - own.y)  # clockwise from north
-        error = math.atan2(math.sin(bearing - own.heading), math.cos(bearing - own.heading))
+        error = wrap_angle(bearing(goal[0] - own.x, goal[1] - own.y) - own.heading)
         wanted = max(-cfg.bank_limit_rad, min(cfg.bank_limit_rad, HEADING_GAIN * error))
         # Bank actions 0, 1, 2 (left, hold, right); ties go to holding.
         options = [float(bank_command(own.bank, 3 * b + HOLD_SPEED, cfg)) for b in range(3)]

@@ -59,6 +59,7 @@ from uavxai.avoidance.learned import (
 )
 from uavxai.avoidance.types import N_ACTIONS, PlannerConfig
 from uavxai.errors import UserError
+from uavxai.geometry import bearing, wrap_angle
 from uavxai.scenario import Scenario, Start
 
 
@@ -126,8 +127,7 @@ def situation(
     """
     x, y, h, v, psi = (float(c) for c in own[:5])
     dx, dy = float(goal[0]) - x, float(goal[1]) - y
-    error = math.atan2(dx, dy) - psi
-    error = math.atan2(math.sin(error), math.cos(error))
+    error = wrap_angle(bearing(dx, dy) - psi)
     conflict = 0.0
     if len(pos):
         rel = pos - own[:3]

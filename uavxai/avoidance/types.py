@@ -44,10 +44,6 @@ class Intruder:
     vx: float  # east, m/s
     vy: float  # north, m/s
     vh: float = 0.0  # up, m/s
-    turn_rate: float = 0.0  # rad/s, + = clockwise (turning right); surveillance estimate
-    sigma_m: float = 0.0  # 1-sigma horizontal position uncertainty, m (0: exact)
-    sigma_v: float = 0.0  # 1-sigma horizontal velocity uncertainty, m/s
-    age_s: float = 0.0  # time since the state was measured, s
     turn_rate: float = 0.0  # rad/s, + turning right (clockwise), as estimated
     sigma_m: float = 0.0  # 1-sigma horizontal position uncertainty, m
     sigma_v: float = 0.0  # 1-sigma velocity uncertainty, m/s

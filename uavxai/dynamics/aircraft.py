@@ -14,6 +14,7 @@ import jsbsim
 
 from uavxai.dynamics.fdm import load_fdm
 from uavxai.dynamics.geodesy import LocalFrame
+from uavxai.errors import UserError
 
 log = logging.getLogger(__name__)
 
@@ -30,6 +31,33 @@ ROLL_RATE_LIMIT = "ap/roll-rate-limit-rad_sec"
 CLIMB_RATE_LIMIT = "ap/climb-rate-limit-mps"
 SPEED_MIN = "ap/speed-min-mps"
 SPEED_MAX = "ap/speed-max-mps"
+
+# Weather (JSBSim 1.3 FGWinds; names checked by reading them back, tests/test_environment.py)
+WIND_NORTH = "atmosphere/wind-north-fps"  # velocity of the air mass, NED, ft/s
+WIND_EAST = "atmosphere/wind-east-fps"
+WIND_DOWN = "atmosphere/wind-down-fps"
+TURB_TYPE = "atmosphere/turb-type"  # 0 none, 3 Milspec (Dryden spectrum, MIL-F-8785C)
+TURB_SEVERITY = "atmosphere/turbulence/milspec/severity"  # probability-of-exceedance row
+TURB_W20 = "atmosphere/turbulence/milspec/windspeed_at_20ft_AGL-fps"
+TURB_SEED = "atmosphere/randomseed"
+TURB_MILSPEC = 3
+KT = 1852.0 / 3600.0  # m/s per knot
+
+# MIL-F-8785C: below 1000 ft the intensity scales with the wind speed at 20 ft (light 15 kt,
+# moderate 30 kt, severe 45 kt); above 2000 ft it follows the probability of exceedance
+# 1e-2, 1e-3 and 1e-5, which are rows 3, 4 and 6 of JSBSim's severity table.
+# JSBSim evaluates these altitude bands at the height above SEA LEVEL, not above ground: over
+# the default origin (400 m) an aircraft at 120 m is at 1700 ft, in the 1000-2000 ft blend of
+# the two models, and its gusts are about 1.25 times the low-altitude intensities (measured:
+# moderate sigma_u 2.5 m/s instead of 2.0; tests/test_dynamics_environment.py checks the
+# low-altitude values over a sea-level origin). JSBSim 1.3 keeps the filter states per
+# executive, so aircraft stepped in lockstep in one process do not disturb each other.
+TURBULENCE: dict[str, tuple[int, float]] = {
+    "none": (0, 0.0),
+    "light": (3, 15.0),
+    "moderate": (4, 30.0),
+    "severe": (6, 45.0),
+}
 
 COMMANDS = {
     "bank_cmd_rad": BANK_CMD,
@@ -76,6 +104,7 @@ class Aircraft:
         self._get = [pm.get_node(p).get_double_value for p in STATE_PROPERTIES]
         self._set = {k: pm.get_node(p).set_double_value for k, p in COMMANDS.items()}
         self.trimmed = False
+        self._wind_ne = (0.0, 0.0)
 
     @property
     def speed_range(self) -> tuple[float, float]:
@@ -93,8 +122,17 @@ class Aircraft:
         f["ic/long-gc-deg"] = float(lon)
         f["ic/h-agl-ft"] = h / FT
         f["ic/psi-true-rad"] = heading_rad
-        f["ic/vt-fps"] = speed_mps / FT
-        f["ic/gamma-rad"] = 0.0
+        wind_n, wind_e = self._wind_ne
+        if wind_n == 0.0 and wind_e == 0.0:
+            f["ic/vt-fps"] = speed_mps / FT
+            f["ic/gamma-rad"] = 0.0
+        else:
+            # In wind, JSBSim's ic/vt-fps keeps the direction of the air-relative velocity
+            # it had (backwards from a standstill), so the ground velocity of the wind
+            # triangle is given instead: air velocity along the heading, plus the wind.
+            f["ic/vn-fps"] = (speed_mps * math.cos(heading_rad) + wind_n) / FT
+            f["ic/ve-fps"] = (speed_mps * math.sin(heading_rad) + wind_e) / FT
+            f["ic/vd-fps"] = 0.0
         f[ENGAGED] = 0.0
         f.run_ic()
         f["fcs/throttle-cmd-norm"] = _SPIN_UP_THROTTLE
@@ -117,6 +155,49 @@ class Aircraft:
         )
         f[ENGAGED] = 1.0
         return self.trimmed
+
+    def set_environment(
+        self,
+        wind_ne_mps: tuple[float, float] = (0.0, 0.0),
+        turbulence: str = "none",
+        seed: int = 0,
+    ) -> None:
+        """Steady wind and Milspec (Dryden) turbulence around this aircraft.
+
+        ``wind_ne_mps`` is the velocity of the air mass over the ground, (north, east) m/s
+        (see :func:`wind_ne_from`); ``turbulence`` one of :data:`TURBULENCE`, the
+        MIL-F-8785C severities; ``seed`` seeds JSBSim's turbulence noise, so a run repeats.
+        Call it before :meth:`start` so that the trim is found in the wind (the trim keeps
+        the true airspeed and heading asked for, the ground speed follows); later calls
+        change the weather mid-flight.
+        """
+        if turbulence not in TURBULENCE:
+            raise UserError(
+                f"environment.turbulence = {turbulence!r}; allowed: {', '.join(TURBULENCE)}"
+            )
+        north, east = (float(w) for w in wind_ne_mps)
+        if not (math.isfinite(north) and math.isfinite(east)):
+            raise UserError(f"environment.wind must be finite, got {wind_ne_mps!r}")
+        f = self.fdm
+        self._wind_ne = (north, east)
+        # run_ic (and the trim, which restarts from the initial conditions) copies the
+        # initial-condition wind into the atmosphere, so both are set. ic/vw-dir-deg is the
+        # direction the air moves TO (read back: 90 gives a wind towards the east).
+        f["ic/vw-mag-fps"] = math.hypot(north, east) / FT
+        f["ic/vw-dir-deg"] = math.degrees(math.atan2(east, north)) % 360.0
+        f[WIND_NORTH] = north / FT
+        f[WIND_EAST] = east / FT
+        f[WIND_DOWN] = 0.0
+        severity, w20_kt = TURBULENCE[turbulence]
+        # The Milspec model draws its white noise from the generator seeded here.
+        f[TURB_SEED] = int(seed) & 0x7FFFFFFF
+        f[TURB_TYPE] = TURB_MILSPEC if severity else 0
+        f[TURB_SEVERITY] = severity
+        f[TURB_W20] = w20_kt * KT / FT
+
+    def wind_ne_mps(self) -> tuple[float, float]:
+        """The steady wind as JSBSim has it, (north, east) m/s (turbulence not included)."""
+        return self.fdm[WIND_NORTH] * FT, self.fdm[WIND_EAST] * FT
 
     def set_limits(
         self,
@@ -162,3 +243,15 @@ class Aircraft:
 def heading_from_deg(heading_deg: float) -> float:
     """Scenario heading (degrees, any sign) to radians in [0, 2 pi)."""
     return math.radians(heading_deg % 360.0)
+
+
+def wind_ne_from(speed_mps: float, from_deg: float) -> tuple[float, float]:
+    """(north, east) velocity of the air mass for a wind of ``speed_mps`` blowing FROM
+    ``from_deg`` (clockwise from north, as in weather reports: 270 is a west wind, blowing
+    towards the east)."""
+    if not (math.isfinite(speed_mps) and speed_mps >= 0):
+        raise UserError(f"environment.wind.speed_mps must be >= 0, got {speed_mps}")
+    if not math.isfinite(from_deg):
+        raise UserError(f"environment.wind.from_deg must be a finite number, got {from_deg}")
+    towards = math.radians(from_deg) + math.pi
+    return speed_mps * math.cos(towards), speed_mps * math.sin(towards)

@@ -217,7 +217,7 @@ class JSBSimWorld:
 
     def _check(self, s: TrafficState) -> bool:
         """Latch the first failure found in ``s``; True if the run has failed."""
-        if self._failure is None:
+        if self._failure is None and not _all_healthy(s):
             for i, who in enumerate(s.ids):
                 reason = _diagnose(who, s.pos[i], s.att[i], s.airspeed[i])
                 if reason:
@@ -237,6 +237,20 @@ class JSBSimWorld:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _all_healthy(s: TrafficState) -> bool:
+    """Every aircraft inside the envelope, in one vectorised test (the common case: then
+    nobody needs :func:`_diagnose`)."""
+    lo, hi = ENVELOPE_AIRSPEED_MPS
+    with np.errstate(invalid="ignore"):  # NaN compares False, which is what we want
+        return bool(
+            np.all(s.pos[:, 2] >= GROUND_M)
+            and np.all((s.airspeed >= lo) & (s.airspeed <= hi))
+            and np.all(np.abs(s.att[:, 0]) <= ENVELOPE_BANK_RAD)
+            and np.all(np.abs(s.att[:, 1]) <= ENVELOPE_PITCH_RAD)
+            and np.all(np.isfinite(s.pos))
+        )
 
 
 def _diagnose(who: str, pos: np.ndarray, att: np.ndarray, airspeed: float) -> str | None:

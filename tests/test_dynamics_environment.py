@@ -1,0 +1,181 @@
+"""Wind and Milspec (Dryden) turbulence on the JSBSim aircraft: the property names JSBSim 1.3
+reads, the wind triangle, determinism of the turbulence, and the autopilot in turbulence."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from uavxai.dynamics.aircraft import (
+    FT,
+    KT,
+    TURB_SEED,
+    TURB_SEVERITY,
+    TURB_TYPE,
+    TURB_W20,
+    WIND_EAST,
+    WIND_NORTH,
+    Aircraft,
+    wind_ne_from,
+)
+from uavxai.dynamics.environment import EnvironmentConfig
+from uavxai.dynamics.geodesy import LocalFrame
+from uavxai.errors import UserError
+
+FRAME = LocalFrame(34.1230, 108.8370, 400.0)
+DT = 1.0 / 120.0
+
+
+def flown(
+    heading_deg: float,
+    wind: tuple[float, float],
+    turbulence: str = "none",
+    seed: int = 1,
+    seconds: float = 60.0,
+    speed: float = 20.0,
+    banks: list[tuple[float, float]] | None = None,
+) -> np.ndarray:
+    """Rows of raw_state() at 10 Hz (lat, lon, h ft, v east/north/down fps, phi, theta, psi,
+    vt fps) of an aircraft started level in this weather; ``banks`` [(t, bank_rad)]."""
+    a = Aircraft("uav_fw", FRAME, DT, seed=7)
+    a.set_environment(wind, turbulence, seed)
+    assert a.start(1000.0, 1000.0, 120.0, math.radians(heading_deg), speed)
+    banks = sorted(banks or [])
+    rows = []
+    for k in range(round(seconds / DT)):
+        t = k * DT
+        while banks and banks[0][0] <= t:
+            a.command(bank_cmd_rad=banks.pop(0)[1])
+        a.run()
+        if k % 12 == 11:
+            rows.append(a.raw_state())
+    a.close()
+    return np.array(rows)
+
+
+def test_wind_from_direction_convention():
+    n, e = wind_ne_from(10.0, 270.0)  # from the west: blows towards the east
+    assert n == pytest.approx(0.0, abs=1e-12) and e == pytest.approx(10.0)
+    n, e = wind_ne_from(5.0, 0.0)  # from the north: blows south
+    assert n == pytest.approx(-5.0) and e == pytest.approx(0.0, abs=1e-12)
+    with pytest.raises(UserError, match="speed_mps"):
+        wind_ne_from(-1.0, 0.0)
+
+
+def test_jsbsim_reads_back_the_weather_properties():
+    a = Aircraft("uav_fw", FRAME, DT, seed=7)
+    a.set_environment(wind_ne_from(10.0, 270.0), "moderate", seed=5)
+    a.start(1000.0, 1000.0, 120.0, 0.0, 20.0)  # run_ic and the trim keep the wind
+    f = a.fdm
+    assert f[WIND_NORTH] == pytest.approx(0.0, abs=1e-9)
+    assert f[WIND_EAST] * FT == pytest.approx(10.0)
+    assert f["atmosphere/wind-mag-fps"] * FT == pytest.approx(10.0)
+    assert f[TURB_TYPE] == 3 and f[TURB_SEVERITY] == 4
+    assert f[TURB_W20] * FT == pytest.approx(30 * KT)
+    assert f[TURB_SEED] == 5
+    a.run()
+    assert f["atmosphere/turb-north-fps"] != 0.0  # the Milspec model is running
+    with pytest.raises(UserError, match="environment.turbulence"):
+        a.set_environment((0.0, 0.0), "strong")
+    a.close()
+
+
+@pytest.mark.parametrize(
+    "heading_deg,wind_from_deg", [(0.0, 270.0), (90.0, 0.0), (45.0, 270.0), (200.0, 150.0)]
+)
+def test_wind_triangle_crab_angle(heading_deg, wind_from_deg):
+    """Wings level (the autopilot holds bank and airspeed, not a track) in a steady 10 m/s
+    wind: the angle between heading and ground track is the wind triangle's, within 1 deg;
+    ground velocity = air velocity along the heading + wind (what TrafficState.vel carries)."""
+    wn, we = wind_ne_from(10.0, wind_from_deg)
+    r = flown(heading_deg, (wn, we))[200:]  # settled: from 20 s on
+    ve, vn = r[:, 3] * FT, r[:, 4] * FT
+    psi, va = r[:, 8], r[:, 9] * FT
+    track = np.arctan2(ve, vn)
+    crab = np.degrees((track - psi + math.pi) % (2 * math.pi) - math.pi)
+    expected = (
+        np.degrees(np.arctan2(va * np.sin(psi) + we, va * np.cos(psi) + wn) - psi + math.pi) % 360
+        - 180
+    )
+    assert np.abs(crab - expected).max() < 1.0
+    # the crab is real (26.6 deg for a pure cross wind at 20 m/s)
+    if wind_from_deg - heading_deg in (270.0, -90.0):
+        assert abs(crab.mean()) == pytest.approx(math.degrees(math.atan2(10, 20)), abs=1.0)
+    ground = np.column_stack([ve, vn])
+    air_plus_wind = np.column_stack([va * np.sin(psi) + we, va * np.cos(psi) + wn])
+    assert np.abs(ground - air_plus_wind).max() < 0.5
+    assert np.abs(va - 20.0).max() < 0.3  # airspeed held, not ground speed
+    assert np.abs(r[:, 2] * FT - 120.0).max() < 1.0
+
+
+def test_turbulence_is_deterministic_for_a_seed():
+    a = flown(30.0, (0.0, 5.0), "moderate", seed=11, seconds=20.0)
+    b = flown(30.0, (0.0, 5.0), "moderate", seed=11, seconds=20.0)
+    c = flown(30.0, (0.0, 5.0), "moderate", seed=12, seconds=20.0)
+    calm = flown(30.0, (0.0, 5.0), "none", seed=11, seconds=20.0)
+    assert np.array_equal(a, b)
+    assert np.abs(a - c).max() > 0.01
+    # turbulence moves the aircraft about: bank excursions are much larger than in calm air
+    assert np.abs(a[:, 6]).max() > 10 * np.abs(calm[:, 6]).max()
+
+
+def test_autopilot_survives_moderate_turbulence_for_a_minute():
+    """Turns of +-30 deg and level flight in moderate turbulence with a 10 m/s wind."""
+    banks = [(10.0, math.radians(30)), (25.0, math.radians(-30)), (40.0, 0.0)]
+    r = flown(0.0, wind_ne_from(10.0, 300.0), "moderate", seed=3, banks=banks)
+    h = r[:, 2] * FT
+    va = r[:, 9] * FT
+    phi, theta = np.degrees(r[:, 6]), np.degrees(r[:, 7])
+    assert np.all(np.isfinite(r))
+    assert np.abs(h - 120.0).max() < 15.0  # the height hold keeps up
+    assert va.min() > 12.0 and va.max() < 30.0  # well inside 10.2 m/s stall, 33 m/s top
+    assert np.abs(phi).max() < 45.0 and np.abs(theta).max() < 25.0
+    # the commanded turns still happen: wings level at the end, turning while banked
+    psi = np.unwrap(r[:, 8])
+    assert psi[240] - psi[110] > math.radians(60)  # 13 s of right turn at ~30 deg
+    assert psi[390] - psi[260] < -math.radians(60)  # then left
+
+
+def test_turbulence_intensity_is_mil_f_8785c_low_altitude():
+    """At 120 m above a sea-level origin the Milspec model's gust velocities have the
+    MIL-F-8785C low-altitude intensities: sigma_w = 0.1 W20, sigma_u = sigma_v =
+    sigma_w / (0.177 + 0.000823 h_ft)^0.4 (W20 = 30 kt for moderate). JSBSim evaluates the
+    model at the height above *sea level* (see aircraft.py), so the origin is put there."""
+    a = Aircraft("uav_fw", LocalFrame(34.1230, 108.8370, 0.0), DT, seed=7)
+    a.set_environment((0.0, 0.0), "moderate", seed=4)
+    a.start(1000.0, 1000.0, 120.0, 0.0, 20.0)
+    props = ["atmosphere/turb-north-fps", "atmosphere/turb-east-fps", "atmosphere/turb-down-fps"]
+    gusts = []
+    for k in range(round(300.0 / DT)):
+        a.run()
+        if k % 12 == 0:
+            gusts.append([a.fdm[p] * FT for p in props])
+    a.close()
+    std = np.array(gusts).std(axis=0)
+    sigma_w = 0.1 * 30 * KT
+    sigma_u = sigma_w / (0.177 + 0.000823 * 120 / FT) ** 0.4
+    # a 300 s record of a process with a correlation time of ~20 s: about 15 % scatter
+    assert math.hypot(std[0], std[1]) / math.sqrt(2) == pytest.approx(sigma_u, rel=0.25)
+    assert std[2] == pytest.approx(sigma_w, rel=0.25)
+
+
+def test_environment_config_for_both_dynamics():
+    env = EnvironmentConfig(wind_speed_mps=10.0, wind_from_deg=270.0, turbulence="moderate")
+    assert env.wind_enu == pytest.approx((10.0, 0.0, 0.0), abs=1e-12)  # blows towards the east
+    assert env.crab_angle_rad(0.0, 20.0) == pytest.approx(math.atan2(10, 20))
+    assert env.crab_angle_rad(math.pi / 2, 20.0) == pytest.approx(0.0, abs=1e-12)  # tail wind
+    assert not env.calm and EnvironmentConfig().calm
+
+    class Wind:
+        speed_mps, from_deg = 4.0, 90.0
+
+    class Env:
+        wind, turbulence = Wind(), "light"
+
+    got = EnvironmentConfig.from_scenario(type("S", (), {"environment": Env()})())
+    assert got == EnvironmentConfig(4.0, 90.0, "light")
+    assert EnvironmentConfig.from_scenario(object()) == EnvironmentConfig()
+    with pytest.raises(UserError, match="environment.turbulence"):
+        EnvironmentConfig(turbulence="gusty")

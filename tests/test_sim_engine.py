@@ -1,0 +1,121 @@
+"""The episode engine: one loop for `run` and `evaluate`, a clock in ticks, one judge."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from uavxai.cli import main
+from uavxai.errors import UserError
+from uavxai.scenario import default_scenario
+from uavxai.sim.build import fly, run_kinematic
+from uavxai.sim.clock import Clock
+from uavxai.sim.episode import Observer
+from uavxai.sim.judge import Judge
+from uavxai.sim.kinematic import KinematicWorld
+from uavxai.vocabulary import Outcome
+
+EQ = {
+    "name": "engine-eq",
+    "seed": 3,
+    "intruders": {"count": 8},
+    "comms": {"fading": "none"},
+    "service": {"planner": "grid", "steps": 10},
+    "avoidance": {"max_steps": 80},
+    "log": {"rerun": False},
+}
+
+
+def test_run_and_evaluate_fly_the_same_episode(tmp_path: Path) -> None:
+    """`uavxai run` (MAVLink bytes through the bridge) and `uavxai evaluate --dynamics jsbsim`
+    (direct to the autopilot): same outcome, steps and minimum separation to 1 mm."""
+    path = tmp_path / "eq.yaml"
+    path.write_text(yaml.safe_dump(EQ))
+    assert main(["run", str(path), "--out", str(tmp_path / "run")]) == 0
+    assert main(
+        ["evaluate", str(path), "--methods", "mcts", "--intruders", "8", "--episodes", "1",
+         "--dynamics", "jsbsim", "--out", str(tmp_path / "ev")]
+    ) == 0  # fmt: skip
+    run = json.loads((tmp_path / "run" / "summary.json").read_text())
+    row = (tmp_path / "ev" / "episodes.csv").read_text().splitlines()[1].split(",")
+    header = (tmp_path / "ev" / "episodes.csv").read_text().splitlines()[0].split(",")
+    ev = dict(zip(header, row, strict=True))
+    assert run["bridge"]["commands"] >= 2 * run["steps"]  # really through MAVLink
+    assert (ev["outcome"], int(ev["steps"])) == (run["outcome"], run["steps"])
+    assert float(ev["min_separation_m"]) == pytest.approx(run["min_separation_m"], abs=1e-3)
+
+
+def test_clock_counts_whole_ticks_and_refuses_rates_that_do_not_divide() -> None:
+    c = Clock.from_scenario(default_scenario("c"))
+    assert (c.sample_ticks, c.decision_ticks, c.samples_per_decision) == (12, 120, 10)
+    bad = default_scenario("c", dynamics={"rate_hz": 100, "trajectory_hz": 30})
+    with pytest.raises(UserError, match="trajectory_hz"):
+        Clock.from_scenario(bad)
+    odd = default_scenario("c", avoidance={"decision_period_s": 1.05})
+    with pytest.raises(UserError, match="decision_period_s"):
+        Clock.from_scenario(odd)
+
+
+def test_judge_order_failure_collision_bounds_goal() -> None:
+    sc = default_scenario("j")
+    judge = Judge(sc.world, 50.0, (1000, 1000, 120), 50.0)
+    world = KinematicWorld(sc, intruders=[])
+    s = world.state()
+    assert judge.judge(s, 10.0, "NaN in ownship state") is Outcome.FDM_FAILURE
+    assert judge.judge(s, 10.0, None) is Outcome.COLLISION
+    assert judge.judge(s, 100.0, None) is None
+
+
+class _Count(Observer):
+    def __init__(self) -> None:
+        self.events: dict[str, int] = dict.fromkeys(("start", "decision", "sample", "end"), 0)
+
+    def on_start(self, ep) -> None:
+        self.events["start"] += 1
+
+    def on_decision(self, ep, event) -> None:
+        self.events["decision"] += 1
+
+    def on_sample(self, ep, state) -> None:
+        self.events["sample"] += 1
+
+    def on_end(self, ep, summary) -> None:
+        self.events["end"] += 1
+        summary["counted"] = True
+
+
+def test_an_output_is_an_observer_and_sees_every_event() -> None:
+    from uavxai.avoidance.planners import make_planner
+    from uavxai.avoidance.types import PlannerConfig
+
+    sc = default_scenario("obs", avoidance={"max_steps": 7}, seed=4)
+    count = _Count()
+    planner = make_planner("none", PlannerConfig.from_scenario(sc))
+    r = fly(sc, planner, (1900, 1900, 120), dynamics="kinematic", intruders=[], observers=[count])
+    assert r.outcome is Outcome.TIMEOUT and r.steps == 7
+    assert count.events == {"start": 1, "decision": 7, "sample": 70, "end": 1}
+    assert r.summary["counted"] and r.summary["outcome"] == "timeout"
+
+
+def test_kinematic_world_flies_the_commanded_turn() -> None:
+    """A 30 deg bank at 20 m/s turns at g tan(phi) / V once the roll has settled."""
+    sc = default_scenario("turn")
+    world = KinematicWorld(sc, intruders=[])
+    world.command_ownship(bank_cmd_rad=np.radians(30.0), accel_cmd_mps2=0.0, alt_target_m=120.0)
+    world.advance(3.0)
+    psi0, t0 = world.state().att[0, 2], world.t
+    world.advance(4.0)
+    rate = (world.state().att[0, 2] - psi0) / (world.t - t0)
+    assert rate == pytest.approx(9.80665 * np.tan(np.radians(30)) / 20.0, rel=1e-3)
+
+
+def test_kinematic_episode_is_reproducible_and_ends_in_a_known_outcome() -> None:
+    sc = default_scenario("k", ownship={"goal": [1000, 1000, 120]})
+    a = run_kinematic("mcts_fast", sc, 11, 15)
+    b = run_kinematic("mcts_fast", sc, 11, 15)
+    assert (a.outcome, a.steps, a.min_separation_m) == (b.outcome, b.steps, b.min_separation_m)
+    assert a.outcome in {o.value for o in Outcome}

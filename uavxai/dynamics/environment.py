@@ -1,0 +1,68 @@
+"""The weather of a scenario (`environment:`): a steady wind and a turbulence severity, as
+plain data that both dynamics use.
+
+The JSBSim world hands it to every aircraft (:meth:`Aircraft.set_environment`, before
+``start``); a kinematic model adds :attr:`EnvironmentConfig.wind_enu` to the air velocity it
+flies (turbulence is JSBSim-only: the kinematic model has no gust response to feed it to).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from uavxai.dynamics.aircraft import TURBULENCE, wind_ne_from
+from uavxai.errors import UserError
+
+
+@dataclass(frozen=True)
+class EnvironmentConfig:
+    wind_speed_mps: float = 0.0
+    wind_from_deg: float = 270.0  # the direction the wind blows FROM, clockwise from north
+    turbulence: str = "none"  # none | light | moderate | severe
+
+    def __post_init__(self) -> None:
+        wind_ne_from(self.wind_speed_mps, self.wind_from_deg)  # validates both
+        if self.turbulence not in TURBULENCE:
+            raise UserError(
+                f"environment.turbulence = {self.turbulence!r}; allowed: {', '.join(TURBULENCE)}"
+            )
+
+    @classmethod
+    def from_scenario(cls, scenario: object) -> EnvironmentConfig:
+        """The scenario's ``environment`` section; calm air for a schema without it."""
+        env = getattr(scenario, "environment", None)
+        if env is None:
+            return cls()
+        wind = getattr(env, "wind", None)
+        return cls(
+            wind_speed_mps=float(getattr(wind, "speed_mps", 0.0)),
+            wind_from_deg=float(getattr(wind, "from_deg", 270.0)),
+            turbulence=str(getattr(env, "turbulence", "none")),
+        )
+
+    @property
+    def wind_ne(self) -> tuple[float, float]:
+        """(north, east) velocity of the air mass, m/s (Aircraft.set_environment's input)."""
+        return wind_ne_from(self.wind_speed_mps, self.wind_from_deg)
+
+    @property
+    def wind_enu(self) -> tuple[float, float, float]:
+        """(x east, y north, h up) velocity of the air mass, m/s: add it to an air velocity
+        to get the ground velocity."""
+        north, east = self.wind_ne
+        return east, north, 0.0
+
+    @property
+    def calm(self) -> bool:
+        return self.wind_speed_mps == 0.0 and self.turbulence == "none"
+
+    def crab_angle_rad(self, heading_rad: float, airspeed_mps: float) -> float:
+        """Ground track minus heading of an aircraft holding ``heading_rad`` at
+        ``airspeed_mps`` in this wind (the wind triangle), in (-pi, pi]."""
+        north, east = self.wind_ne
+        track = math.atan2(
+            airspeed_mps * math.sin(heading_rad) + east,
+            airspeed_mps * math.cos(heading_rad) + north,
+        )
+        return (track - heading_rad + math.pi) % (2 * math.pi) - math.pi

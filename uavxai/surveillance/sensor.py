@@ -1,0 +1,48 @@
+"""The onboard sensor that sees non-cooperative traffic (a radar or camera, simplified).
+
+It measures position only (no velocity: the tracker estimates it), within a range and a
+horizontal field of view centred on the ownship's heading, with isotropic Gaussian noise.
+Its reports are not transmitted, so they have no latency and no dropout. It is told which
+intruder it sees (perfect association): the tracker needs no data association.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from uavxai.dynamics.state import TrafficState
+from uavxai.errors import UserError
+
+
+@dataclass(frozen=True)
+class SensorConfig:
+    """The onboard sensor that sees non-cooperative traffic (radar or camera, simplified):
+    position only, within ``range_m`` and ``fov_deg`` (total, centred on the ownship's
+    heading, horizontal), with per-axis noise ``sigma_m``, at the surveillance rate."""
+
+    range_m: float = 1000.0
+    fov_deg: float = 220.0
+    sigma_m: float = 10.0
+
+    def __post_init__(self) -> None:
+        if not self.range_m >= 0:
+            raise UserError(f"surveillance.sensor.range_m must be >= 0, got {self.range_m}")
+        if not 0 <= self.fov_deg <= 360:
+            raise UserError(f"surveillance.sensor.fov_deg must be in [0, 360], got {self.fov_deg}")
+        if not self.sigma_m >= 0:
+            raise UserError(f"surveillance.sensor.sigma_m must be >= 0, got {self.sigma_m}")
+
+
+def sensor_sees(state: TrafficState, rows: np.ndarray, sensor: SensorConfig) -> np.ndarray:
+    """Which of ``rows`` the onboard sensor of the ownship (row 0) sees: within ``range_m``
+    (3-D) and within ``fov_deg / 2`` of the ownship's heading (horizontal bearing)."""
+    rows = np.asarray(rows, dtype=int)
+    d = state.pos[rows] - state.pos[0]
+    in_range = np.linalg.norm(d, axis=1) <= sensor.range_m
+    bearing = np.arctan2(d[:, 0], d[:, 1])  # clockwise from north
+    off = np.abs((bearing - state.att[0, 2] + math.pi) % (2 * math.pi) - math.pi)
+    in_fov = off <= math.radians(sensor.fov_deg) / 2 + 1e-12
+    return in_range & in_fov
