@@ -136,6 +136,9 @@ class MavlinkBridge:
         }
         self._previous_attitude: tuple[float, np.ndarray] | None = None
         self._now: float | None = None
+        # Publish every intruder's exact state as ADSB_VEHICLE (no surveillance model); off
+        # when a surveillance model's reports are relayed instead.
+        self.truth_adsb = True
 
         self._link = Link(link, system_id) if link is not None else None
         self._codec = new_codec(SimpleNamespace(write=self._write), system_id, AUTOPILOT_COMPONENT)
@@ -204,9 +207,16 @@ class MavlinkBridge:
             self._send(telemetry.global_position_int(state, self.frame))
             self._send(telemetry.attitude(state, self._body_rates(state)))
             self._send(telemetry.vfr_hud(state, self.frame))
-        if gates["adsb"].due(t):
+        if self.truth_adsb and gates["adsb"].due(t):
             for msg in telemetry.adsb_vehicles(state, self.frame):
                 self._send(msg)
+
+    def relay(self, frames: bytes) -> None:
+        """Forward frames packed elsewhere to the link: the ADS-B receiver's ADSB_VEHICLE
+        reports, which the ground station then shows as traffic (with ``truth_adsb`` off,
+        they replace the exact traffic the bridge would otherwise publish)."""
+        if frames:
+            self._write(frames)
 
     @property
     def failsafe_active(self) -> bool:

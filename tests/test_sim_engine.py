@@ -119,3 +119,55 @@ def test_kinematic_episode_is_reproducible_and_ends_in_a_known_outcome() -> None
     b = run_kinematic("mcts_fast", sc, 11, 15)
     assert (a.outcome, a.steps, a.min_separation_m) == (b.outcome, b.steps, b.min_separation_m)
     assert a.outcome in {o.value for o in Outcome}
+
+
+def test_the_planner_believes_what_the_adsb_frames_on_the_link_carry(tmp_path: Path) -> None:
+    """`uavxai run` with ADS-B surveillance: the reports the tracker ingests are the ones
+    decoded from ADSB_VEHICLE frames, and a ground station on the link receives those same
+    frames (noisy, not the truth)."""
+    import socket
+
+    from pymavlink import mavutil
+
+    from uavxai.avoidance.planners import make_planner
+    from uavxai.avoidance.types import PlannerConfig
+    from uavxai.sim.picture import Picture
+    from uavxai.sim.run import mavlink_path
+
+    gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    gcs.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 22)
+    gcs.bind(("127.0.0.1", 0))
+    gcs.settimeout(0.0)
+    port = gcs.getsockname()[1]
+    sc = default_scenario("adsb", seed=2, avoidance={"max_steps": 8}, intruders={"count": 6})
+
+    decoded: list = []
+
+    class Grab(Observer):
+        def on_sample(self, ep, state) -> None:
+            link = ep.picture.link
+            decoded.extend((r.id, round(r.pos[0], 2), round(r.pos[1], 2)) for r in link.decoded)
+            link.decoded = []
+
+    planner = make_planner("none", PlannerConfig.from_scenario(sc))
+    r = fly(sc, planner, (1900, 1900, 120), path=mavlink_path(sc, f"udpout:127.0.0.1:{port}"),
+            observers=[Grab()])  # fmt: skip
+    assert r.steps == 8 and decoded
+    mav = mavutil.mavlink.MAVLink(None)
+    received = []
+    while True:
+        try:
+            data = gcs.recv(65536)
+        except BlockingIOError:
+            break
+        for m in mav.parse_buffer(data) or []:
+            if m.get_type() == "ADSB_VEHICLE":
+                received.append(m)
+    frame = Picture(sc).link.frame
+    on_link = set()
+    for m in received:
+        x, y, _ = frame.to_local(m.lat / 1e7, m.lon / 1e7, m.altitude / 1000.0)
+        ident = f"intruder-{m.ICAO_address - 0xF00000}"
+        on_link.add((ident, round(float(x), 2), round(float(y), 2)))
+    assert set(decoded) <= on_link  # everything the planner decoded went out on the link
+    assert len(received) >= len(decoded)

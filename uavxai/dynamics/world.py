@@ -17,6 +17,7 @@ import numpy as np
 
 from uavxai.dynamics.aircraft import FT, Aircraft, heading_from_deg
 from uavxai.dynamics.behaviours import PILOT_PERIOD_S, make_pilots
+from uavxai.dynamics.environment import EnvironmentConfig
 from uavxai.dynamics.geodesy import LocalFrame
 from uavxai.dynamics.state import OWNSHIP_ID, TrafficState, intruder_id
 from uavxai.dynamics.traffic import draw_intruders
@@ -97,6 +98,9 @@ class JSBSimWorld:
                 f"avoidance.speed_mps = {list(avoid.speed_mps)}: aircraft "
                 f"'{sc.ownship.aircraft}' flies between {flyable[0]:g} and {flyable[1]:g} m/s"
             )
+        env = EnvironmentConfig.from_scenario(sc)
+        if not env.calm:
+            own.set_environment(env.wind_ne, env.turbulence, jsbsim_seed(self.seed, 0))
         own.set_limits(bank_limit_rad=math.radians(avoid.bank_limit_deg), speed_range=limits)
         own.start(start.x, start.y, start.h, heading_from_deg(start.heading_deg), start.speed_mps)
         for i, spec in enumerate(self.intruders, start=1):
@@ -106,6 +110,8 @@ class JSBSimWorld:
                 f"intruder {i} speed_mps", spec.speed_mps, sc.intruders.aircraft, a.speed_range
             )
             a.set_limits(bank_limit_rad=math.radians(avoid.bank_limit_deg))
+            if not env.calm:  # the same air for everyone; turbulence seeded per aircraft
+                a.set_environment(env.wind_ne, env.turbulence, jsbsim_seed(self.seed, i))
             a.start(spec.x, spec.y, spec.h, heading_from_deg(spec.heading_deg), spec.speed_mps)
 
     @staticmethod

@@ -19,6 +19,7 @@ from uavxai.sim.command import CommandPath, DirectPath, Dynamics
 from uavxai.sim.episode import Episode, EpisodeResult, Observer
 from uavxai.sim.judge import Judge
 from uavxai.sim.kinematic import KinematicWorld
+from uavxai.sim.picture import Picture
 
 
 def _jsbsim(scenario: Scenario, intruders, seed: int) -> Dynamics:
@@ -78,6 +79,9 @@ def fly(
         av = scenario.avoidance
         planner.reset(seed)
         command = path(world)
+        picture = Picture(scenario, forward=command.relay)
+        if hasattr(command, "bridge"):  # ground stations see the traffic the planner sees
+            command.bridge.truth_adsb = picture.truth
         episode = Episode(
             world,
             planner,
@@ -86,7 +90,8 @@ def fly(
             Clock.from_scenario(scenario),
             goal=goal,
             max_steps=av.max_steps,
-            observers=observers,
+            observers=[picture, *observers],
+            picture=picture,
             label={"scenario": scenario.name, "seed": seed, "dynamics": dynamics},
         )
         return episode.run()

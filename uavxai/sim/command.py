@@ -45,6 +45,9 @@ class CommandPath(Protocol):
     def on_sample(self, state: TrafficState) -> None:
         """After every sample: read the link, publish what is due."""
 
+    def relay(self, frames: bytes) -> None:
+        """Frames for the ground stations (the ADS-B receiver's reports), if there is a link."""
+
     def close(self) -> dict[str, int] | None:
         """Finish; returns the link's counters for summary.json (None: no link)."""
 
@@ -70,6 +73,9 @@ class DirectPath:
     def on_sample(self, state: TrafficState) -> None:
         pass
 
+    def relay(self, frames: bytes) -> None:
+        pass
+
     def close(self) -> None:
         return None
 
@@ -87,6 +93,9 @@ class MavlinkPath:
     def on_sample(self, state: TrafficState) -> None:
         self.bridge.poll()
         self.bridge.publish(state)
+
+    def relay(self, frames: bytes) -> None:
+        self.bridge.relay(frames)
 
     def close(self) -> dict[str, int]:
         counters = dict(self.bridge.counters)

@@ -5,7 +5,9 @@ The ownship follows its autopilot commands the way the planners predict it (bank
 reached at the roll-rate limit, coordinated turn, along-track acceleration within the speed
 limits, climb towards the height target at a bounded rate: :class:`EncounterModel`);
 intruders are flown by the same pilots as in the JSBSim world (:func:`make_pilots`), at
-constant speed and altitude. It never fails: :meth:`failure` is always None.
+constant speed and altitude. A steady wind (``environment.wind``) carries everyone over the
+ground; turbulence is JSBSim-only (the model has no gust response). It never fails:
+:meth:`failure` is always None.
 
 Commands are taken as the JSBSim world takes them (``command_ownship``); a speed target is
 flown as the largest allowed acceleration towards it.
@@ -21,6 +23,7 @@ import numpy as np
 from uavxai.avoidance.model import PHI, PHI_CMD, PSI, STATE_DIM, EncounterModel, Track, V
 from uavxai.avoidance.types import PlannerConfig
 from uavxai.dynamics.behaviours import PILOT_PERIOD_S, make_pilots
+from uavxai.dynamics.environment import EnvironmentConfig
 from uavxai.dynamics.state import OWNSHIP_ID, TrafficState, intruder_id
 from uavxai.dynamics.traffic import draw_intruders
 from uavxai.errors import UserError
@@ -59,6 +62,8 @@ class KinematicWorld:
             dtype=float,
         ).reshape(len(self.intruders), STATE_DIM)
         self._vh = 0.0
+        # The air mass moves everyone over the ground; turbulence is JSBSim-only.
+        self._wind = np.asarray(EnvironmentConfig.from_scenario(scenario).wind_enu, dtype=float)
         self._accel = 0.0
         self._speed_target: float | None = None
         self._alt_target = float(start.h)
@@ -114,11 +119,13 @@ class KinematicWorld:
         goal = np.array([_FAR, _FAR, self._alt_target])
         seg = model.fly(self._own[None], np.array([action]), goal, duration, empty, cull=False)
         self._own = seg.end[0].copy()
+        self._own[:2] += self._wind[:2] * duration
         self._vh = (float(self._own[2]) - h0) / duration
         if len(self._traffic):
             _, self._traffic = model.fly_commanded(
                 self._traffic, self._traffic[:, PHI_CMD], duration
             )
+            self._traffic[:, :2] += self._wind[:2] * duration
 
     def _fly_pilots(self) -> None:
         if not self._pilots:
@@ -135,6 +142,7 @@ class KinematicWorld:
             rows = np.vstack([self._own[None], self._traffic])
             v, psi = rows[:, V], rows[:, PSI]
             vel = np.stack([v * np.sin(psi), v * np.cos(psi), np.zeros_like(v)], axis=1)
+            vel += self._wind  # over the ground
             vel[0, 2] = self._vh
             att = np.stack([rows[:, PHI], np.zeros_like(v), np.mod(psi, 2 * math.pi)], axis=1)
             self._cached = TrafficState(

@@ -55,6 +55,11 @@ class TrajectoryCSV(Observer):
             self._f.close()
 
 
+def _xyzv(pos: np.ndarray, vel: np.ndarray) -> dict[str, float]:
+    values = (*pos.tolist(), *vel.tolist())
+    return dict(zip(("x", "y", "h", "vx", "vy", "vh"), (round(v, 3) for v in values), strict=True))
+
+
 class DecisionsJSONL(Observer):
     """``decisions.jsonl``: one line per decision, what the planner saw and chose (SPEC §4)."""
 
@@ -65,6 +70,10 @@ class DecisionsJSONL(Observer):
         from uavxai.xai.explain import decision_record
 
         record = decision_record(event.t, event.own, event.intruders, event.decision)
+        truth = event.truth  # the same instant as it really was, beside the belief
+        record["truth"] = [
+            {"id": truth.ids[i], **_xyzv(truth.pos[i], truth.vel[i])} for i in range(1, truth.n)
+        ]
         self._f.write(json.dumps({"step": event.step, **record}, allow_nan=False) + "\n")
 
     def close(self) -> None:

@@ -166,8 +166,21 @@ def decision_record(
             "heading": own.heading,
             "bank": own.bank,
         },
+        # What the planner believed (SPEC §4): the track and how sure it was of it.
         "intruders": [
-            {"id": i.id, "x": i.x, "y": i.y, "h": i.h, "vx": i.vx, "vy": i.vy, "vh": i.vh}
+            {
+                "id": i.id,
+                "x": i.x,
+                "y": i.y,
+                "h": i.h,
+                "vx": i.vx,
+                "vy": i.vy,
+                "vh": i.vh,
+                "turn_rate": i.turn_rate,
+                "sigma_m": i.sigma_m,
+                "sigma_v": i.sigma_v,
+                "age_s": i.age_s,
+            }
             for i in intruders
         ],
     }
