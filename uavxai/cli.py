@@ -290,7 +290,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     out = prepare_out_dir(args.out or Path("runs") / sc.name, args.force)
     from uavxai.sim.run import run_command
 
-    run_command(
+    final = run_command(
         sc,
         out=out,
         episodes=args.episodes,
@@ -299,6 +299,13 @@ def cmd_run(args: argparse.Namespace) -> int:
         mavlink=args.mavlink,
         realtime=args.realtime,
     )
+    if any(e["outcome"] == "interrupted" for e in final.get("episodes", [final])):
+        print(
+            f"uavxai: interrupted; the files in {out} are whole and summary.json says "
+            "outcome 'interrupted'",
+            file=sys.stderr,
+        )
+        return 130
     return EXIT_OK
 
 
@@ -319,9 +326,23 @@ COMMANDS = {
 }
 
 
+def _sigterm_as_interrupt() -> None:
+    """SIGTERM ends a run like Ctrl-C does: files closed whole, a summary marked
+    ``interrupted``, finished episodes kept, worker processes stopped."""
+    import signal
+    import threading
+
+    def interrupt(signum, frame) -> None:
+        raise KeyboardInterrupt(f"signal {signum}")
+
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, interrupt)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     os.environ.setdefault("JSBSIM_DEBUG", "0")
     os.environ.setdefault("MAVLINK20", "1")
+    _sigterm_as_interrupt()
     parser = build_parser()
     try:
         args = parser.parse_args(argv)

@@ -90,3 +90,10 @@ def make_pilots(
         IntruderPilot(spec, np.random.default_rng(stream), scenario)
         for spec, stream in zip(specs, streams, strict=True)
     ]
+
+
+def newcomer_pilot(scenario: Scenario, spec: IntruderSpec, seed: int, number: int) -> IntruderPilot:
+    """The pilot of intruder ``number`` entering mid-run (``intruders.flow: replace``), with
+    its own random stream of the run's ``seed``."""
+    stream = np.random.SeedSequence(seed, spawn_key=(0x4E4557, number))  # "NEW"
+    return IntruderPilot(spec, np.random.default_rng(stream), scenario)

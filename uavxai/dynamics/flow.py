@@ -24,6 +24,9 @@ import numpy as np
 from uavxai.errors import UserError
 
 FLOWS = ("replace", "none")
+# A newcomer never appears closer than this to the ownship (horizontally): an aircraft
+# materialising next to it would be a collision nobody could avoid.
+ENTRY_CLEARANCE_M = 300.0
 _FLOW_STREAM = 0x464C4F  # "FLO": spawn key apart from the run's other random streams
 
 

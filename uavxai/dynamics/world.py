@@ -16,8 +16,9 @@ import jsbsim
 import numpy as np
 
 from uavxai.dynamics.aircraft import FT, Aircraft, heading_from_deg
-from uavxai.dynamics.behaviours import PILOT_PERIOD_S, make_pilots
+from uavxai.dynamics.behaviours import PILOT_PERIOD_S, make_pilots, newcomer_pilot
 from uavxai.dynamics.environment import EnvironmentConfig
+from uavxai.dynamics.flow import ENTRY_CLEARANCE_M, Entry, TrafficFlow
 from uavxai.dynamics.geodesy import LocalFrame
 from uavxai.dynamics.state import OWNSHIP_ID, TrafficState, intruder_id
 from uavxai.dynamics.traffic import draw_intruders
@@ -69,6 +70,7 @@ class JSBSimWorld:
         self.intruders = list(intruders)
         self.ids = (OWNSHIP_ID, *(intruder_id(i + 1) for i in range(len(self.intruders))))
         self._pilots = make_pilots(scenario, self.intruders, self.seed)
+        self._flow = TrafficFlow.from_scenario(scenario, seed=self.seed)
         self._pilot_period = max(1, round(PILOT_PERIOD_S / self.dt))
         self._steps = 0
         self._cached: TrafficState | None = None
@@ -104,15 +106,24 @@ class JSBSimWorld:
         own.set_limits(bank_limit_rad=math.radians(avoid.bank_limit_deg), speed_range=limits)
         own.start(start.x, start.y, start.h, heading_from_deg(start.heading_deg), start.speed_mps)
         for i, spec in enumerate(self.intruders, start=1):
-            a = Aircraft(sc.intruders.aircraft, self.frame, self.dt, jsbsim_seed(self.seed, i))
-            self.aircraft.append(a)
+            self.aircraft.append(self._intruder(i, spec, env))
+
+    def _intruder(self, i: int, spec: IntruderSpec, env: EnvironmentConfig) -> Aircraft:
+        """The JSBSim aircraft of intruder row ``i`` (1-based), started and trimmed."""
+        sc = self.scenario
+        a = Aircraft(sc.intruders.aircraft, self.frame, self.dt, jsbsim_seed(self.seed, i))
+        try:
             self._check_speed(
                 f"intruder {i} speed_mps", spec.speed_mps, sc.intruders.aircraft, a.speed_range
             )
-            a.set_limits(bank_limit_rad=math.radians(avoid.bank_limit_deg))
+            a.set_limits(bank_limit_rad=math.radians(sc.avoidance.bank_limit_deg))
             if not env.calm:  # the same air for everyone; turbulence seeded per aircraft
                 a.set_environment(env.wind_ne, env.turbulence, jsbsim_seed(self.seed, i))
             a.start(spec.x, spec.y, spec.h, heading_from_deg(spec.heading_deg), spec.speed_mps)
+        except BaseException:
+            a.close()
+            raise
+        return a
 
     @staticmethod
     def _check_speed(field: str, speed: float, aircraft: str, flyable: tuple[float, float]) -> None:
@@ -165,9 +176,31 @@ class JSBSimWorld:
         s = self.state()
         if self._check(s):
             return
+        if self._flow is not None and s.n > 1:
+            entries = self._flow.replace(
+                s.pos[1:], keep_clear=s.pos[:1], min_distance_m=ENTRY_CLEARANCE_M
+            )
+            if entries:
+                self._replace(entries)
+                s = self.state()
         for i, pilot in enumerate(self._pilots, start=1):
             bank, speed = pilot.command(s.t, s.pos[i], s.vel[i], float(s.att[i, 2]))
             self.aircraft[i].command(bank_cmd_rad=bank, speed_target_mps=speed)
+
+    def _replace(self, entries: list[Entry]) -> None:
+        """Intruders that left the area make way for newcomers entering at the edge."""
+        env = EnvironmentConfig.from_scenario(self.scenario)
+        ids = list(self.ids)
+        for e in entries:
+            row = e.replaces + 1
+            spec = e.to_spec(self.scenario.intruders.behaviour)
+            self.aircraft[row].close()
+            self.aircraft[row] = self._intruder(e.number, spec, env)
+            self._pilots[row - 1] = newcomer_pilot(self.scenario, spec, self.seed, e.number)
+            ids[row] = e.id
+        self.ids = tuple(ids)
+        self._runs = [a.run for a in self.aircraft]
+        self._cached = None
 
     # ----------------------------------------------------------------------------- state
     def state(self) -> TrafficState:

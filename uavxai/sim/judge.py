@@ -32,10 +32,17 @@ class Judge:
         self.goal_radius_m = goal_radius_m
 
     def separation(self, prev: TrafficState, now: TrafficState) -> float:
-        """Smallest ownship-intruder distance between two samples (inf without intruders)."""
+        """Smallest ownship-intruder distance between two samples (inf without intruders).
+        A row whose aircraft was replaced in between (persistent traffic) counts from now."""
         if now.n < 2 or prev.n != now.n:
             return now.min_separation()
-        return closest_approach(prev.pos[0], now.pos[0], prev.pos[1:], now.pos[1:])
+        if prev.ids == now.ids:
+            return closest_approach(prev.pos[0], now.pos[0], prev.pos[1:], now.pos[1:])
+        same = np.array([a == b for a, b in zip(prev.ids[1:], now.ids[1:], strict=True)])
+        new = now.pos[1:][~same]
+        fresh = float(np.min(np.linalg.norm(new - now.pos[0], axis=1))) if len(new) else math.inf
+        kept = closest_approach(prev.pos[0], now.pos[0], prev.pos[1:][same], now.pos[1:][same])
+        return min(kept, fresh)
 
     def judge(self, now: TrafficState, flown_min_m: float, failure: str | None) -> Outcome | None:
         """The outcome the episode ends with after this sample, or None to go on."""

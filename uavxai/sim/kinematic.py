@@ -22,8 +22,9 @@ import numpy as np
 
 from uavxai.avoidance.model import PHI, PHI_CMD, PSI, STATE_DIM, EncounterModel, Track, V
 from uavxai.avoidance.types import PlannerConfig
-from uavxai.dynamics.behaviours import PILOT_PERIOD_S, make_pilots
+from uavxai.dynamics.behaviours import PILOT_PERIOD_S, make_pilots, newcomer_pilot
 from uavxai.dynamics.environment import EnvironmentConfig
+from uavxai.dynamics.flow import ENTRY_CLEARANCE_M, Entry, TrafficFlow
 from uavxai.dynamics.state import OWNSHIP_ID, TrafficState, intruder_id
 from uavxai.dynamics.traffic import draw_intruders
 from uavxai.errors import UserError
@@ -68,6 +69,7 @@ class KinematicWorld:
         self._speed_target: float | None = None
         self._alt_target = float(start.h)
         self._pilots = make_pilots(scenario, self.intruders, self.seed)
+        self._flow = TrafficFlow.from_scenario(scenario, seed=self.seed)
         self._pilot_period = max(1, round(PILOT_PERIOD_S / self.dt))
         self._steps = 0
         self._cached: TrafficState | None = None
@@ -131,10 +133,28 @@ class KinematicWorld:
         if not self._pilots:
             return
         s = self.state()
+        if self._flow is not None:
+            entries = self._flow.replace(
+                s.pos[1:], keep_clear=s.pos[:1], min_distance_m=ENTRY_CLEARANCE_M
+            )
+            if entries:
+                self._replace(entries)
+                s = self.state()
         for i, pilot in enumerate(self._pilots):
             bank, speed = pilot.command(s.t, s.pos[i + 1], s.vel[i + 1], float(s.att[i + 1, 2]))
             self._traffic[i, PHI_CMD] = bank
             self._traffic[i, V] = speed  # the pilot's speed target, held
+
+    def _replace(self, entries: list[Entry]) -> None:
+        """As the JSBSim world: a newcomer at the edge for every intruder that left."""
+        ids = list(self.ids)
+        for e in entries:
+            spec = e.to_spec(self.scenario.intruders.behaviour)
+            self._traffic[e.replaces] = (e.x, e.y, e.h, e.speed_mps, e.heading_rad, 0.0, 0.0)
+            self._pilots[e.replaces] = newcomer_pilot(self.scenario, spec, self.seed, e.number)
+            ids[e.replaces + 1] = e.id
+        self.ids = tuple(ids)
+        self._cached = None
 
     # ----------------------------------------------------------------------------- state
     def state(self) -> TrafficState:

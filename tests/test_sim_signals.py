@@ -1,0 +1,43 @@
+"""SIGTERM and SIGINT end a run cleanly: whole files, a summary marked `interrupted`."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from uavxai.paths import scenarios_dir
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_a_signal_leaves_whole_files_and_an_interrupted_summary(tmp_path: Path, sig) -> None:
+    out = tmp_path / "run"
+    env = {**os.environ, "JSBSIM_DEBUG": "0"}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "uavxai", "run", str(scenarios_dir() / "head_on.yaml"),
+         "--out", str(out), "--realtime", "4"],
+        env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    deadline = time.monotonic() + 120
+    while not (out / "decisions.jsonl").exists() or (out / "decisions.jsonl").stat().st_size == 0:
+        assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
+        time.sleep(0.2)
+    time.sleep(2.0)
+    proc.send_signal(sig)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err and "interrupted" in err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["outcome"] == "interrupted" and summary["steps"] >= 1
+    rows = (out / "trajectory.csv").read_text().splitlines()
+    assert all(len(r.split(",")) == 12 for r in rows)  # no row cut mid-write
+    from rerun.chunk import RrdReader
+
+    chunks = RrdReader(out / "run.rrd").stream().to_chunks()
+    assert any(c.entity_path == "/xai/tree" for c in chunks)
