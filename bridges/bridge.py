@@ -83,6 +83,9 @@ class CommandSink(Protocol):
         alt_target_m: float | None = None,
     ) -> None: ...
 
+    def command_orbit(self, x: float, y: float, radius_m: float, clockwise: bool = True) -> None:
+        ...
+
 
 class MavlinkBridge:
     """The ownship as MAVLink system `system_id`, component 1.
@@ -152,6 +155,7 @@ class MavlinkBridge:
             "SET_ATTITUDE_TARGET": self._on_attitude_target,
             "SET_POSITION_TARGET_LOCAL_NED": self._on_position_target,
             "COMMAND_LONG": self._on_command_long,
+            "COMMAND_INT": self._on_command_int,
             "PARAM_REQUEST_LIST": self._on_param_request_list,
             "PARAM_REQUEST_READ": self._on_param_request_read,
             "PARAM_SET": self._on_param_set,
@@ -210,6 +214,13 @@ class MavlinkBridge:
         if self.truth_adsb and gates["adsb"].due(t):
             for msg in telemetry.adsb_vehicles(state, self.frame):
                 self._send(msg)
+
+    def announce(self, text: str, severity: int = mavlink.MAV_SEVERITY_NOTICE) -> None:
+        """A STATUSTEXT to the ground stations (mission phases, failsafes); MAVLink carries
+        50 characters, the rest is cut."""
+        data = text[:50].encode("ascii", "replace")
+        self._send(mavlink.MAVLink_statustext_message(severity, data))
+        log.info("%s", text)
 
     def relay(self, frames: bytes) -> None:
         """Forward frames packed elsewhere to the link: the ADS-B receiver's ADSB_VEHICLE
@@ -318,6 +329,25 @@ class MavlinkBridge:
         self._ack(msg, mavlink.MAV_RESULT_ACCEPTED)
         self._send(reply)
         return False
+
+    def _on_command_int(self, msg) -> bool:
+        """COMMAND_INT: MAV_CMD_DO_ORBIT (loiter about a point), the one position command."""
+        if not self._addressed_to_me(msg):
+            return False
+        if msg.command != mavlink.MAV_CMD_DO_ORBIT:
+            self._ack(msg, mavlink.MAV_RESULT_UNSUPPORTED)
+            self.counters["ignored_messages"] += 1
+            return False
+        # param1 radius (m, positive clockwise); x, y lat/lon degE7; z altitude in `frame`.
+        radius, frames = msg.param1, (mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT,)
+        if msg.frame not in frames or not (math.isfinite(radius) and abs(radius) >= 1.0):
+            self._ack(msg, mavlink.MAV_RESULT_DENIED)
+            return self._reject(f"DO_ORBIT radius {radius} in frame {msg.frame}")
+        x, y, _ = self.frame.to_local(msg.x / 1e7, msg.y / 1e7, 0.0)
+        self._ack(msg, mavlink.MAV_RESULT_ACCEPTED)
+        self._obey(alt_target_m=float(msg.z))
+        self._sink.command_orbit(float(x), float(y), abs(float(radius)), radius >= 0)
+        return True
 
     def _change_speed(self, msg) -> bool:
         # param1 speed type: 0 airspeed, 1 ground speed; both set the airspeed target, since

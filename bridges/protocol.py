@@ -193,6 +193,30 @@ class CommandEncoder:
         )
         return self._packer.pack(msg)
 
+    def orbit(
+        self, lat_e7: int, lon_e7: int, h_m: float, radius_m: float, clockwise: bool
+    ) -> bytes:
+        """MAV_CMD_DO_ORBIT (loiter) as COMMAND_INT; the bridge answers COMMAND_ACK."""
+        return self._packer.pack(
+            orbit_command(
+                self.target_system, self.target_component, lat_e7, lon_e7, h_m, radius_m,
+                clockwise,
+            )
+        )  # fmt: skip
+
+    def change_altitude(self, h_m: float) -> bytes:
+        """MAV_CMD_DO_CHANGE_ALTITUDE to a height above home (the local h)."""
+        msg = mavlink.MAVLink_command_long_message(
+            self.target_system,
+            self.target_component,
+            mavlink.MAV_CMD_DO_CHANGE_ALTITUDE,
+            0,
+            float(h_m),
+            mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT,
+            *(0.0,) * 5,
+        )
+        return self._packer.pack(msg)
+
     def change_speed(self, speed_mps: float) -> bytes:
         """MAV_CMD_DO_CHANGE_SPEED to an airspeed target (the bridge answers COMMAND_ACK)."""
         msg = mavlink.MAVLink_command_long_message(
@@ -209,6 +233,33 @@ class CommandEncoder:
             0.0,
         )
         return self._packer.pack(msg)
+
+
+def orbit_command(
+    target_system: int,
+    target_component: int,
+    lat_e7: int,
+    lon_e7: int,
+    h_m: float,
+    radius_m: float,
+    clockwise: bool = True,
+) -> mavlink.MAVLink_command_int_message:
+    """COMMAND_INT MAV_CMD_DO_ORBIT about (lat, lon) degE7 at height ``h_m`` above home."""
+    return mavlink.MAVLink_command_int_message(
+        target_system,
+        target_component,
+        mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT,
+        mavlink.MAV_CMD_DO_ORBIT,
+        0,
+        0,
+        float(radius_m if clockwise else -radius_m),
+        float("nan"),  # velocity: the current airspeed target
+        0.0,  # yaw behaviour: the default (front to the circle's tangent)
+        0.0,  # orbits: forever
+        int(lat_e7),
+        int(lon_e7),
+        float(h_m),
+    )
 
 
 def boot_ms(t_s: float) -> int:

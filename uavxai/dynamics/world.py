@@ -20,6 +20,7 @@ from uavxai.dynamics.behaviours import PILOT_PERIOD_S, make_pilots, newcomer_pil
 from uavxai.dynamics.environment import EnvironmentConfig
 from uavxai.dynamics.flow import ENTRY_CLEARANCE_M, Entry, TrafficFlow
 from uavxai.dynamics.geodesy import LocalFrame
+from uavxai.dynamics.loiter import GUIDANCE_PERIOD_S, LoiterAutopilot
 from uavxai.dynamics.state import OWNSHIP_ID, TrafficState, intruder_id
 from uavxai.dynamics.traffic import draw_intruders
 from uavxai.errors import UserError
@@ -47,7 +48,7 @@ def jsbsim_seed(seed: int, index: int) -> int:
     return int(state[0] & 0x7FFFFFFF)
 
 
-class JSBSimWorld:
+class JSBSimWorld(LoiterAutopilot):
     """Ownship (row 0) and intruders (rows 1..N) flown by JSBSim.
 
     ``intruders`` None draws them from the scenario with ``seed`` (default: the scenario's
@@ -71,6 +72,7 @@ class JSBSimWorld:
         self.ids = (OWNSHIP_ID, *(intruder_id(i + 1) for i in range(len(self.intruders))))
         self._pilots = make_pilots(scenario, self.intruders, self.seed)
         self._flow = TrafficFlow.from_scenario(scenario, seed=self.seed)
+        self._guidance_period = max(1, round(GUIDANCE_PERIOD_S / self.dt))
         self._pilot_period = max(1, round(PILOT_PERIOD_S / self.dt))
         self._steps = 0
         self._cached: TrafficState | None = None
@@ -153,7 +155,11 @@ class JSBSimWorld:
         runs = self._runs
         left = int(n)
         while left > 0 and self._failure is None:
-            chunk = min(left, self._pilot_period - self._steps % self._pilot_period)
+            chunk = min(
+                left,
+                self._pilot_period - self._steps % self._pilot_period,
+                self._guidance_period - self._steps % self._guidance_period,
+            )
             try:
                 for _ in range(chunk):
                     for run in runs:
@@ -167,6 +173,8 @@ class JSBSimWorld:
             self._cached = None
             if self._steps % self._pilot_period == 0:
                 self._fly_pilots()
+            if self._orbit is not None and self._steps % self._guidance_period == 0:
+                self._fly_orbit()
 
     def advance(self, seconds: float) -> None:
         self.step(round(seconds / self.dt))
@@ -240,7 +248,12 @@ class JSBSimWorld:
         for key, value in given.items():
             if value is not None and not math.isfinite(value):
                 raise UserError(f"command_ownship: {key} must be a finite number, got {value}")
+        if bank_cmd_rad is not None:
+            self._orbit = None  # a bank command takes the aircraft off its loiter orbit
         self.aircraft[0].command(**given)
+
+    def _bank_from_guidance(self, bank_rad: float) -> None:
+        self.aircraft[0].command(bank_cmd_rad=bank_rad)
 
     def ownship_command(self) -> dict[str, float]:
         """The ownship's current bank command, acceleration command, speed and height targets

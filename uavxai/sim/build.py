@@ -6,6 +6,7 @@ what differs between them is only which dynamics, which command path and which o
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import lru_cache
@@ -19,6 +20,7 @@ from uavxai.sim.command import CommandPath, DirectPath, Dynamics
 from uavxai.sim.episode import Episode, EpisodeResult, Observer
 from uavxai.sim.judge import Judge
 from uavxai.sim.kinematic import KinematicWorld
+from uavxai.sim.mission import Mission, MissionConfig
 from uavxai.sim.picture import Picture
 
 
@@ -68,30 +70,38 @@ def fly(
     intruders: list[IntruderSpec] | None = None,
     path: Callable[[Dynamics], CommandPath] = DirectPath,
     observers: Sequence[Observer] = (),
+    mission: MissionConfig | None = None,
 ) -> EpisodeResult:
     """Fly one seeded episode of ``scenario`` (its seed) and return its result; the world is
-    closed and every observer closed whatever happens."""
+    closed and every observer closed whatever happens. With a ``mission`` the episode flies
+    it (transit, on station, return; ``goal`` is then the service point) instead of ending at
+    the goal."""
     seed = scenario.seed
     world = command = None
     try:
         world = DYNAMICS[dynamics](scenario, intruders, seed)
-        world.command_ownship(alt_target_m=float(goal[2]))
         av = scenario.avoidance
         planner.reset(seed)
         command = path(world)
+        command.altitude(float(goal[2]), 0.0)  # the planner's model climbs to the goal's height
         picture = Picture(scenario, forward=command.relay)
         if hasattr(command, "bridge"):  # ground stations see the traffic the planner sees
             command.bridge.truth_adsb = picture.truth
+        flying = Mission(mission, command.announce) if mission is not None else None
+        max_steps = av.max_steps
+        if mission is not None:  # there and back, plus the time on station
+            max_steps = 2 * av.max_steps + math.ceil(mission.service_s / av.decision_period_s)
         episode = Episode(
             world,
             planner,
             command,
-            Judge(scenario.world, av.d_min_m, goal, av.goal_radius_m),
+            Judge(scenario.world, av.d_min_m, None if mission else goal, av.goal_radius_m),
             Clock.from_scenario(scenario),
             goal=goal,
-            max_steps=av.max_steps,
-            observers=[picture, *observers],
+            max_steps=max_steps,
+            observers=[picture, *([flying] if flying else []), *observers],
             picture=picture,
+            mission=flying,
             label={"scenario": scenario.name, "seed": seed, "dynamics": dynamics},
         )
         return episode.run()

@@ -48,8 +48,26 @@ class CommandPath(Protocol):
     def relay(self, frames: bytes) -> None:
         """Frames for the ground stations (the ADS-B receiver's reports), if there is a link."""
 
+    def orbit(self, x: float, y: float, h: float, radius_m: float, clockwise: bool, t: float):
+        """Put the autopilot in loiter about (x, y) at height h (MAV_CMD_DO_ORBIT)."""
+
+    def announce(self, text: str) -> None:
+        """Tell the ground stations (STATUSTEXT), if there is a link."""
+
+    def altitude(self, h: float, t: float) -> None:
+        """The height the autopilot holds (MAV_CMD_DO_CHANGE_ALTITUDE)."""
+
     def close(self) -> dict[str, int] | None:
         """Finish; returns the link's counters for summary.json (None: no link)."""
+
+
+def orbit_centre_on_wire(frame, x: float, y: float) -> tuple[int, int, float, float]:
+    """An orbit centre as COMMAND_INT carries it (lat/lon degE7) and where that lands back
+    in the local frame: both paths orbit the same point."""
+    lat, lon, _ = frame.to_geodetic(x, y, 0.0)
+    lat_e7, lon_e7 = round(float(lat) * 1e7), round(float(lon) * 1e7)
+    xq, yq, _ = frame.to_local(lat_e7 / 1e7, lon_e7 / 1e7, 0.0)
+    return lat_e7, lon_e7, float(xq), float(yq)
 
 
 def wire_values(bank_cmd_rad: float, accel_mps2: float) -> tuple[float, float]:
@@ -62,8 +80,17 @@ class DirectPath:
     """Setpoints straight to the autopilot (no bytes, no bridge)."""
 
     def __init__(self, world: Dynamics) -> None:
+        from uavxai.dynamics.geodesy import LocalFrame
+
         self._world = world
+        self._frame = LocalFrame.from_origin(world.scenario.world.origin)
         self.commands = 0
+
+    def orbit(self, x: float, y: float, h: float, radius_m: float, clockwise: bool, t: float):
+        _, _, xq, yq = orbit_centre_on_wire(self._frame, x, y)
+        self._world.command_ownship(alt_target_m=float(np.float32(h)))
+        self._world.command_orbit(xq, yq, float(np.float32(radius_m)), clockwise)
+        self.commands += 1
 
     def send(self, decision: Decision, t: float) -> None:
         bank, accel = wire_values(decision.bank_cmd_rad, decision.accel_mps2)
@@ -75,6 +102,13 @@ class DirectPath:
 
     def relay(self, frames: bytes) -> None:
         pass
+
+    def announce(self, text: str) -> None:
+        pass
+
+    def altitude(self, h: float, t: float) -> None:
+        self._world.command_ownship(alt_target_m=float(np.float32(h)))
+        self.commands += 1
 
     def close(self) -> None:
         return None
@@ -90,12 +124,22 @@ class MavlinkPath:
     def send(self, decision: Decision, t: float) -> None:
         self.bridge.feed(self._encoder.encode(decision.bank_cmd_rad, decision.accel_mps2, t))
 
+    def orbit(self, x: float, y: float, h: float, radius_m: float, clockwise: bool, t: float):
+        lat_e7, lon_e7, _, _ = orbit_centre_on_wire(self.bridge.frame, x, y)
+        self.bridge.feed(self._encoder.orbit(lat_e7, lon_e7, h, radius_m, clockwise))
+
     def on_sample(self, state: TrafficState) -> None:
         self.bridge.poll()
         self.bridge.publish(state)
 
     def relay(self, frames: bytes) -> None:
         self.bridge.relay(frames)
+
+    def announce(self, text: str) -> None:
+        self.bridge.announce(text)
+
+    def altitude(self, h: float, t: float) -> None:
+        self.bridge.feed(self._encoder.change_altitude(h))
 
     def close(self) -> dict[str, int]:
         counters = dict(self.bridge.counters)

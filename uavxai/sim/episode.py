@@ -106,6 +106,7 @@ class Episode:
         observers: Sequence[Observer] = (),
         picture: Picture = truth_picture,
         label: dict | None = None,
+        mission=None,
     ) -> None:
         self.world = world
         self.planner = planner
@@ -116,6 +117,7 @@ class Episode:
         self.max_steps = max_steps
         self.observers = list(observers)
         self.picture = picture
+        self.mission = mission  # uavxai.sim.mission.Mission, or None: transit to `goal` only
         self.label = dict(label or {})  # scenario, seed, ...: the head of the summary
         self.state = world.state()
         self.steps = 0
@@ -130,8 +132,12 @@ class Episode:
         state = self.state
         own = ownship_view(state, self.world.ownship_command()["bank_cmd_rad"])
         intruders = self.picture(state)
-        decision = self.planner.plan(own, intruders, self.goal, step=self.steps)
-        self.path.send(decision, state.t)
+        m = self.mission
+        decision = m.decide(self, own, intruders) if m is not None else None
+        if decision is None:  # the avoidance planner flies
+            goal = m.goal if m is not None else self.goal
+            decision = self.planner.plan(own, intruders, goal, step=self.steps)
+            self.path.send(decision, state.t)
         self.decision_ms.append(decision.ms)
         event = DecisionEvent(self.steps, state.t, own, intruders, decision, state)
         self.steps += 1
@@ -153,6 +159,8 @@ class Episode:
             for o in self.observers:
                 o.on_sample(self, self.state)
             outcome = self.judge.judge(self.state, sep, self.world.failure())
+            if outcome is None and self.mission is not None:
+                outcome = self.mission.outcome
             if outcome is not None:
                 break
         for o in self.observers:

@@ -25,6 +25,7 @@ from uavxai.avoidance.types import PlannerConfig
 from uavxai.dynamics.behaviours import PILOT_PERIOD_S, make_pilots, newcomer_pilot
 from uavxai.dynamics.environment import EnvironmentConfig
 from uavxai.dynamics.flow import ENTRY_CLEARANCE_M, Entry, TrafficFlow
+from uavxai.dynamics.loiter import GUIDANCE_PERIOD_S, LoiterAutopilot
 from uavxai.dynamics.state import OWNSHIP_ID, TrafficState, intruder_id
 from uavxai.dynamics.traffic import draw_intruders
 from uavxai.errors import UserError
@@ -34,7 +35,7 @@ from uavxai.vocabulary import HOLD
 _FAR = 1e12  # a goal nobody reaches: the model's goal only sets the height target here
 
 
-class KinematicWorld:
+class KinematicWorld(LoiterAutopilot):
     """Ownship (row 0) and intruders (rows 1..N) on the encounter model; the interface of
     :class:`uavxai.dynamics.world.JSBSimWorld`."""
 
@@ -71,6 +72,7 @@ class KinematicWorld:
         self._pilots = make_pilots(scenario, self.intruders, self.seed)
         self._flow = TrafficFlow.from_scenario(scenario, seed=self.seed)
         self._pilot_period = max(1, round(PILOT_PERIOD_S / self.dt))
+        self._guidance_period = max(1, round(GUIDANCE_PERIOD_S / self.dt))
         self._steps = 0
         self._cached: TrafficState | None = None
         self._fly_pilots()
@@ -88,13 +90,19 @@ class KinematicWorld:
         """Advance by ``n`` ticks; pilots decide on their period, as in the JSBSim world."""
         left = int(n)
         while left > 0:
-            chunk = min(left, self._pilot_period - self._steps % self._pilot_period)
+            chunk = min(
+                left,
+                self._pilot_period - self._steps % self._pilot_period,
+                self._guidance_period - self._steps % self._guidance_period,
+            )
             self._fly(chunk * self.dt)
             self._steps += chunk
             left -= chunk
             self._cached = None
             if self._steps % self._pilot_period == 0:
                 self._fly_pilots()
+            if self._orbit is not None and self._steps % self._guidance_period == 0:
+                self._fly_orbit()
 
     def advance(self, seconds: float) -> None:
         self.step(round(seconds / self.dt))
@@ -188,9 +196,9 @@ class KinematicWorld:
         ):
             if value is not None and not math.isfinite(value):
                 raise UserError(f"command_ownship: {key} must be a finite number, got {value}")
-        lim = self.config.bank_limit_rad
         if bank_cmd_rad is not None:
-            self._own[PHI_CMD] = min(max(float(bank_cmd_rad), -lim), lim)
+            self._orbit = None  # a bank command takes the aircraft off its loiter orbit
+            self._bank_from_guidance(bank_cmd_rad)
         if accel_cmd_mps2 is not None:
             self._accel = float(accel_cmd_mps2)
             self._speed_target = None
@@ -200,6 +208,11 @@ class KinematicWorld:
             self._accel = 0.0
         if alt_target_m is not None:
             self._alt_target = float(alt_target_m)
+        self._cached = None
+
+    def _bank_from_guidance(self, bank_rad: float) -> None:
+        lim = self.config.bank_limit_rad
+        self._own[PHI_CMD] = min(max(float(bank_rad), -lim), lim)
         self._cached = None
 
     def ownship_command(self) -> dict[str, float]:

@@ -19,6 +19,7 @@ from uavxai import __version__
 from uavxai.scenario import Scenario
 from uavxai.sim.build import episode_goal, fly
 from uavxai.sim.command import MavlinkPath
+from uavxai.sim.mission import mission_of
 from uavxai.sim.observers import DecisionsJSONL, Pacing, ProgressBar, Rerun, Throughput, Trust
 
 console = Console(stderr=True, soft_wrap=True)
@@ -105,6 +106,7 @@ def run_episode(
         dynamics="jsbsim",
         path=mavlink_path(sc, mavlink if mavlink is not None else sc.bridge.mavlink),
         observers=observers,
+        mission=mission_of(sc, goal),
     )
     summary = result.summary
     summary.update(service.to_summary())

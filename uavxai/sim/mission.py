@@ -1,0 +1,220 @@
+"""The communication mission: transit -> on station (orbit, serving) -> return home.
+
+Phases (announced to ground stations as STATUSTEXT, shown as the flight mode):
+
+- ``transit``: the avoidance planner flies to the service point among traffic;
+- ``on_station``: the autopilot loiters about the service point (MAV_CMD_DO_ORBIT, re-sent
+  every decision) for ``mission.service_s``; every decision the orbit ahead is checked
+  against every intruder the planner believes in, over the planner's horizon;
+- ``avoiding``: when the orbit ahead comes within ``2 d_min`` of an intruder, the avoidance
+  planner takes over (its commands take the aircraft off the orbit), steering for the orbit
+  point it would have reached at the end of the horizon; once the orbit ahead is clear it
+  rejoins (a new DO_ORBIT). Time avoiding counts as time on station: the users are still in
+  reach, the service lost to the manoeuvre is measured by the delivery observer;
+- ``returning``: after the service time, or when the battery reaches its reserve, the planner
+  flies home; the mission is ``completed`` there (or at the end of the service time without
+  ``return_home``).
+
+Avoidance is therefore on in every phase. ``mission.service_s: 0`` or an explicit
+``ownship.goal`` keep the paper's transit-only episode (no Mission object at all).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from enum import StrEnum
+
+import numpy as np
+
+from uavxai.avoidance.types import Decision, Intruder, Ownship
+from uavxai.dynamics.environment import EnvironmentConfig
+from uavxai.dynamics.orbit import radius_for
+from uavxai.dynamics.state import TrafficState
+from uavxai.scenario import Scenario
+from uavxai.sim.episode import Episode, Observer
+from uavxai.vocabulary import HOLD, Outcome
+
+CONFLICT_FACTOR = 2.0  # the orbit ahead must keep 2 d_min from every believed intruder
+
+
+class Phase(StrEnum):
+    TRANSIT = "transit"
+    ON_STATION = "on_station"
+    AVOIDING = "avoiding"
+    RETURNING = "returning"
+
+
+@dataclass(frozen=True)
+class MissionConfig:
+    station: tuple[float, float, float]  # the service point: orbit centre and height
+    home: tuple[float, float, float]
+    service_s: float
+    return_home: bool
+    radius_m: float
+    clockwise: bool = True
+
+    @classmethod
+    def from_scenario(cls, scenario: Scenario, station: Sequence[float]) -> MissionConfig:
+        m = getattr(scenario, "mission", None)
+        start, av = scenario.ownship.start, scenario.avoidance
+        wind = EnvironmentConfig.from_scenario(scenario).wind_speed_mps
+        radius = getattr(m, "orbit_radius_m", None) or radius_for(
+            start.speed_mps, math.radians(av.bank_limit_deg), wind_mps=wind
+        )
+        return cls(
+            station=tuple(float(v) for v in station),
+            home=(float(start.x), float(start.y), float(start.h)),
+            service_s=float(getattr(m, "service_s", 300.0)),
+            return_home=bool(getattr(m, "return_home", True)),
+            radius_m=float(radius),
+        )
+
+
+def mission_of(scenario: Scenario, station: Sequence[float]) -> MissionConfig | None:
+    """The scenario's mission, or None for a transit-only episode."""
+    cfg = MissionConfig.from_scenario(scenario, station)
+    if scenario.ownship.goal is not None or cfg.service_s <= 0:
+        return None
+    return cfg
+
+
+class Mission(Observer):
+    """Decides, phase by phase, who flies; an observer of the episode it runs in."""
+
+    def __init__(self, config: MissionConfig, announce: Callable[[str], None]) -> None:
+        self.config = config
+        self.announce = announce
+        self.phase = Phase.TRANSIT
+        self.phases: dict[str, float] = {}  # first start of each phase
+        self.transitions: list[tuple[float, str]] = []
+        self.on_station_s = 0.0
+        self.avoidance_s = 0.0
+        self.outcome: Outcome | None = None
+        self.service_points: list[tuple[float, float, float, float]] = []
+        self._battery_low = False
+
+    # ------------------------------------------------------------------------- phases
+    def _enter(self, phase: Phase, t: float, why: str, ep: Episode) -> None:
+        self.phase = phase
+        if phase in (Phase.TRANSIT, Phase.RETURNING):  # the height of where it now goes
+            ep.path.altitude(self.goal[2], t)
+        self.phases.setdefault(phase.value, round(t, 3))
+        self.transitions.append((round(t, 3), phase.value))
+        self.announce(f"{phase.value.replace('_', ' ')}: {why}")
+
+    def on_start(self, ep: Episode) -> None:
+        c = self.config
+        self.service_points.append((0.0, *c.station))
+        self._enter(Phase.TRANSIT, ep.state.t, "to the service point", ep)
+
+    def battery_reserve(self, ep: Episode) -> None:
+        """The battery reached its reserve: go home now, whatever the phase."""
+        if not self._battery_low and self.phase != Phase.RETURNING:
+            self._battery_low = True
+            self._enter(Phase.RETURNING, ep.state.t, "battery at reserve, returning home", ep)
+
+    @property
+    def goal(self) -> tuple[float, float, float]:
+        """Where the avoidance planner steers now."""
+        return self.config.home if self.phase == Phase.RETURNING else self.config.station
+
+    @property
+    def serving(self) -> bool:
+        return self.phase in (Phase.ON_STATION, Phase.AVOIDING)
+
+    def on_sample(self, ep: Episode, state: TrafficState) -> None:
+        c, p, t = self.config, state.pos[0], state.t
+        if self.phase == Phase.TRANSIT:
+            d = math.hypot(p[0] - c.station[0], p[1] - c.station[1])
+            if d <= c.radius_m + ep.judge.goal_radius_m:
+                self._enter(Phase.ON_STATION, t, f"orbiting at {c.radius_m:.0f} m", ep)
+                ep.path.orbit(*c.station, c.radius_m, c.clockwise, t)
+        elif self.serving:
+            self.on_station_s += ep.clock.sample_s
+            if self.phase == Phase.AVOIDING:
+                self.avoidance_s += ep.clock.sample_s
+            if self.on_station_s >= c.service_s - 1e-9:
+                if c.return_home:
+                    self._enter(Phase.RETURNING, t, "service time over, returning home", ep)
+                else:
+                    self.outcome = Outcome.COMPLETED
+        elif math.dist(p, c.home) < ep.judge.goal_radius_m:
+            self.outcome = Outcome.COMPLETED
+
+    # ------------------------------------------------------------------------ decisions
+    def decide(self, ep: Episode, own: Ownship, intruders: list[Intruder]) -> Decision | None:
+        """On station: the orbit's decision (re-sent, the orbit ahead checked), or None when
+        the avoidance planner must fly (transit, return, a conflict on the orbit)."""
+        if not self.serving:
+            return None
+        c, t = self.config, ep.state.t
+        horizon = ep.planner.config.depth * ep.planner.config.action_hold_s
+        sep, who, when = orbit_clearance(c, own, intruders, horizon)
+        d_min = ep.judge.d_min_m
+        # Hysteresis: leave the orbit below 2 d_min, rejoin only above 3 d_min, so that a
+        # pass near the threshold does not toggle the phase every decision.
+        limit = (CONFLICT_FACTOR + (1.0 if self.phase == Phase.AVOIDING else 0.0)) * d_min
+        if sep < limit:
+            if self.phase == Phase.ON_STATION:
+                why = f"{who} would pass the orbit at {sep:.0f} m in {when:.0f} s"
+                self._enter(Phase.AVOIDING, t, why, ep)
+            return None
+        if self.phase == Phase.AVOIDING:
+            self._enter(Phase.ON_STATION, t, "orbit clear, rejoining", ep)
+        ep.path.orbit(*c.station, c.radius_m, c.clockwise, t)
+        near = f"; {who} passes it at {sep:.0f} m in {when:.0f} s" if who else ""
+        return Decision(
+            bank_cmd_rad=float(ep.world.ownship_command()["bank_cmd_rad"]),
+            accel_mps2=0.0,
+            action=HOLD,
+            children=[],
+            predicted_min_separation_m=sep,
+            branch_min_separation_m=sep,
+            confidence=1.0,
+            planner="orbit",
+            d_min_m=d_min,
+            words=(f"on station: orbiting the service point at {c.radius_m:.0f} m{near}", ""),
+        )
+
+    def on_end(self, ep: Episode, summary: dict) -> None:
+        summary["mission"] = {
+            "phases": self.phases,
+            "transitions": self.transitions,
+            "service_points": [list(p) for p in self.service_points],
+            "on_station_s": round(self.on_station_s, 3),
+            "avoiding_s": round(self.avoidance_s, 3),
+            "orbit_radius_m": self.config.radius_m,
+        }
+
+
+def orbit_clearance(
+    c: MissionConfig, own: Ownship, intruders: Sequence[Intruder], horizon_s: float
+) -> tuple[float, str | None, float]:
+    """(smallest predicted separation, who, when) between the ownship flying the orbit ahead
+    for ``horizon_s`` at its speed and every intruder on its believed constant turn."""
+    if not intruders:
+        return math.inf, None, 0.0
+    t = np.arange(0.0, horizon_s + 1e-9, 0.5)
+    cx, cy, h = c.station
+    phase0 = math.atan2(own.x - cx, own.y - cy)  # the ownship's angle on the circle
+    rate = (1.0 if c.clockwise else -1.0) * own.speed / c.radius_m
+    ang = phase0 + rate * t
+    path = np.stack([cx + c.radius_m * np.sin(ang), cy + c.radius_m * np.cos(ang)], axis=1)
+    path = np.column_stack([path, np.full(len(t), h)])
+    best, who, when = math.inf, None, 0.0
+    for i in intruders:
+        speed, w = math.hypot(i.vx, i.vy), i.turn_rate
+        psi0 = math.atan2(i.vx, i.vy)
+        if abs(w) < 1e-6:
+            xs, ys = i.x + i.vx * t, i.y + i.vy * t
+        else:  # constant turn, clockwise positive
+            xs = i.x + speed / w * (np.cos(psi0) - np.cos(psi0 + w * t))
+            ys = i.y + speed / w * (np.sin(psi0 + w * t) - np.sin(psi0))
+        d = np.sqrt((path[:, 0] - xs) ** 2 + (path[:, 1] - ys) ** 2 + (h - i.h - i.vh * t) ** 2)
+        d = d - 2.0 * i.sigma_m  # the track's uncertainty shrinks the room believed
+        k = int(np.argmin(d))
+        if d[k] < best:
+            best, who, when = float(d[k]), f"intruder {str(i.id).removeprefix('intruder-')}", t[k]
+    return best, who, float(when)
