@@ -345,7 +345,9 @@ class MavlinkBridge:
             return self._reject(f"DO_ORBIT radius {radius} in frame {msg.frame}")
         x, y, _ = self.frame.to_local(msg.x / 1e7, msg.y / 1e7, 0.0)
         self._ack(msg, mavlink.MAV_RESULT_ACCEPTED)
-        self._obey(alt_target_m=float(msg.z))
+        # param2: the orbit's speed (NaN or <= 0: keep the airspeed target as it is)
+        speed = float(msg.param2) if math.isfinite(msg.param2) and msg.param2 > 0 else None
+        self._obey(alt_target_m=float(msg.z), speed_target_mps=speed)
         self._sink.command_orbit(float(x), float(y), abs(float(radius)), radius >= 0)
         return True
 

@@ -194,13 +194,13 @@ class CommandEncoder:
         return self._packer.pack(msg)
 
     def orbit(
-        self, lat_e7: int, lon_e7: int, h_m: float, radius_m: float, clockwise: bool
+        self, lat_e7: int, lon_e7: int, h_m: float, radius_m: float, clockwise: bool, speed: float
     ) -> bytes:
         """MAV_CMD_DO_ORBIT (loiter) as COMMAND_INT; the bridge answers COMMAND_ACK."""
         return self._packer.pack(
             orbit_command(
                 self.target_system, self.target_component, lat_e7, lon_e7, h_m, radius_m,
-                clockwise,
+                clockwise, speed,
             )
         )  # fmt: skip
 
@@ -243,8 +243,10 @@ def orbit_command(
     h_m: float,
     radius_m: float,
     clockwise: bool = True,
+    speed_mps: float = float("nan"),
 ) -> mavlink.MAVLink_command_int_message:
-    """COMMAND_INT MAV_CMD_DO_ORBIT about (lat, lon) degE7 at height ``h_m`` above home."""
+    """COMMAND_INT MAV_CMD_DO_ORBIT about (lat, lon) degE7 at height ``h_m`` above home, at
+    ``speed_mps`` (NaN: the current airspeed target)."""
     return mavlink.MAVLink_command_int_message(
         target_system,
         target_component,
@@ -253,7 +255,7 @@ def orbit_command(
         0,
         0,
         float(radius_m if clockwise else -radius_m),
-        float("nan"),  # velocity: the current airspeed target
+        float(speed_mps),
         0.0,  # yaw behaviour: the default (front to the circle's tangent)
         0.0,  # orbits: forever
         int(lat_e7),

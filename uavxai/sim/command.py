@@ -48,8 +48,12 @@ class CommandPath(Protocol):
     def relay(self, frames: bytes) -> None:
         """Frames for the ground stations (the ADS-B receiver's reports), if there is a link."""
 
-    def orbit(self, x: float, y: float, h: float, radius_m: float, clockwise: bool, t: float):
-        """Put the autopilot in loiter about (x, y) at height h (MAV_CMD_DO_ORBIT)."""
+    def orbit(
+        self, x: float, y: float, h: float, radius_m: float, clockwise: bool, speed_mps: float,
+        t: float,
+    ) -> None:
+        """Put the autopilot in loiter about (x, y) at height h and an airspeed
+        (MAV_CMD_DO_ORBIT)."""
 
     def announce(self, text: str) -> None:
         """Tell the ground stations (STATUSTEXT), if there is a link."""
@@ -86,9 +90,11 @@ class DirectPath:
         self._frame = LocalFrame.from_origin(world.scenario.world.origin)
         self.commands = 0
 
-    def orbit(self, x: float, y: float, h: float, radius_m: float, clockwise: bool, t: float):
+    def orbit(self, x, y, h, radius_m, clockwise, speed_mps, t) -> None:
         _, _, xq, yq = orbit_centre_on_wire(self._frame, x, y)
-        self._world.command_ownship(alt_target_m=float(np.float32(h)))
+        self._world.command_ownship(
+            alt_target_m=float(np.float32(h)), speed_target_mps=float(np.float32(speed_mps))
+        )
         self._world.command_orbit(xq, yq, float(np.float32(radius_m)), clockwise)
         self.commands += 1
 
@@ -124,9 +130,9 @@ class MavlinkPath:
     def send(self, decision: Decision, t: float) -> None:
         self.bridge.feed(self._encoder.encode(decision.bank_cmd_rad, decision.accel_mps2, t))
 
-    def orbit(self, x: float, y: float, h: float, radius_m: float, clockwise: bool, t: float):
+    def orbit(self, x, y, h, radius_m, clockwise, speed_mps, t) -> None:
         lat_e7, lon_e7, _, _ = orbit_centre_on_wire(self.bridge.frame, x, y)
-        self.bridge.feed(self._encoder.orbit(lat_e7, lon_e7, h, radius_m, clockwise))
+        self.bridge.feed(self._encoder.orbit(lat_e7, lon_e7, h, radius_m, clockwise, speed_mps))
 
     def on_sample(self, state: TrafficState) -> None:
         self.bridge.poll()

@@ -53,6 +53,7 @@ class MissionConfig:
     service_s: float
     return_home: bool
     radius_m: float
+    speed_mps: float  # the loiter airspeed the radius is designed for
     clockwise: bool = True
 
     @classmethod
@@ -69,6 +70,7 @@ class MissionConfig:
             service_s=float(getattr(m, "service_s", 300.0)),
             return_home=bool(getattr(m, "return_home", True)),
             radius_m=float(radius),
+            speed_mps=float(start.speed_mps),
         )
 
 
@@ -130,7 +132,7 @@ class Mission(Observer):
             d = math.hypot(p[0] - c.station[0], p[1] - c.station[1])
             if d <= c.radius_m + ep.judge.goal_radius_m:
                 self._enter(Phase.ON_STATION, t, f"orbiting at {c.radius_m:.0f} m", ep)
-                ep.path.orbit(*c.station, c.radius_m, c.clockwise, t)
+                ep.path.orbit(*c.station, c.radius_m, c.clockwise, c.speed_mps, t)
         elif self.serving:
             self.on_station_s += ep.clock.sample_s
             if self.phase == Phase.AVOIDING:
@@ -163,7 +165,7 @@ class Mission(Observer):
             return None
         if self.phase == Phase.AVOIDING:
             self._enter(Phase.ON_STATION, t, "orbit clear, rejoining", ep)
-        ep.path.orbit(*c.station, c.radius_m, c.clockwise, t)
+        ep.path.orbit(*c.station, c.radius_m, c.clockwise, c.speed_mps, t)
         near = f"; {who} passes it at {sep:.0f} m in {when:.0f} s" if who else ""
         return Decision(
             bank_cmd_rad=float(ep.world.ownship_command()["bank_cmd_rad"]),

@@ -1,0 +1,72 @@
+"""The mission: transit, on station (loiter orbit), avoidance on station, return home."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from uavxai.avoidance.planners import make_planner
+from uavxai.avoidance.types import PlannerConfig
+from uavxai.scenario import default_scenario
+from uavxai.sim.build import fly
+from uavxai.sim.episode import Observer
+from uavxai.sim.mission import MissionConfig, mission_of
+from uavxai.vocabulary import Outcome
+
+STATION = (1000.0, 1000.0, 120.0)
+
+
+class Track(Observer):
+    def __init__(self) -> None:
+        self.rows: list[tuple[float, str, np.ndarray]] = []
+
+    def on_sample(self, ep, state) -> None:
+        self.rows.append((state.t, ep.mission.phase.value, state.pos[0].copy()))
+
+
+def _mission(sc, **changes) -> MissionConfig:
+    return dataclasses.replace(mission_of(sc, STATION), **changes)
+
+
+def test_phases_in_order_and_the_orbit_holds_its_radius() -> None:
+    sc = default_scenario("mission", intruders={"count": 0}, seed=1)
+    m = _mission(sc, service_s=120.0)
+    track = Track()
+    planner = make_planner("mcts_fast", PlannerConfig.from_scenario(sc))
+    r = fly(sc, planner, STATION, dynamics="kinematic", mission=m, observers=[track])
+    assert r.outcome is Outcome.COMPLETED
+    phases = r.summary["mission"]["phases"]
+    assert list(phases) == ["transit", "on_station", "returning"]
+    assert r.summary["mission"]["on_station_s"] == pytest.approx(120.0, abs=0.15)
+    settled = phases["on_station"] + 20.0
+    d = [math.hypot(p[0] - STATION[0], p[1] - STATION[1]) for t, ph, p in track.rows
+         if ph == "on_station" and t > settled]  # fmt: skip
+    assert d and max(abs(x - m.radius_m) for x in d) < 0.1 * m.radius_m
+    home = np.array(m.home)
+    assert np.linalg.norm(track.rows[-1][2] - home) < sc.avoidance.goal_radius_m
+
+
+def test_an_intruder_crossing_the_orbit_is_avoided_and_the_orbit_rejoined() -> None:
+    crossing = {"list": [{"x": 1900, "y": 1000, "h": 120, "heading_deg": 270, "speed_mps": 15}]}
+    sc = default_scenario("mission-avoid", intruders={**crossing, "behaviour": "straight"}, seed=1)
+    m = _mission(sc, service_s=90.0, return_home=False)
+    track = Track()
+    planner = make_planner("mcts", PlannerConfig.from_scenario(sc))
+    r = fly(sc, planner, STATION, dynamics="kinematic", mission=m, observers=[track])
+    seq = [ph for _, ph in r.summary["mission"]["transitions"]]
+    assert "avoiding" in seq and seq.index("avoiding") < len(seq) - 1
+    assert seq[seq.index("avoiding") + 1] == "on_station"  # rejoined
+    assert r.outcome is Outcome.COMPLETED
+    assert r.min_separation_m > sc.avoidance.d_min_m
+
+
+def test_no_service_time_or_an_explicit_goal_is_the_papers_transit_episode() -> None:
+    sc = default_scenario("transit", intruders={"count": 0})
+    assert mission_of(default_scenario("g", ownship={"goal": [900, 900, 120]}), STATION) is None
+    assert mission_of(sc, STATION) is not None
+    planner = make_planner("none", PlannerConfig.from_scenario(sc))
+    r = fly(sc, planner, STATION, dynamics="kinematic")
+    assert r.outcome is Outcome.GOAL and "mission" not in r.summary
