@@ -10,6 +10,7 @@ the same seed flies the same to the millimetre through either path.
 
 from __future__ import annotations
 
+import math
 from typing import Protocol
 
 import numpy as np
@@ -60,6 +61,10 @@ class CommandPath(Protocol):
 
     def altitude(self, h: float, t: float) -> None:
         """The height the autopilot holds (MAV_CMD_DO_CHANGE_ALTITUDE)."""
+
+    def operator_in_command(self, t: float) -> bool:
+        """Whether a ground station's command holds the aircraft at ``t`` (the planner then
+        advises but does not command)."""
 
     def close(self) -> dict[str, int] | None:
         """Finish; returns the link's counters for summary.json (None: no link)."""
@@ -116,16 +121,29 @@ class DirectPath:
         self._world.command_ownship(alt_target_m=float(np.float32(h)))
         self.commands += 1
 
+    def operator_in_command(self, t: float) -> bool:
+        return False
+
     def close(self) -> None:
         return None
 
 
 class MavlinkPath:
-    """The planner as a companion computer: its commands are bytes through the bridge."""
+    """The planner as a companion computer: its commands are bytes through the bridge.
 
-    def __init__(self, bridge, encoder) -> None:
+    A command a ground station sends on the link (a DO_CHANGE_ALTITUDE from MAVProxy, a
+    bank setpoint) is obeyed and puts the operator in command for ``override_s`` of
+    simulated time after the last such command; then the planner takes over again."""
+
+    def __init__(self, bridge, encoder, override_s: float = 30.0) -> None:
         self.bridge = bridge
         self._encoder = encoder
+        self.override_s = float(override_s)
+        self.override_until = -math.inf
+        self.overrides = 0
+
+    def operator_in_command(self, t: float) -> bool:
+        return t < self.override_until
 
     def send(self, decision: Decision, t: float) -> None:
         self.bridge.feed(self._encoder.encode(decision.bank_cmd_rad, decision.accel_mps2, t))
@@ -135,7 +153,11 @@ class MavlinkPath:
         self.bridge.feed(self._encoder.orbit(lat_e7, lon_e7, h, radius_m, clockwise, speed_mps))
 
     def on_sample(self, state: TrafficState) -> None:
-        self.bridge.poll()
+        if self.bridge.poll():  # the operator commanded the aircraft from the link
+            if not self.operator_in_command(state.t):
+                self.bridge.announce(f"operator in command for {self.override_s:.0f} s")
+            self.override_until = state.t + self.override_s
+            self.overrides += 1
         self.bridge.publish(state)
 
     def relay(self, frames: bytes) -> None:

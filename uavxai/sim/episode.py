@@ -124,6 +124,7 @@ class Episode:
         self.min_separation_m = self.state.min_separation()
         self.decision_ms: list[float] = []
         self.sample_metrics: dict[str, float] = {}  # per-sample scratch observers share
+        self._overridden = False
         self.wall0 = time.perf_counter()
 
     # ---------------------------------------------------------------------------- phases
@@ -133,17 +134,37 @@ class Episode:
         own = ownship_view(state, self.world.ownship_command()["bank_cmd_rad"])
         intruders = self.picture(state)
         m = self.mission
-        decision = m.decide(self, own, intruders) if m is not None else None
-        if decision is None:  # the avoidance planner flies
-            goal = m.goal if m is not None else self.goal
-            decision = self.planner.plan(own, intruders, goal, step=self.steps)
-            self.path.send(decision, state.t)
+        goal = m.goal if m is not None else self.goal
+        if self.path.operator_in_command(state.t):
+            decision = self._advise(own, intruders, goal)
+        else:
+            if self._overridden:  # handed back: the mission's height and plan again
+                self._overridden = False
+                self.path.announce("operator override over, resuming the mission")
+                self.path.altitude(goal[2], state.t)
+            decision = m.decide(self, own, intruders) if m is not None else None
+            if decision is None:  # the avoidance planner flies
+                decision = self.planner.plan(own, intruders, goal, step=self.steps)
+                self.path.send(decision, state.t)
         self.decision_ms.append(decision.ms)
         event = DecisionEvent(self.steps, state.t, own, intruders, decision, state)
         self.steps += 1
         for o in self.observers:
             o.on_decision(self, event)
         return event
+
+    def _advise(self, own: Ownship, intruders: list[Intruder], goal) -> Decision:
+        """While the operator is in command the planner still looks, and says what it would
+        do, but sends nothing."""
+        self._overridden = True
+        decision = self.planner.plan(own, intruders, goal, step=self.steps)
+        decision.words = (
+            "operator override: the ground station's commands fly the aircraft; the planner "
+            f"would have {decision.explanation}",
+            decision.counterfactual,
+        )
+        decision.planner = f"{decision.planner} (advice, operator in command)"
+        return decision
 
     def advance(self, event: DecisionEvent) -> Outcome | None:
         """Fly one decision period sample by sample, judging each; the outcome or None."""

@@ -57,7 +57,8 @@ def mavlink_path(scenario: Scenario, link: str | None):
             home=(start.x, start.y, start.h),
         )
         encoder = CommandEncoder(sc.bridge.system_id, sc.bridge.system_id, signing_key=key)
-        return MavlinkPath(bridge, encoder)
+        override_s = float(getattr(sc.bridge, "override_s", 30.0))
+        return MavlinkPath(bridge, encoder, override_s=override_s)
 
     return build
 
