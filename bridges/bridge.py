@@ -142,6 +142,7 @@ class MavlinkBridge:
         # Publish every intruder's exact state as ADSB_VEHICLE (no surveillance model); off
         # when a surveillance model's reports are relayed instead.
         self.truth_adsb = True
+        self.phase = "transit"  # the mission phase, shown as the flight mode
 
         self._link = Link(link, system_id) if link is not None else None
         self._codec = new_codec(SimpleNamespace(write=self._write), system_id, AUTOPILOT_COMPONENT)
@@ -203,7 +204,7 @@ class MavlinkBridge:
             return
         t, gates = state.t, self._gates
         if gates["heartbeat"].due(t):
-            self._send(telemetry.heartbeat(self.failsafe_active))
+            self._send(telemetry.heartbeat(self.failsafe_active, self.phase))
         if gates["home"].due(t):
             self._send(telemetry.home_position(self.frame, self._home, t))
         if gates["vehicle"].due(t):

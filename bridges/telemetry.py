@@ -81,12 +81,23 @@ class RateGate:
         self._next = None
 
 
-def heartbeat(failsafe: bool) -> mavlink.MAVLink_heartbeat_message:
+# Flight modes as custom_mode numbers of the fixed-wing mode table that pymavlink (and so
+# MAVProxy) and QGroundControl name for a MAV_TYPE_FIXED_WING vehicle: the mission's phases
+# show as GUIDED (transit, avoiding), LOITER (on station), RTL (returning), FBWA (failsafe:
+# wings level, holding height and speed).
+FLIGHT_MODES = {"transit": 15, "avoiding": 15, "on_station": 12, "returning": 11}
+FAILSAFE_MODE = 5
+
+
+def heartbeat(failsafe: bool, phase: str = "transit") -> mavlink.MAVLink_heartbeat_message:
+    custom = FAILSAFE_MODE if failsafe else FLIGHT_MODES.get(phase, FLIGHT_MODES["transit"])
     return mavlink.MAVLink_heartbeat_message(
         mavlink.MAV_TYPE_FIXED_WING,
         mavlink.MAV_AUTOPILOT_GENERIC,
-        mavlink.MAV_MODE_FLAG_SAFETY_ARMED | mavlink.MAV_MODE_FLAG_GUIDED_ENABLED,
-        0,
+        mavlink.MAV_MODE_FLAG_SAFETY_ARMED
+        | mavlink.MAV_MODE_FLAG_GUIDED_ENABLED
+        | mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+        custom,
         mavlink.MAV_STATE_CRITICAL if failsafe else mavlink.MAV_STATE_ACTIVE,
         3,
     )

@@ -70,3 +70,39 @@ def test_no_service_time_or_an_explicit_goal_is_the_papers_transit_episode() -> 
     planner = make_planner("none", PlannerConfig.from_scenario(sc))
     r = fly(sc, planner, STATION, dynamics="kinematic")
     assert r.outcome is Outcome.GOAL and "mission" not in r.summary
+
+
+def test_ground_station_sees_the_phases_as_flight_modes_and_status_texts() -> None:
+    import os
+    import socket
+
+    os.environ.setdefault("MAVLINK20", "1")
+    from pymavlink import mavutil
+
+    from uavxai.sim.run import mavlink_path
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    gcs = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", source_system=255)
+    modes, texts = [], []
+
+    class GroundStation(Observer):
+        def on_sample(self, ep, state) -> None:
+            while (m := gcs.recv_match(blocking=False)) is not None:
+                if m.get_type() == "HEARTBEAT":
+                    modes.append(mavutil.mode_string_v10(m))
+                elif m.get_type() == "STATUSTEXT":
+                    texts.append(m.text)
+
+    sc = default_scenario("gcs", intruders={"count": 0}, seed=1)
+    m = _mission(sc, service_s=30.0)
+    planner = make_planner("mcts_fast", PlannerConfig.from_scenario(sc))
+    path = mavlink_path(sc, f"udpout:127.0.0.1:{port}")
+    r = fly(sc, planner, STATION, dynamics="kinematic", path=path, mission=m,
+            observers=[GroundStation()])  # fmt: skip
+    gcs.close()
+    assert r.outcome is Outcome.COMPLETED
+    seen = list(dict.fromkeys(modes))
+    assert seen == ["GUIDED", "LOITER", "RTL"], seen
+    assert [t.split(":")[0] for t in texts] == ["transit", "on station", "returning"], texts

@@ -56,8 +56,8 @@ class CommandPath(Protocol):
         """Put the autopilot in loiter about (x, y) at height h and an airspeed
         (MAV_CMD_DO_ORBIT)."""
 
-    def announce(self, text: str) -> None:
-        """Tell the ground stations (STATUSTEXT), if there is a link."""
+    def announce(self, text: str, phase: str | None = None) -> None:
+        """Tell the ground stations (STATUSTEXT; ``phase``: the flight mode they show)."""
 
     def altitude(self, h: float, t: float) -> None:
         """The height the autopilot holds (MAV_CMD_DO_CHANGE_ALTITUDE)."""
@@ -114,7 +114,7 @@ class DirectPath:
     def relay(self, frames: bytes) -> None:
         pass
 
-    def announce(self, text: str) -> None:
+    def announce(self, text: str, phase: str | None = None) -> None:
         pass
 
     def altitude(self, h: float, t: float) -> None:
@@ -163,7 +163,9 @@ class MavlinkPath:
     def relay(self, frames: bytes) -> None:
         self.bridge.relay(frames)
 
-    def announce(self, text: str) -> None:
+    def announce(self, text: str, phase: str | None = None) -> None:
+        if phase is not None:
+            self.bridge.phase = phase
         self.bridge.announce(text)
 
     def altitude(self, h: float, t: float) -> None:

@@ -85,7 +85,7 @@ def mission_of(scenario: Scenario, station: Sequence[float]) -> MissionConfig | 
 class Mission(Observer):
     """Decides, phase by phase, who flies; an observer of the episode it runs in."""
 
-    def __init__(self, config: MissionConfig, announce: Callable[[str], None]) -> None:
+    def __init__(self, config: MissionConfig, announce: Callable[..., None]) -> None:
         self.config = config
         self.announce = announce
         self.phase = Phase.TRANSIT
@@ -104,7 +104,7 @@ class Mission(Observer):
             ep.path.altitude(self.goal[2], t)
         self.phases.setdefault(phase.value, round(t, 3))
         self.transitions.append((round(t, 3), phase.value))
-        self.announce(f"{phase.value.replace('_', ' ')}: {why}")
+        self.announce(f"{phase.value.replace('_', ' ')}: {why}", phase.value)
 
     def on_start(self, ep: Episode) -> None:
         c = self.config
