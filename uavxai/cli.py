@@ -8,6 +8,7 @@ traceback; internal errors exit 1 (set UAVXAI_DEBUG=1 to see the traceback).
 from __future__ import annotations
 
 import argparse
+import fcntl
 import json
 import os
 import shutil
@@ -92,7 +93,16 @@ def _mavlink_url(text: str) -> str:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
-AVOIDANCE_METHODS = ("mcts", "mcts_fast", "exhaustive", "dqn", "safe_dqn", "none")
+def _dynamics() -> tuple[str, ...]:
+    from uavxai.sim.build import DYNAMICS  # the registry of worlds
+
+    return tuple(DYNAMICS)
+
+
+def _avoidance_methods() -> tuple[str, ...]:
+    from uavxai.avoidance.planners import PLANNERS  # the registry, not a copy of its names
+
+    return tuple(PLANNERS)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -152,8 +162,8 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument(
         "--methods",
         required=True,
-        type=_csv_list(str, "--methods", AVOIDANCE_METHODS),
-        help=f"comma-separated: {','.join(AVOIDANCE_METHODS)}",
+        type=_csv_list(str, "--methods", _avoidance_methods()),
+        help=f"comma-separated: {','.join(_avoidance_methods())}",
     )
     e.add_argument(
         "--intruders",
@@ -162,7 +172,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="comma-separated intruder counts, e.g. 5,10,20,40",
     )
     e.add_argument("--episodes", type=_positive_int, default=100)
-    e.add_argument("--dynamics", choices=("kinematic", "jsbsim"), default="kinematic")
+    e.add_argument("--dynamics", choices=_dynamics(), default="kinematic")
     e.add_argument("--workers", type=_positive_int, default=1, help="local worker processes")
     e.add_argument(
         "--ray", metavar="ADDRESS", help="run on a Ray cluster (`auto`, ray://host:port)"
@@ -198,20 +208,92 @@ def _version() -> str:
     return __version__
 
 
+MARKER = ".uavxai-run"  # in every output folder uavxai creates; also its lock file
+_HELD_LOCKS: list[Any] = []  # open lock files: held until the process ends
+
+
+def _dangerous(path: Path) -> str | None:
+    """Why ``--force`` must never empty ``path`` (None: it may)."""
+    resolved = path.resolve()
+    cwd, home = Path.cwd().resolve(), Path.home().resolve()
+    if resolved == Path(resolved.anchor):
+        return "it is the root of the file system"
+    if resolved == cwd or resolved in cwd.parents:
+        return "it is the current folder or one above it"
+    if resolved == home or resolved in home.parents:
+        return "it is your home folder or one above it"
+    return None
+
+
 def prepare_out_dir(out: Path, force: bool) -> Path:
-    """Create an empty output folder; never overwrite one silently."""
-    if out.exists():
-        if not out.is_dir():
+    """Create (or reuse an empty) output folder, mark it as uavxai's and lock it.
+
+    Never overwrites silently: a non-empty folder needs ``--force``, and ``--force`` empties only
+    a folder that uavxai made (it holds the ``.uavxai-run`` marker), never the current folder,
+    home or '/'. The marker file is locked (fcntl) for as long as this process lives, so a
+    second run into the same folder fails at once instead of mixing its files into ours.
+    """
+    text = str(out)
+    if "\x00" in text:
+        raise UserError(f"--out {text!r}: a folder name cannot contain a NUL byte.")
+    if force and (why := _dangerous(out)):
+        raise UserError(f"--out {out}: refusing --force, {why}; choose a folder of its own.")
+    try:
+        if out.exists() and not out.is_dir():
             raise UserError(f"--out {out}: exists and is not a folder.")
-        if any(out.iterdir()):
+        had_marker = (out / MARKER).is_file()
+        out.mkdir(parents=True, exist_ok=True)
+        lock = open(out / MARKER, "a+", encoding="utf-8")  # noqa: SIM115 - held open on purpose
+    except OSError as exc:
+        raise UserError(
+            f"--out {out}: cannot create or write this folder ({exc.strerror or exc}); choose a "
+            "writable folder."
+        ) from None
+    try:
+        fcntl.flock(lock.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        lock.close()
+        raise UserError(
+            f"--out {out}: another uavxai process is writing into this folder right now; wait "
+            "for it to end or choose another --out."
+        ) from None
+    try:
+        others = [p for p in out.iterdir() if p.name != MARKER]
+        if others:
             if not force:
                 raise UserError(
                     f"--out {out}: the folder exists and is not empty; choose another folder or "
                     "pass --force to overwrite it."
                 )
-            shutil.rmtree(out)
-    out.mkdir(parents=True, exist_ok=True)
+            if not had_marker:
+                raise UserError(
+                    f"--out {out}: refusing --force, this folder was not written by uavxai (it "
+                    f"has no {MARKER} marker); empty it yourself or choose another --out."
+                )
+            for p in others:  # the marker stays: it is our lock
+                if p.is_dir() and not p.is_symlink():
+                    shutil.rmtree(p)
+                else:
+                    p.unlink()
+        lock.seek(0)
+        lock.truncate()
+        lock.write(
+            json.dumps({"uavxai": _version(), "pid": os.getpid(), "argv": sys.argv[1:]}) + "\n"
+        )
+        lock.flush()
+    except OSError as exc:
+        lock.close()
+        raise UserError(f"--out {out}: cannot prepare this folder ({exc}).") from None
+    except BaseException:
+        lock.close()
+        raise
+    _HELD_LOCKS.append(lock)
     return out
+
+
+# Commands that fly the service stage and so need its model (train makes one; evaluate flies
+# only the avoidance stage).
+_NEEDS_SERVICE_MODEL = ("run", "validate", "service")
 
 
 def _load(args: argparse.Namespace):
@@ -220,11 +302,86 @@ def _load(args: argparse.Namespace):
     scenario = load_scenario(args.scenario)
     if getattr(args, "seed", None) is not None:
         scenario = scenario.with_seed(args.seed)
+    if args.command in _NEEDS_SERVICE_MODEL:
+        _check_service_model(scenario, getattr(args, "planner", None), args.scenario)
     return scenario
 
 
-def _print_json(obj: Any) -> None:
-    print(json.dumps(obj, indent=2, default=float))
+def shipped_service_model(k: int, power_levels: int, access: str) -> Path:
+    """Where the shipped service model for (K, L, access) lives (as
+    uavxai.service.stage.shipped_checkpoint, without importing torch)."""
+    from uavxai.paths import service_checkpoints_dir
+
+    return service_checkpoints_dir() / f"d3qn_k{k}_l{power_levels}_{access}.pt"
+
+
+def _check_service_model(sc: Any, planner: str | None, source: str) -> None:
+    """What the service stage would refuse at run time, refused by `validate` already: a
+    learned planner with no checkpoint and no shipped model that fits."""
+    from uavxai.errors import ScenarioError
+    from uavxai.paths import service_checkpoints_dir
+
+    planner = planner or sc.service.planner
+    if planner not in ("d3qn", "dqn") or sc.service.checkpoint is not None:
+        return
+    c = sc.comms
+    if planner == "d3qn" and shipped_service_model(c.users.k, c.power_levels, c.access).is_file():
+        return
+    have = sorted(p.name for p in service_checkpoints_dir().glob("*.pt"))
+    raise ScenarioError(
+        f"{source}: 'service.planner' = {planner!r} with 'service.checkpoint' null needs a "
+        f"shipped model for K = {c.users.k} users, power_levels = {c.power_levels}, access = "
+        f"{c.access}; shipped: {', '.join(have) or 'none'}. Train one with `uavxai train "
+        f"SCENARIO --stage service --algo {planner}` and set service.checkpoint to its "
+        "model.pt, or use service.planner: grid or random. See docs/scenario.md."
+    )
+
+
+def _cell(value: Any) -> str | None:
+    """A short rendering of one report value (None: leave it out of the table)."""
+    if isinstance(value, bool) or value is None:
+        return str(value).lower()
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    if isinstance(value, str):
+        return value if len(value) <= 60 else value[:57] + "..."
+    if isinstance(value, list | tuple):
+        nums = [v for v in value if isinstance(v, int | float) and not isinstance(v, bool)]
+        if len(nums) != len(value) or not nums:
+            return f"{len(value)} items"
+        if len(nums) <= 3:
+            return "[" + ", ".join(f"{v:.6g}" for v in nums) + "]"
+        return f"{len(nums)} values, {min(nums):.4g} .. {max(nums):.4g}"
+    return None
+
+
+def print_report(title: str, report: dict[str, Any], path: Path, max_rows: int = 24) -> None:
+    """A short table of a report's headline values on stdout; the whole report is in ``path``."""
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title=title, show_header=True, header_style="bold")
+    table.add_column("field", no_wrap=True)
+    table.add_column("value", overflow="fold")
+    rows = 0
+    for key, value in report.items():
+        items = value.items() if isinstance(value, dict) else [(None, value)]
+        for sub, v in items:
+            cell = _cell(v)
+            if cell is None:
+                continue
+            if rows == max_rows:
+                table.add_row("...", f"more in {path.name}")
+                break
+            table.add_row(key if sub is None else f"{key}.{sub}", cell)
+            rows += 1
+        if rows == max_rows:
+            break
+    console = Console(soft_wrap=False, width=max(100, Console().width))
+    console.print(table)
+    console.print(f"full report: {path}")
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
@@ -243,9 +400,9 @@ def cmd_service(args: argparse.Namespace) -> int:
     from uavxai.service.stage import run_service_stage
 
     summary = run_service_stage(sc, planner=args.planner)
-    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
-    _print_json(summary)
-    print(f"wrote {out / 'summary.json'}", file=sys.stderr)
+    path = out / "summary.json"
+    path.write_text(json.dumps(summary, indent=2, default=float) + "\n")
+    print_report(f"service point ({sc.name})", summary, path)
     return EXIT_OK
 
 
@@ -263,7 +420,9 @@ def cmd_train(args: argparse.Namespace) -> int:
     else:
         from uavxai.avoidance.train import train_command
     report = train_command(sc, algo=args.algo, episodes=args.episodes, out=out)
-    _print_json(report)
+    path = out / "train_report.json"
+    path.write_text(json.dumps(report, indent=2, default=float) + "\n")
+    print_report(f"training {args.stage} {args.algo} ({sc.name})", report, path)
     return EXIT_OK
 
 
@@ -313,6 +472,7 @@ def cmd_explain(args: argparse.Namespace) -> int:
     from uavxai.xai.explain import explain_command
 
     print(explain_command(args.run_dir, args.decision))
+    sys.stdout.flush()  # a closed pipe (`| head`) shows here, inside main's handler
     return EXIT_OK
 
 
@@ -356,6 +516,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("uavxai: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:
+        # the reader went away (`uavxai explain RUN | head`): not an error of ours. Point
+        # stdout at /dev/null so that the interpreter's final flush does not raise again.
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+        return 141  # 128 + SIGPIPE, what a shell reports for a tool stopped by a closed pipe
     except Exception as exc:  # noqa: BLE001 - the last line of defence: no raw traceback
         if os.environ.get("UAVXAI_DEBUG"):
             raise

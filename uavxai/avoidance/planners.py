@@ -10,19 +10,34 @@ when asked for (it needs torch), through ``make_learned_planner(name, config, ch
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from pathlib import Path
 
 from uavxai.avoidance.direct import DirectPlanner
 from uavxai.avoidance.exhaustive import ExhaustivePlanner
 from uavxai.avoidance.mcts import MCTSPlanner
+from uavxai.avoidance.mvp import MVPPlanner
 from uavxai.avoidance.types import Planner, PlannerConfig
 from uavxai.errors import UserError
 
-PLANNERS = ("mcts", "mcts_fast", "exhaustive", "dqn", "safe_dqn", "none")
-LEARNED = ("dqn", "safe_dqn")
-
 # The paper's Tree-fast: few simulations, a shallow tree, short holds.
 TREE_FAST = {"simulations": 40, "depth": 2, "action_hold_s": 2.0}
+
+PlannerFactory = Callable[[PlannerConfig, "str | Path | None"], Planner]
+# Every avoidance planner by name: the scenario schema, `uavxai evaluate --methods` and the
+# campaigns read their choices from here.
+PLANNERS: dict[str, PlannerFactory] = {}
+LEARNED = ("dqn", "safe_dqn")
+
+
+def register(name: str) -> Callable[[PlannerFactory], PlannerFactory]:
+    """Register a planner factory ``(config, checkpoint) -> Planner`` under ``name``."""
+
+    def add(factory: PlannerFactory) -> PlannerFactory:
+        PLANNERS[name] = factory
+        return factory
+
+    return add
 
 
 def fast_config(config: PlannerConfig) -> PlannerConfig:
@@ -30,21 +45,14 @@ def fast_config(config: PlannerConfig) -> PlannerConfig:
     return dataclasses.replace(config, **TREE_FAST)
 
 
-def make_planner(
-    name: str, config: PlannerConfig | None = None, checkpoint: str | Path | None = None
-) -> Planner:
-    """The planner called ``name`` (one of PLANNERS) with ``config``; ``checkpoint`` is the
-    model.pt of a learned planner (None: the shipped one) and is ignored by the others."""
-    config = config or PlannerConfig()
-    if name == "mcts":
-        return MCTSPlanner(config)
-    if name == "mcts_fast":
-        return MCTSPlanner(fast_config(config), name="mcts_fast")
-    if name == "exhaustive":
-        return ExhaustivePlanner(config)
-    if name == "none":
-        return DirectPlanner(config)
-    if name in LEARNED:
+register("mcts")(lambda config, checkpoint: MCTSPlanner(config))
+register("mcts_fast")(lambda config, checkpoint: MCTSPlanner(fast_config(config), name="mcts_fast"))
+register("exhaustive")(lambda config, checkpoint: ExhaustivePlanner(config))
+register("mvp")(lambda config, checkpoint: MVPPlanner(config))
+
+
+def _learned(name: str) -> PlannerFactory:
+    def make(config: PlannerConfig, checkpoint: str | Path | None) -> Planner:
         try:
             from uavxai.avoidance.learned import make_learned_planner
         except ModuleNotFoundError as exc:
@@ -56,4 +64,23 @@ def make_planner(
                 f"Use one of {', '.join(p for p in PLANNERS if p not in LEARNED)}."
             ) from None
         return make_learned_planner(name, config, checkpoint)
-    raise UserError(f"unknown avoidance planner '{name}'; choose one of {', '.join(PLANNERS)}.")
+
+    return make
+
+
+for _name in LEARNED:
+    register(_name)(_learned(_name))
+register("none")(lambda config, checkpoint: DirectPlanner(config))
+
+
+def make_planner(
+    name: str, config: PlannerConfig | None = None, checkpoint: str | Path | None = None
+) -> Planner:
+    """The planner called ``name`` (a key of PLANNERS) with ``config``; ``checkpoint`` is the
+    model.pt of a learned planner (None: the shipped one) and is ignored by the others."""
+    factory = PLANNERS.get(name)
+    if factory is None:
+        raise UserError(
+            f"unknown avoidance planner '{name}'; choose one of {', '.join(PLANNERS)}."
+        )
+    return factory(config or PlannerConfig(), checkpoint)
