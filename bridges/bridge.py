@@ -8,13 +8,27 @@ Signing policy (with a key): every outgoing frame is signed. Incoming frames mus
 signature, except HEARTBEAT, PARAM_REQUEST_LIST and PARAM_REQUEST_READ, which are accepted
 unsigned: they change nothing, a ground station without the key can still see the vehicle and
 its parameters (signing authenticates, it does not hide), and every command it sends is
-refused and counted.
+refused and counted. A frame that carries a signature that fails is refused whatever its type:
+that is a forgery, not a station without the key. Signatures are verified before any stream
+timestamp is recorded (`uavxai.bridges.signing`), and the planner's path (`feed`) and the link
+(`poll`) keep separate stream tables, so nothing from the link can make the planner's commands
+look old.
+
+Limits: every command is clamped to the world and the aircraft before it reaches the sink
+(height to ``alt_limits_m``, airspeed to ``speed_limits_mps``, bank to ``bank_limit_rad``,
+along-track acceleration to ``accel_limit_mps2``, orbit centres to ``xy_limits_m``). A clamped
+COMMAND_LONG/COMMAND_INT is still acknowledged MAV_RESULT_ACCEPTED (the aircraft does fly it,
+at the limit) with ``result_param2 = ACK_CLAMPED`` and a STATUSTEXT warning naming the clamp,
+which is what ground stations show the operator; setpoints, which have no acknowledgement, get
+the STATUSTEXT (at most one per kind every few simulated seconds) and the ``clamped_commands``
+counter.
 """
 
 from __future__ import annotations
 
 import logging
 import math
+from pathlib import Path
 from types import SimpleNamespace
 from typing import Protocol
 
@@ -36,6 +50,7 @@ from .protocol import (
     enable_signing,
     new_codec,
 )
+from .signing import Clock, SignatureGate
 from .watchdog import CommandWatchdog
 
 log = logging.getLogger(__name__)
@@ -53,6 +68,20 @@ _LEGACY_REQUESTS = {
     mavlink.MAV_CMD_GET_HOME_POSITION: mavlink.MAVLINK_MSG_ID_HOME_POSITION,
     mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION,
 }
+# COMMAND_ACK.result_param2 of an accepted command that was flown at a limit, not as asked
+# (0 = unused, as MAVLink asks of command-specific result codes).
+ACK_CLAMPED = 1
+# Setpoints arrive at 10 Hz or more; say that they are clamped at most this often (simulated s).
+CLAMP_NOTICE_PERIOD_S = 5.0
+# Defaults of the limits: the scenario defaults of world.h, world.x and world.y, the uav_fw
+# autopilot's speed range, and the largest avoidance.bank_limit_deg and avoidance.accel_mps2 a
+# scenario may set (the autopilot applies the scenario's own bank limit as well).
+DEFAULT_ALT_LIMITS_M = (50.0, 300.0)
+DEFAULT_SPEED_LIMITS_MPS = (12.0, 30.0)
+DEFAULT_BANK_LIMIT_RAD = math.radians(60.0)
+DEFAULT_ACCEL_LIMIT_MPS2 = 10.0
+DEFAULT_XY_LIMITS_M = ((0.0, 2000.0), (0.0, 2000.0))
+MIN_ORBIT_RADIUS_M = 1.0
 # Bound the work one poll() does, so a flooding peer cannot stall the simulation loop.
 _MAX_READS_PER_POLL = 1000
 _COUNTERS = (
@@ -69,6 +98,7 @@ _COUNTERS = (
     "param_requests",
     "param_sets_refused",
     "failsafe_events",
+    "clamped_commands",  # obeyed, but at a limit of the world or the aircraft
 )
 
 
@@ -95,6 +125,14 @@ class MavlinkBridge:
     MAVLink 2 signing both ways. `params` are extra read-only parameters for ground stations.
     `home` is the home point (x, y, h) in the local frame; by default the ground point below the
     ownship's first published position. Rates are in Hz of simulated time.
+
+    Limits every command is clamped to (see the module docstring): `alt_limits_m` (h band,
+    m above the local origin; the lower limit must be above the ground), `speed_limits_mps`
+    (airspeed), `bank_limit_rad` (|bank|), `accel_limit_mps2` (|along-track acceleration|),
+    `xy_limits_m` ((x0, x1), (y0, y1)) for orbit centres. `signing_state` (with a key) is a
+    file where the link's stream timestamps are kept between runs, so signed frames captured
+    in one run cannot be replayed into the next; without it, MAVLink's new-stream rule lets a
+    capture in for about a minute.
     """
 
     def __init__(
@@ -109,9 +147,28 @@ class MavlinkBridge:
         home: tuple[float, float, float] | None = None,
         telemetry_hz: float = 10.0,
         adsb_hz: float = 2.0,
+        alt_limits_m: tuple[float, float] = DEFAULT_ALT_LIMITS_M,
+        speed_limits_mps: tuple[float, float] = DEFAULT_SPEED_LIMITS_MPS,
+        bank_limit_rad: float = DEFAULT_BANK_LIMIT_RAD,
+        accel_limit_mps2: float = DEFAULT_ACCEL_LIMIT_MPS2,
+        xy_limits_m: tuple[tuple[float, float], tuple[float, float]] = DEFAULT_XY_LIMITS_M,
+        signing_state: str | Path | None = None,
     ) -> None:
         if not 1 <= system_id <= 255:
             raise ValueError(f"MAVLink system id must be 1..255, got {system_id}")
+        self._alt_limits = _interval("alt_limits_m", alt_limits_m, lowest=0.0)
+        self._speed_limits = _interval("speed_limits_mps", speed_limits_mps, lowest=0.0)
+        self._xy_limits = (
+            _interval("xy_limits_m[0]", xy_limits_m[0]),
+            _interval("xy_limits_m[1]", xy_limits_m[1]),
+        )
+        if not (math.isfinite(bank_limit_rad) and 0 < bank_limit_rad < math.pi / 2):
+            raise ValueError(f"bank_limit_rad must lie in (0, pi/2), got {bank_limit_rad}")
+        if not (math.isfinite(accel_limit_mps2) and accel_limit_mps2 > 0):
+            raise ValueError(f"accel_limit_mps2 must be positive, got {accel_limit_mps2}")
+        self._bank_limit = float(bank_limit_rad)
+        self._accel_limit = float(accel_limit_mps2)
+        self._clamp_noticed: dict[str, float] = {}
         self.system_id = system_id
         self.frame = frame
         self.counters: dict[str, int] = dict.fromkeys(_COUNTERS, 0)
@@ -143,14 +200,28 @@ class MavlinkBridge:
         # when a surveillance model's reports are relayed instead.
         self.truth_adsb = True
         self.phase = "transit"  # the mission phase, shown as the flight mode
+        self.power = telemetry.Power()  # battery and throttle, when the dynamics model them
 
         self._link = Link(link, system_id) if link is not None else None
+        # One codec signs what we send; decoding is done by key-less codecs, because the
+        # signature check belongs to the gates (pymavlink's records a timestamp before it
+        # checks the signature: the forged-frame attack of issue 14).
         self._codec = new_codec(SimpleNamespace(write=self._write), system_id, AUTOPILOT_COMPONENT)
+        feed_gate = link_gate = None
+        self._signing_state = Path(signing_state) if signing_state and signing_key else None
         if signing_key is not None:
-            enable_signing(self._codec, signing_key, ACCEPTED_UNSIGNED.__contains__)
-        self._feed_reader = FrameReader(self._codec, stream=False)
+            enable_signing(self._codec, signing_key)
+            accept = ACCEPTED_UNSIGNED.__contains__
+            # The planner's path has its own gate and clock: the link cannot touch them.
+            feed_gate = SignatureGate(signing_key, Clock(), accept)
+            link_gate = SignatureGate(signing_key, self._codec.signing, accept)
+            if self._signing_state is not None:
+                link_gate.load(self._signing_state)
+        self._link_gate = link_gate
+        decoder = new_codec(None, system_id, AUTOPILOT_COMPONENT)
+        self._feed_reader = FrameReader(decoder, stream=False, gate=feed_gate)
         self._link_reader = (
-            FrameReader(self._codec, stream=self._link.stream) if self._link else None
+            FrameReader(decoder, stream=self._link.stream, gate=link_gate) if self._link else None
         )
         self._handlers = {
             "SET_ATTITUDE_TARGET": self._on_attitude_target,
@@ -208,10 +279,10 @@ class MavlinkBridge:
         if gates["home"].due(t):
             self._send(telemetry.home_position(self.frame, self._home, t))
         if gates["vehicle"].due(t):
-            self._send(telemetry.sys_status(self.counters["malformed"]))
+            self._send(telemetry.sys_status(self.counters["malformed"], self.power))
             self._send(telemetry.global_position_int(state, self.frame))
             self._send(telemetry.attitude(state, self._body_rates(state)))
-            self._send(telemetry.vfr_hud(state, self.frame))
+            self._send(telemetry.vfr_hud(state, self.frame, self.power))
         if self.truth_adsb and gates["adsb"].due(t):
             for msg in telemetry.adsb_vehicles(state, self.frame):
                 self._send(msg)
@@ -235,6 +306,9 @@ class MavlinkBridge:
         return self._watchdog.tripped
 
     def close(self) -> None:
+        if self._link_gate is not None and self._signing_state is not None:
+            self._link_gate.save(self._signing_state)
+            self._signing_state = None
         if self._link is not None:
             self._link.close()
             self._link = None
@@ -302,17 +376,30 @@ class MavlinkBridge:
         if not self._addressed_to_me(msg):
             return False
         try:
-            return self._obey(bank_cmd_rad=bank_from_attitude_target(msg))
+            bank = bank_from_attitude_target(msg)
         except SetpointError as why:
             return self._reject(str(why))
+        # The quaternion round trip moves a bank at the limit by ~1e-16: not a clamp.
+        limit = self._bank_limit
+        flown = bank if abs(bank) <= limit + 1e-9 else math.copysign(limit, bank)
+        if flown != bank:
+            self._clamped(
+                "bank", f"bank {math.degrees(bank):.0f} deg clamped to {math.degrees(flown):.0f}"
+            )
+        return self._obey(bank_cmd_rad=flown)
 
     def _on_position_target(self, msg) -> bool:
         if not self._addressed_to_me(msg):
             return False
         try:
-            return self._obey(accel_cmd_mps2=accel_from_position_target(msg))
+            accel = accel_from_position_target(msg)
         except SetpointError as why:
             return self._reject(str(why))
+        limit = self._accel_limit
+        flown = min(max(accel, -limit), limit)
+        if flown != accel:
+            self._clamped("accel", f"accel {accel:.3g} m/s2 clamped to {flown:.3g}")
+        return self._obey(accel_cmd_mps2=flown)
 
     def _on_command_long(self, msg) -> bool:
         if not self._addressed_to_me(msg):
@@ -341,15 +428,39 @@ class MavlinkBridge:
             return False
         # param1 radius (m, positive clockwise); x, y lat/lon degE7; z altitude in `frame`.
         radius, frames = msg.param1, (mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT,)
-        if msg.frame not in frames or not (math.isfinite(radius) and abs(radius) >= 1.0):
+        lat, lon = msg.x / 1e7, msg.y / 1e7
+        if (
+            msg.frame not in frames
+            or not (math.isfinite(radius) and abs(radius) >= MIN_ORBIT_RADIUS_M)
+            or not math.isfinite(msg.z)
+            or not (abs(lat) <= 90 and abs(lon) <= 180)
+        ):
             self._ack(msg, mavlink.MAV_RESULT_DENIED)
-            return self._reject(f"DO_ORBIT radius {radius} in frame {msg.frame}")
-        x, y, _ = self.frame.to_local(msg.x / 1e7, msg.y / 1e7, 0.0)
-        self._ack(msg, mavlink.MAV_RESULT_ACCEPTED)
+            return self._reject(
+                f"DO_ORBIT radius {radius} at {lat}, {lon}, {msg.z} in frame {msg.frame}"
+            )
+        x, y, _ = self.frame.to_local(lat, lon, 0.0)
+        (x0, x1), (y0, y1) = self._xy_limits
+        notes = []
+        cx, cy = min(max(float(x), x0), x1), min(max(float(y), y0), y1)
+        if (cx, cy) != (x, y):
+            notes.append(f"centre ({cx:.6g}, {cy:.6g})")
+        # The whole circle need not fit (the world's edge is a soft limit for a loiter), but a
+        # circle larger than the world is no orbit of this world.
+        largest = max(x1 - x0, y1 - y0) / 2
+        r = min(abs(float(radius)), max(largest, MIN_ORBIT_RADIUS_M))
+        if r != abs(radius):
+            notes.append(f"radius {abs(radius):.4g} -> {r:.6g} m")
+        h, note = self._clamp_alt(float(msg.z))
+        notes += [note] if note else []
         # param2: the orbit's speed (NaN or <= 0: keep the airspeed target as it is)
-        speed = float(msg.param2) if math.isfinite(msg.param2) and msg.param2 > 0 else None
-        self._obey(alt_target_m=float(msg.z), speed_target_mps=speed)
-        self._sink.command_orbit(float(x), float(y), abs(float(radius)), radius >= 0)
+        speed = None
+        if math.isfinite(msg.param2) and msg.param2 > 0:
+            speed, note = self._clamp_speed(float(msg.param2))
+            notes += [note] if note else []
+        self._ack_obeyed(msg, "DO_ORBIT", notes)
+        self._obey(alt_target_m=h, speed_target_mps=speed)
+        self._sink.command_orbit(cx, cy, r, radius >= 0)
         return True
 
     def _change_speed(self, msg) -> bool:
@@ -360,8 +471,9 @@ class MavlinkBridge:
         if msg.param1 not in (0, 1) or not math.isfinite(speed) or speed <= 0:
             self._ack(msg, mavlink.MAV_RESULT_DENIED)
             return self._reject(f"DO_CHANGE_SPEED type {msg.param1} speed {speed}")
-        self._ack(msg, mavlink.MAV_RESULT_ACCEPTED)
-        return self._obey(speed_target_mps=float(speed))
+        flown, note = self._clamp_speed(float(speed))
+        self._ack_obeyed(msg, "DO_CHANGE_SPEED", [note] if note else [])
+        return self._obey(speed_target_mps=flown)
 
     def _change_altitude(self, msg) -> bool:
         # param1 altitude (m), param2 its frame: MSL, or relative to the local origin (= h).
@@ -373,8 +485,9 @@ class MavlinkBridge:
         if frame not in offsets or not math.isfinite(alt):
             self._ack(msg, mavlink.MAV_RESULT_DENIED)
             return self._reject(f"DO_CHANGE_ALTITUDE {alt} in frame {frame}")
-        self._ack(msg, mavlink.MAV_RESULT_ACCEPTED)
-        return self._obey(alt_target_m=float(alt) + offsets[frame])
+        flown, note = self._clamp_alt(float(alt) + offsets[frame])
+        self._ack_obeyed(msg, "DO_CHANGE_ALTITUDE", [note] if note else [])
+        return self._obey(alt_target_m=flown)
 
     def _requested_message(self, msg):
         """The reply to a request for a message this bridge can send on demand, or None."""
@@ -388,12 +501,49 @@ class MavlinkBridge:
             return telemetry.autopilot_version()
         return None
 
-    def _ack(self, msg, result: int) -> None:
+    def _ack(self, msg, result: int, result_param2: int = 0) -> None:
         self._send(
             mavlink.MAVLink_command_ack_message(
-                msg.command, result, 0, 0, msg.get_srcSystem(), msg.get_srcComponent()
+                msg.command,
+                result,
+                0,
+                result_param2,
+                msg.get_srcSystem(),
+                msg.get_srcComponent(),
             )
         )
+
+    # ------------------------------------------------------------------ limits
+    def _clamp_alt(self, h: float) -> tuple[float, str | None]:
+        lo, hi = self._alt_limits
+        flown = min(max(h, lo), hi)
+        return flown, None if flown == h else f"h {h:.4g} -> {flown:.6g} m"
+
+    def _clamp_speed(self, speed: float) -> tuple[float, str | None]:
+        lo, hi = self._speed_limits
+        flown = min(max(speed, lo), hi)
+        return flown, None if flown == speed else f"speed {speed:.4g} -> {flown:.4g} m/s"
+
+    def _ack_obeyed(self, msg, name: str, notes: list[str]) -> None:
+        """ACCEPTED; if a limit changed the command, say so first (STATUSTEXT, which ground
+        stations show; one per clamp, as a STATUSTEXT holds 50 characters) and mark the
+        acknowledgement with ACK_CLAMPED."""
+        if notes:
+            self.counters["clamped_commands"] += 1
+            for note in notes:
+                self.announce(f"{name} clamped: {note}", mavlink.MAV_SEVERITY_WARNING)
+        self._ack(msg, mavlink.MAV_RESULT_ACCEPTED, ACK_CLAMPED if notes else 0)
+
+    def _clamped(self, kind: str, text: str) -> None:
+        """A setpoint flown at a limit: counted; announced at most every few seconds."""
+        self.counters["clamped_commands"] += 1
+        now = self._now if self._now is not None else 0.0
+        last = self._clamp_noticed.get(kind)
+        if last is None or not 0 <= now - last < CLAMP_NOTICE_PERIOD_S:
+            self._clamp_noticed[kind] = now
+            self.announce(text, mavlink.MAV_SEVERITY_WARNING)
+        else:
+            log.debug("%s", text)
 
     def _on_param_request_list(self, msg) -> bool:
         if self._addressed_to_me(msg, allow_broadcast=True):
@@ -434,3 +584,10 @@ class MavlinkBridge:
             gate.restart()
         self._previous_attitude = None
         self._home = self._home_setting
+
+
+def _interval(name: str, value, lowest: float = -math.inf) -> tuple[float, float]:
+    lo, hi = (float(v) for v in value)
+    if not (math.isfinite(lo) and math.isfinite(hi) and lowest < lo <= hi):
+        raise ValueError(f"{name} must be finite, ordered and above {lowest:g}, got {value}")
+    return lo, hi

@@ -17,6 +17,7 @@ SI and ENU come in, MAVLink units go out, and only here:
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
@@ -103,16 +104,28 @@ def heartbeat(failsafe: bool, phase: str = "transit") -> mavlink.MAVLink_heartbe
     )
 
 
-def sys_status(errors_comm: int) -> mavlink.MAVLink_sys_status_message:
-    """Healthy sensors and controllers, no battery model, dropped input bytes as comm errors."""
+@dataclass
+class Power:
+    """What the vehicle reports of its power system (None: not simulated)."""
+
+    voltage_v: float | None = None
+    current_a: float | None = None
+    soc: float | None = None  # state of charge, 0..1
+    throttle: float | None = None  # 0..1
+
+
+def sys_status(errors_comm: int, power: Power | None = None) -> mavlink.MAVLink_sys_status_message:
+    """Healthy sensors and controllers, the battery when simulated, dropped input bytes as
+    comm errors."""
+    p = power or Power()
     return mavlink.MAVLink_sys_status_message(
         _SENSORS,
         _SENSORS,
         _SENSORS,
         0,
-        _UINT16_UNKNOWN,  # voltage_battery: not simulated
-        -1,  # current_battery: not simulated
-        -1,  # battery_remaining: not simulated
+        _UINT16_UNKNOWN if p.voltage_v is None else min(round(p.voltage_v * 1000), 0xFFFE),
+        -1 if p.current_a is None else min(round(p.current_a * 100), 0x7FFF),
+        -1 if p.soc is None else max(0, min(100, round(100 * p.soc))),
         0,
         min(errors_comm, 0xFFFF),
         0,
@@ -147,14 +160,17 @@ def attitude(state: TrafficState, rates: np.ndarray) -> mavlink.MAVLink_attitude
     return mavlink.MAVLink_attitude_message(boot_ms(state.t), phi, theta, _wrap_pi(psi), p, q, r)
 
 
-def vfr_hud(state: TrafficState, frame: LocalFrame) -> mavlink.MAVLink_vfr_hud_message:
+def vfr_hud(
+    state: TrafficState, frame: LocalFrame, power: Power | None = None
+) -> mavlink.MAVLink_vfr_hud_message:
     _, _, alt = frame.to_geodetic(*state.pos[0])
     heading_deg = round(math.degrees(state.att[0, 2])) % 360
+    throttle = None if power is None else power.throttle
     return mavlink.MAVLink_vfr_hud_message(
         state.airspeed[0],
         state.ground_speed[0],
         heading_deg,
-        0,  # throttle: not reported by the dynamics
+        0 if throttle is None else max(0, min(100, round(100 * throttle))),
         float(alt),
         state.vel[0, 2],
     )

@@ -35,7 +35,8 @@ SMALL = {
             {"x": 1100, "y": 1000, "h": 120, "heading_deg": 270, "speed_mps": 20},
             {"x": 900, "y": 600, "h": 125, "heading_deg": 10, "speed_mps": 18},
             {"x": 1500, "y": 1400, "h": 118, "heading_deg": 200, "speed_mps": 22},
-        ]
+        ],
+        "flow": "none",  # these three only: the ADS-B check below counts them
     },
     "avoidance": {"max_steps": 25, "mcts": {"simulations": 60, "depth": 3}},
 }
@@ -185,17 +186,16 @@ def test_mavlink_telemetry_matches_trajectory(flown) -> None:
             assert abs(m.roll - row[4]) < 1e-3
             att_matched += 1
     assert att_matched > 20
-    icao_seen = set()
+    # The traffic the ground station sees is the ADS-B receiver's (surveillance.model: adsb,
+    # NACp 10: 95 % of horizontal errors within 10 m), not the truth.
+    icao_seen, errors = set(), []
     for m in msgs["ADSB_VEHICLE"]:
         icao_seen.add(m.ICAO_address)
         x, y, h = frame.to_local(m.lat * 1e-7, m.lon * 1e-7, m.altitude * 1e-3)
-        best = min(
-            np.min(np.linalg.norm(traj[i][:, 1:4] - [x, y, h], axis=1))
-            for i in traj
-            if i != "ownship"
-        )
-        assert best < 1.0
+        rows = traj[f"intruder-{m.ICAO_address - 0xF00000}"]
+        errors.append(float(np.min(np.linalg.norm(rows[:, 1:3] - [x, y], axis=1))))
     assert len(icao_seen) == 3
+    assert 0.5 < float(np.median(errors)) < 10.0 and max(errors) < 30.0
 
 
 def test_recording_read_back(flown) -> None:

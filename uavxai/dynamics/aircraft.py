@@ -12,6 +12,7 @@ import math
 
 import jsbsim
 
+from uavxai.dynamics.energy import SHAFT_POWER_HP, THROTTLE, WATTS_PER_HP, BatterySpec
 from uavxai.dynamics.fdm import load_fdm
 from uavxai.dynamics.geodesy import LocalFrame
 from uavxai.errors import UserError
@@ -232,6 +233,31 @@ class Aircraft:
     def raw_state(self) -> list[float]:
         """STATE_PROPERTIES in JSBSim units (degrees of lat/lon, feet, radians)."""
         return [get() for get in self._get]
+
+    # ---------------------------------------------- electrical (see uavxai.dynamics.energy)
+    def battery_spec(self) -> BatterySpec:
+        """The battery and electrical loads the aircraft package declares."""
+        spec = getattr(self, "_battery_spec", None)
+        if spec is None:
+            spec = self._battery_spec = BatterySpec.from_fdm(self.fdm, self.name)
+        return spec
+
+    def shaft_power_w(self) -> float:
+        """The motor's shaft power now, W, as JSBSim's electric engine computes it."""
+        return self.fdm[SHAFT_POWER_HP] * WATTS_PER_HP
+
+    def motor_power_w(self) -> float:
+        """The electrical power the motor and its ESC take from the battery now, W: the
+        shaft power over the package's motor efficiency."""
+        return self.shaft_power_w() / self.battery_spec().motor_efficiency
+
+    def electric_power_w(self) -> float:
+        """The battery's whole load now, W: the motor plus the avionics and payload."""
+        return self.motor_power_w() + self.battery_spec().constant_load_w
+
+    def throttle(self) -> float:
+        """The motor's throttle, 0..1 (autopilot plus trim, after the mixer's clip)."""
+        return self.fdm[THROTTLE]
 
     def close(self) -> None:
         self.run = None

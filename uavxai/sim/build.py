@@ -95,7 +95,13 @@ def fly(
             world,
             planner,
             command,
-            Judge(scenario.world, av.d_min_m, None if mission else goal, av.goal_radius_m),
+            Judge(
+                scenario.world,
+                av.d_min_m,
+                None if mission else goal,
+                av.goal_radius_m,
+                nmac_m=_nmac_cylinder(scenario),
+            ),
             Clock.from_scenario(scenario),
             goal=goal,
             max_steps=max_steps,
@@ -112,6 +118,17 @@ def fly(
             command.close()
         if world is not None:
             world.close()
+
+
+def _nmac_cylinder(scenario: Scenario) -> tuple[float, float]:
+    """The scenario's NMAC cylinder (``avoidance.nmac``), 500 ft x 100 ft by default."""
+    from uavxai.sim.judge import NMAC_HORIZONTAL_M, NMAC_VERTICAL_M
+
+    nmac = getattr(scenario.avoidance, "nmac", None)
+    return (
+        float(getattr(nmac, "horizontal_m", NMAC_HORIZONTAL_M)),
+        float(getattr(nmac, "vertical_m", NMAC_VERTICAL_M)),
+    )
 
 
 # ----------------------------------------------------------------------- kinematic runner

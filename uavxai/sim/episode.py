@@ -74,6 +74,7 @@ class EpisodeResult:
     min_separation_m: float
     decision_ms: list[float]
     wall_s: float
+    nmac: bool = False
     failure: str | None = None
     summary: dict = field(default_factory=dict)
 
@@ -125,6 +126,8 @@ class Episode:
         self.decision_ms: list[float] = []
         self.sample_metrics: dict[str, float] = {}  # per-sample scratch observers share
         self._overridden = False
+        self.nmac = False  # any near mid-air collision (the judge's cylinder) so far
+        self.nmac = False  # any near mid-air collision (the judge's cylinder) so far
         self.wall0 = time.perf_counter()
 
     # ---------------------------------------------------------------------------- phases
@@ -175,6 +178,7 @@ class Episode:
             self.state = self.world.state()
             self.path.on_sample(self.state)
             sep = self.judge.separation(prev, self.state)
+            self.nmac = self.nmac or self.judge.nmac(self.state)
             flown_min = min(flown_min, sep)
             self.min_separation_m = min(self.min_separation_m, sep)
             for o in self.observers:
@@ -215,6 +219,7 @@ class Episode:
             **self.label,
             "outcome": outcome.value,
             "min_separation_m": sep if math.isfinite(sep) else None,
+            "nmac": self.nmac,
             "steps": self.steps,
             "flight_time_s": round(self.state.t, 3),
             "goal": list(self.goal),
@@ -237,6 +242,7 @@ class Episode:
             min_separation_m=sep,
             decision_ms=self.decision_ms,
             wall_s=wall,
+            nmac=self.nmac,
             failure=failure,
             summary=summary,
         )

@@ -17,6 +17,11 @@ from uavxai.geometry import closest_approach
 from uavxai.scenario import World
 from uavxai.vocabulary import Outcome
 
+# Near mid-air collision, as the detect-and-avoid field defines it: a cylinder of 500 ft
+# horizontally and 100 ft vertically around the ownship.
+NMAC_HORIZONTAL_M = 152.4
+NMAC_VERTICAL_M = 30.48
+
 
 class Judge:
     def __init__(
@@ -25,11 +30,24 @@ class Judge:
         d_min_m: float,
         goal: Sequence[float] | None,
         goal_radius_m: float,
+        nmac_m: tuple[float, float] = (NMAC_HORIZONTAL_M, NMAC_VERTICAL_M),
     ) -> None:
         self.world = world
         self.d_min_m = d_min_m
         self.goal = None if goal is None else np.asarray(goal, dtype=float)
         self.goal_radius_m = goal_radius_m
+        self.nmac_m = nmac_m
+
+    def nmac(self, now: TrafficState) -> bool:
+        """Is any intruder inside the NMAC cylinder now? (Checked every sample: at 10 Hz
+        two aircraft close at most a few metres between samples, against a 152 m radius.)"""
+        if now.n < 2:
+            return False
+        rel = now.pos[1:] - now.pos[0]
+        inside = (np.hypot(rel[:, 0], rel[:, 1]) < self.nmac_m[0]) & (
+            np.abs(rel[:, 2]) < self.nmac_m[1]
+        )
+        return bool(inside.any())
 
     def separation(self, prev: TrafficState, now: TrafficState) -> float:
         """Smallest ownship-intruder distance between two samples (inf without intruders).

@@ -16,6 +16,7 @@ import numpy as np
 
 from uavxai.dynamics.state import TrafficState
 from uavxai.sim.episode import DecisionEvent, Episode, Observer, stats
+from uavxai.vocabulary import Outcome
 
 TRAJECTORY_FIELDS = ("t", "id", "x", "y", "h", "vx", "vy", "vh", "phi", "theta", "psi", "airspeed")
 _FLUSH_SAMPLES = 100
@@ -177,3 +178,53 @@ class ProgressBar(Observer):
         self.progress.update(
             self.task, completed=ep.max_steps, description=f"{self.name}: {summary['outcome']}"
         )
+
+
+class Energy(Observer):
+    """The ownship's battery, fed every sample with the electrical power JSBSim's motor
+    takes (plus the package's avionics and payload): energy (Wh), state of charge, and what
+    a ground station shows (SYS_STATUS battery, VFR_HUD throttle). At the reserve a mission
+    turns for home; an empty battery ends the episode (outcome ``battery``). Only worlds
+    whose aircraft report power (JSBSim) have one."""
+
+    def __init__(self) -> None:
+        self.battery = None
+        self.spec = None
+        self.outcome = None
+
+    def on_start(self, ep: Episode) -> None:
+        from uavxai.dynamics.energy import Battery
+
+        aircraft = getattr(ep.world, "aircraft", None)
+        if not aircraft:
+            return
+        self._own = aircraft[0]
+        self.spec = self._own.battery_spec()
+        self.battery = Battery.from_spec(self.spec)
+        self.battery.draw(self._own.electric_power_w(), 0.0)
+
+    def on_sample(self, ep: Episode, state: TrafficState) -> None:
+        if self.battery is None:
+            return
+        power = self._own.electric_power_w()
+        self.battery.draw(power, ep.clock.sample_s)
+        bridge = getattr(ep.path, "bridge", None)
+        if bridge is not None:
+            bridge.power.voltage_v = self.spec.voltage_v
+            bridge.power.current_a = self.spec.current_a(power)
+            bridge.power.soc = self.battery.soc
+            bridge.power.throttle = self._own.throttle()
+        if ep.mission is not None and self.battery.at_reserve:
+            ep.mission.battery_reserve(ep)
+        if self.battery.empty and ep.mission is not None:
+            ep.mission.outcome = ep.mission.outcome or Outcome.BATTERY
+
+    def on_end(self, ep: Episode, summary: dict) -> None:
+        if self.battery is None:
+            return
+        summary["energy"] = {
+            "energy_wh": self.battery.energy_wh,
+            "battery_soc_end": self.battery.soc,
+            "capacity_wh": self.spec.capacity_wh,
+            "reserve_soc": self.battery.reserve_soc,
+        }

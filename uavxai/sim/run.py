@@ -20,7 +20,15 @@ from uavxai.scenario import Scenario
 from uavxai.sim.build import episode_goal, fly
 from uavxai.sim.command import MavlinkPath
 from uavxai.sim.mission import mission_of
-from uavxai.sim.observers import DecisionsJSONL, Pacing, ProgressBar, Rerun, Throughput, Trust
+from uavxai.sim.observers import (
+    DecisionsJSONL,
+    Energy,
+    Pacing,
+    ProgressBar,
+    Rerun,
+    Throughput,
+    Trust,
+)
 
 console = Console(stderr=True, soft_wrap=True)
 
@@ -89,6 +97,7 @@ def run_episode(
     )
     observers = [
         Throughput(Channel.from_scenario(sc, users=service.users), service.power_w),
+        Energy(),
         Trust(),
         TrajectoryCSV(out / "trajectory.csv"),
         DecisionsJSONL(out / "decisions.jsonl"),
