@@ -82,6 +82,7 @@ DEFAULT_BANK_LIMIT_RAD = math.radians(60.0)
 DEFAULT_ACCEL_LIMIT_MPS2 = 10.0
 DEFAULT_XY_LIMITS_M = ((0.0, 2000.0), (0.0, 2000.0))
 MIN_ORBIT_RADIUS_M = 1.0
+ORBIT_CENTRE_TOLERANCE_M = 0.05
 # Bound the work one poll() does, so a flooding peer cannot stall the simulation loop.
 _MAX_READS_PER_POLL = 1000
 _COUNTERS = (
@@ -113,8 +114,9 @@ class CommandSink(Protocol):
         alt_target_m: float | None = None,
     ) -> None: ...
 
-    def command_orbit(self, x: float, y: float, radius_m: float, clockwise: bool = True) -> None:
-        ...
+    def command_orbit(
+        self, x: float, y: float, radius_m: float, clockwise: bool = True
+    ) -> None: ...
 
 
 class MavlinkBridge:
@@ -183,6 +185,13 @@ class MavlinkBridge:
             "BRG_TELEM_HZ": float(telemetry_hz),
             "BRG_ADSB_HZ": float(adsb_hz),
             "BRG_SIGNING": 1.0 if signing_key is not None else 0.0,
+            # the limits commands are clamped to, so an operator can see them before sending
+            "BRG_ALT_MIN": self._alt_limits[0],
+            "BRG_ALT_MAX": self._alt_limits[1],
+            "BRG_SPD_MIN": self._speed_limits[0],
+            "BRG_SPD_MAX": self._speed_limits[1],
+            "BRG_BANK_LIM": math.degrees(self._bank_limit),
+            "BRG_ACCEL_LIM": self._accel_limit,
         }
         clash = sorted(set(own) & set(params or {}))
         if clash:
@@ -379,10 +388,9 @@ class MavlinkBridge:
             bank = bank_from_attitude_target(msg)
         except SetpointError as why:
             return self._reject(str(why))
-        # The quaternion round trip moves a bank at the limit by ~1e-16: not a clamp.
         limit = self._bank_limit
-        flown = bank if abs(bank) <= limit + 1e-9 else math.copysign(limit, bank)
-        if flown != bank:
+        flown, clamped = _limited(bank, -limit, limit)
+        if clamped:
             self._clamped(
                 "bank", f"bank {math.degrees(bank):.0f} deg clamped to {math.degrees(flown):.0f}"
             )
@@ -396,8 +404,8 @@ class MavlinkBridge:
         except SetpointError as why:
             return self._reject(str(why))
         limit = self._accel_limit
-        flown = min(max(accel, -limit), limit)
-        if flown != accel:
+        flown, clamped = _limited(accel, -limit, limit)
+        if clamped:
             self._clamped("accel", f"accel {accel:.3g} m/s2 clamped to {flown:.3g}")
         return self._obey(accel_cmd_mps2=flown)
 
@@ -443,7 +451,8 @@ class MavlinkBridge:
         (x0, x1), (y0, y1) = self._xy_limits
         notes = []
         cx, cy = min(max(float(x), x0), x1), min(max(float(y), y0), y1)
-        if (cx, cy) != (x, y):
+        # degE7 on the wire is ~1 cm: a centre sent on the edge may come back just outside it.
+        if math.hypot(cx - x, cy - y) > ORBIT_CENTRE_TOLERANCE_M:
             notes.append(f"centre ({cx:.6g}, {cy:.6g})")
         # The whole circle need not fit (the world's edge is a soft limit for a loiter), but a
         # circle larger than the world is no orbit of this world.
@@ -515,14 +524,12 @@ class MavlinkBridge:
 
     # ------------------------------------------------------------------ limits
     def _clamp_alt(self, h: float) -> tuple[float, str | None]:
-        lo, hi = self._alt_limits
-        flown = min(max(h, lo), hi)
-        return flown, None if flown == h else f"h {h:.4g} -> {flown:.6g} m"
+        flown, clamped = _limited(h, *self._alt_limits)
+        return flown, f"h {h:.4g} -> {flown:.6g} m" if clamped else None
 
     def _clamp_speed(self, speed: float) -> tuple[float, str | None]:
-        lo, hi = self._speed_limits
-        flown = min(max(speed, lo), hi)
-        return flown, None if flown == speed else f"speed {speed:.4g} -> {flown:.4g} m/s"
+        flown, clamped = _limited(speed, *self._speed_limits)
+        return flown, f"speed {speed:.4g} -> {flown:.4g} m/s" if clamped else None
 
     def _ack_obeyed(self, msg, name: str, notes: list[str]) -> None:
         """ACCEPTED; if a limit changed the command, say so first (STATUSTEXT, which ground
@@ -584,6 +591,15 @@ class MavlinkBridge:
             gate.restart()
         self._previous_attitude = None
         self._home = self._home_setting
+
+
+def _limited(value: float, lo: float, hi: float) -> tuple[float, bool]:
+    """``value`` held to [lo, hi], and whether that was a clamp worth reporting. MAVLink
+    carries these values as float32 (a quaternion, for the bank), so a command sent exactly
+    at a limit may arrive a few parts in 10^8 beyond it: held, but not reported."""
+    flown = min(max(value, lo), hi)
+    tolerance = 1e-6 * max(1.0, abs(lo), abs(hi))
+    return flown, not lo - tolerance <= value <= hi + tolerance
 
 
 def _interval(name: str, value, lowest: float = -math.inf) -> tuple[float, float]:

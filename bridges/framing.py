@@ -4,7 +4,8 @@ pymavlink's own parser, after a frame fails its CRC, discards the whole length t
 corrupted) header announced, and a truncated datagram leaves bytes in its buffer that corrupt
 the next one. Here a frame whose CRC fails costs only its first byte: scanning resumes at the
 next start marker, so one damaged frame never takes a good neighbour with it. pymavlink's
-``decode()`` still does the CRC, signature and payload work.
+``decode()`` still does the CRC and payload work; signatures are checked by a
+`uavxai.bridges.signing.SignatureGate`, verified before any timestamp is recorded.
 
 Datagram sources (UDP, the planner's ``feed``) carry whole frames, so an incomplete frame at the
 end of a datagram is garbage. Stream sources (TCP) keep it until more bytes arrive.
@@ -15,6 +16,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from pymavlink.dialects.v20 import common as mavlink
+
+from .signing import ACCEPTED, REFUSED_BAD_SIGNATURE, REFUSED_UNSIGNED, SignatureGate
 
 _MAGIC_V1 = mavlink.PROTOCOL_MARKER_V1
 _MAGIC_V2 = mavlink.PROTOCOL_MARKER_V2
@@ -39,9 +42,16 @@ class Parsed:
 class FrameReader:
     """Splits bytes from one source into frames and decodes them with `codec`."""
 
-    def __init__(self, codec: mavlink.MAVLink, stream: bool) -> None:
+    def __init__(
+        self, codec: mavlink.MAVLink, stream: bool, gate: SignatureGate | None = None
+    ) -> None:
+        """`codec` decodes (it must hold no signing key: signatures are `gate`'s business,
+        checked in an order pymavlink does not keep; see `uavxai.bridges.signing`)."""
+        if codec.signing.secret_key is not None:
+            raise ValueError("FrameReader's codec must not hold a signing key; pass a gate")
         self._codec = codec
         self._stream = stream
+        self._gate = gate
         self._tail = b""
 
     def push(self, data: bytes) -> Parsed:
@@ -81,21 +91,21 @@ class FrameReader:
 
     def _decode(self, frame: bytes, out: Parsed) -> bool:
         """Decode one candidate frame into `out`; False if it is not a frame after all."""
-        refusals = self._codec.signing.reject_count
         try:
             msg = self._codec.decode(bytearray(frame))
         except Exception:  # hostile bytes must never escape as an exception
-            if self._codec.signing.reject_count == refusals:
-                return False
-            # CRC passed (pymavlink checks it first), so this is a real frame the signing
-            # policy turned away.
-            if frame[0] == _MAGIC_V2 and frame[2] & _SIGNED:
-                out.refused_bad_signature += 1
-            else:
-                out.refused_unsigned += 1
-            return True
+            return False
         if isinstance(msg, mavlink.MAVLink_unknown):
+            # No CRC extra, so not even the CRC could be checked: dropped, and it touches no
+            # signing state.
             out.unknown += 1
+            return True
+        # The CRC passed (decode checks it), so this is a real frame; now its signature.
+        verdict = ACCEPTED if self._gate is None else self._gate.check(frame, msg.get_msgId())
+        if verdict == REFUSED_UNSIGNED:
+            out.refused_unsigned += 1
+        elif verdict == REFUSED_BAD_SIGNATURE:
+            out.refused_bad_signature += 1
         else:
             out.messages.append(msg)
         return True

@@ -66,11 +66,13 @@ def enable_signing(
     accept_unsigned: Callable[[int], bool] | None = None,
     link_id: int = 0,
 ) -> None:
-    """Sign every outgoing frame with `key` and check incoming ones.
+    """Sign every outgoing frame with `key` (and let pymavlink check incoming ones).
 
     Incoming frames that are unsigned or badly signed are refused unless
     ``accept_unsigned(message_id)`` says otherwise (pymavlink then counts a refusal in
-    ``codec.signing.reject_count``).
+    ``codec.signing.reject_count``). pymavlink records a stream's timestamp before it checks
+    the signature, so a codec that decodes hostile input must not rely on this check: the
+    bridge decodes with key-less codecs and `uavxai.bridges.signing.SignatureGate` instead.
     """
     if len(key) != SIGNING_KEY_BYTES:
         raise ValueError(f"a MAVLink signing key is {SIGNING_KEY_BYTES} bytes, got {len(key)}")

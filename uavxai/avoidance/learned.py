@@ -23,7 +23,9 @@ explanations can be checked against the same physics as the tree search's.
 from __future__ import annotations
 
 import math
+import reprlib
 import time
+import zipfile
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -183,22 +185,56 @@ def shipped_checkpoint(algo: str) -> Path:
     return avoidance_checkpoints_dir() / f"{algo}.pt"
 
 
+# Bounds on what a checkpoint may declare, checked before anything is allocated from it: a file
+# is data, and its sizes are not to be trusted (issue 14: hidden layers of 60000 asked for over
+# 8 GB before any shape was compared). Generous next to what training writes ((128, 128), 8).
+MAX_CHECKPOINT_BYTES = 256 * 2**20
+MAX_CHECKPOINT_RECORDS = 1000
+MAX_HIDDEN_LAYERS = 8
+MAX_HIDDEN_WIDTH = 4096
+MAX_N_NEAREST = 64
+
+
+def _short_repr() -> reprlib.Repr:
+    """repr that stays short whatever a hostile file holds (keyword arguments need 3.12)."""
+    r = reprlib.Repr()
+    r.maxstring = r.maxother = 40
+    r.maxlist = r.maxtuple = r.maxdict = 4
+    r.maxlevel = 2
+    return r
+
+
+_SHORT = _short_repr()
+
+
 def load_checkpoint(path: str | Path | None, algo: str) -> tuple[dict[str, QNetwork], dict]:
     """The networks of a checkpoint for ``algo`` (None: the shipped one), in eval mode.
 
-    Raises :class:`CheckpointError` naming the file when it is missing, unreadable or made for
-    another algorithm or observation.
+    Raises :class:`CheckpointError` naming the file (and the field, with what is allowed) when
+    it is missing, unreadable, damaged, made for another algorithm or observation, declares
+    sizes beyond the bounds above or different from its tensors, or holds non-finite weights.
+    Every declared size is checked against the bounds and the stored tensors' shapes before a
+    network is built, so a hostile file cannot make this allocate more than it holds.
     """
     if algo not in ALGOS:
         raise CheckpointError(f"unknown learned avoidance algorithm '{algo}'; known: {ALGOS}")
     p = Path(path) if path is not None else shipped_checkpoint(algo)
     where = "avoidance.checkpoint" if path is not None else "the shipped checkpoint"
+    retrain = f"`uavxai train SCENARIO --stage avoidance --algo {algo}`"
     if not p.is_file():
         hint = (
             "train one with `uavxai train SCENARIO --stage avoidance --algo "
             f"{algo} --out DIR` and point avoidance.checkpoint at DIR/model.pt"
         )
         raise CheckpointError(f"{where} {p}: no such file; {hint}.")
+
+    def bad(field: str, value: object, allowed: str) -> CheckpointError:
+        return CheckpointError(
+            f"{where} {p}: {field} = {_SHORT.repr(value)}; allowed: {allowed}. Use a model.pt "
+            f"written by {retrain}."
+        )
+
+    _check_archive(p, where, algo)
     try:
         ckpt = torch.load(p, map_location="cpu", weights_only=True)
     except Exception as exc:  # noqa: BLE001 - any unreadable file is the same user error
@@ -207,42 +243,138 @@ def load_checkpoint(path: str | Path | None, algo: str) -> tuple[dict[str, QNetw
             f"expected a model.pt written by `uavxai train --stage avoidance --algo {algo}`."
         ) from None
     if not isinstance(ckpt, dict) or ckpt.get("format") != CHECKPOINT_FORMAT:
+        found = _SHORT.repr(ckpt.get("format")) if isinstance(ckpt, dict) else type(ckpt).__name__
         raise CheckpointError(
-            f"{where} {p}: not an avoidance checkpoint (format "
-            f"{ckpt.get('format') if isinstance(ckpt, dict) else type(ckpt).__name__!r}); "
+            f"{where} {p}: not an avoidance checkpoint (format {found}); "
             f"expected one written by `uavxai train --stage avoidance --algo {algo}`."
         )
     if ckpt.get("algo") != algo:
         raise CheckpointError(
-            f"{where} {p}: trained for '{ckpt.get('algo')}', but the planner is '{algo}'; "
-            f"use a checkpoint trained with --algo {algo}."
+            f"{where} {p}: trained for {_SHORT.repr(ckpt.get('algo'))}, but the planner is "
+            f"'{algo}'; use a checkpoint trained with --algo {algo}."
         )
-    n_nearest = int(ckpt.get("n_nearest", 0))
+    n_nearest = ckpt.get("n_nearest")
+    if not _is_int(n_nearest) or not 1 <= n_nearest <= MAX_N_NEAREST:
+        raise bad("n_nearest", n_nearest, f"an integer from 1 to {MAX_N_NEAREST}")
+    hidden = ckpt.get("hidden")
+    if (
+        not isinstance(hidden, list | tuple)
+        or not 1 <= len(hidden) <= MAX_HIDDEN_LAYERS
+        or not all(_is_int(h) and 1 <= h <= MAX_HIDDEN_WIDTH for h in hidden)
+    ):
+        raise bad(
+            "hidden",
+            hidden,
+            f"a list of 1 to {MAX_HIDDEN_LAYERS} layer widths, each an integer from 1 to "
+            f"{MAX_HIDDEN_WIDTH}",
+        )
+    hidden = [int(h) for h in hidden]
+    meta = ckpt.get("meta", {})
+    if not isinstance(meta, dict) or not all(isinstance(k, str) for k in meta):
+        raise bad("meta", meta, "a mapping from names to values")
+    n_obs = obs_dim(n_nearest)
     probe = ckpt.get("obs_probe")
     if (
-        n_nearest < 1
-        or ckpt.get("obs_dim") != obs_dim(n_nearest)
-        or probe is None
+        ckpt.get("obs_dim") != n_obs
+        or not isinstance(probe, torch.Tensor)
+        or tuple(probe.shape) != (n_obs,)
+        or not probe.is_floating_point()
         or not np.allclose(probe.numpy(), _probe_observation(n_nearest), atol=1e-5)
     ):
         raise CheckpointError(
             f"{where} {p}: trained on an observation that differs from this uavxai's "
-            f"(size {ckpt.get('obs_dim')}, {n_nearest} nearest intruders); retrain it with "
-            f"`uavxai train SCENARIO --stage avoidance --algo {algo}`."
+            f"(size {_SHORT.repr(ckpt.get('obs_dim'))}, {n_nearest} nearest intruders); "
+            f"retrain it with {retrain}."
         )
+    state_dicts = ckpt.get("state_dicts")
+    if not isinstance(state_dicts, dict):
+        raise bad("state_dicts", state_dicts, f"one state dict per network {head_names(algo)}")
+    expected = _expected_shapes(n_obs, hidden)
+    for name in head_names(algo):
+        sd = state_dicts.get(name)
+        if not isinstance(sd, dict):
+            raise CheckpointError(
+                f"{where} {p}: network '{name}' is missing; retrain with {retrain}."
+            )
+        shapes = {
+            k: tuple(v.shape) if isinstance(v, torch.Tensor) else type(v).__name__
+            for k, v in sd.items()
+        }
+        if shapes != expected:
+            wrong = sorted(set(shapes.items()) ^ set(expected.items()), key=str)[:4]
+            raise CheckpointError(
+                f"{where} {p}: network '{name}' has the wrong shape for hidden {hidden} and "
+                f"{n_obs} inputs (differs at {_SHORT.repr(wrong)}); retrain with {retrain}."
+            )
+        for k, v in sd.items():
+            if not v.is_floating_point() or not bool(torch.isfinite(v).all()):
+                raise CheckpointError(
+                    f"{where} {p}: network '{name}' tensor '{k}' holds "
+                    f"{'non-finite values (NaN or inf)' if v.is_floating_point() else v.dtype}; "
+                    f"allowed: finite floating-point weights. The file is damaged; retrain with "
+                    f"{retrain}."
+                )
     nets: dict[str, QNetwork] = {}
     for name in head_names(algo):
-        net = QNetwork(obs_dim(n_nearest), ckpt["hidden"])
+        net = QNetwork(n_obs, hidden)  # sizes now known to match the stored tensors
         try:
-            net.load_state_dict(ckpt["state_dicts"][name])
+            net.load_state_dict(state_dicts[name])
         except (KeyError, RuntimeError) as exc:
             raise CheckpointError(
                 f"{where} {p}: network '{name}' is missing or has the wrong shape "
                 f"({str(exc).splitlines()[0]})."
             ) from None
         nets[name] = net.eval()
-    info = {"n_nearest": n_nearest, "hidden": list(ckpt["hidden"]), **dict(ckpt.get("meta", {}))}
+    info = {"n_nearest": n_nearest, "hidden": hidden, **meta}
     return nets, info
+
+
+def _is_int(value: object) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _expected_shapes(n_obs: int, hidden: Sequence[int]) -> dict[str, tuple[int, ...]]:
+    """The state-dict shapes of ``QNetwork(n_obs, hidden)``, computed without building it."""
+    shapes: dict[str, tuple[int, ...]] = {}
+    width = n_obs
+    for i, h in enumerate([*hidden, N_ACTIONS]):
+        shapes[f"net.{2 * i}.weight"] = (h, width)
+        shapes[f"net.{2 * i}.bias"] = (h,)
+        width = h
+    return shapes
+
+
+def _check_archive(p: Path, where: str, algo: str) -> None:
+    """Bounded size, and every record's CRC: torch's loader reads a bit-flipped tensor without
+    a word, but the zip archive torch.save writes keeps a CRC-32 of every record."""
+    expected = f"expected a model.pt written by `uavxai train --stage avoidance --algo {algo}`"
+    size = p.stat().st_size
+    if size > MAX_CHECKPOINT_BYTES:
+        raise CheckpointError(
+            f"{where} {p}: {size} bytes; allowed: at most {MAX_CHECKPOINT_BYTES} bytes; {expected}."
+        )
+    try:
+        with zipfile.ZipFile(p) as archive:
+            records = archive.infolist()
+            declared = sum(r.file_size for r in records)
+            if len(records) > MAX_CHECKPOINT_RECORDS or declared > MAX_CHECKPOINT_BYTES:
+                raise CheckpointError(
+                    f"{where} {p}: declares {len(records)} records of {declared} bytes; "
+                    f"allowed: at most {MAX_CHECKPOINT_RECORDS} records and "
+                    f"{MAX_CHECKPOINT_BYTES} bytes; {expected}."
+                )
+            damaged = archive.testzip()
+    except CheckpointError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - not a zip, or one too broken to list
+        raise CheckpointError(
+            f"{where} {p}: not a readable torch checkpoint ({type(exc).__name__}); {expected}."
+        ) from None
+    if damaged is not None:
+        raise CheckpointError(
+            f"{where} {p}: damaged (record '{_SHORT.repr(damaged)}' fails its CRC check): the "
+            f"file changed after it was written; copy it again or retrain; {expected}."
+        )
 
 
 # ------------------------------------------------------------------------------------ planners

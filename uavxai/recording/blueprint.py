@@ -1,11 +1,15 @@
 """The default viewer layout: the 3-D scene big on the left, the reasoning on the right.
 
-Left: the 3-D world over a grid of metric plots. Right: the search tree of the current decision
-above the explanations. Trails are logged as short segments; a visible time range from the
-start of the run to the cursor makes the viewer draw them as one growing line.
+Left: the 3-D world with, beside it, the map and the per-user rate bars; under them a grid of
+metric plots (with the mission phase). Right: the mission status (phase, users at QoS) above
+the search tree of the current decision and the explanations interleaved with phase changes.
+Trails are logged as short segments; a visible time range from the start of the run to the
+cursor makes the viewer draw them as one growing line.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 import rerun as rr
@@ -60,6 +64,29 @@ def _scene(bounds: dict[str, tuple[float, float]] | None) -> rrb.Spatial3DView:
     )
 
 
+def _map(bounds: dict[str, tuple[float, float]] | None) -> rrb.MapView:
+    zoom = None
+    if bounds is not None:
+        # Web-map zoom at which the flight area spans about 200 px of the small map view
+        # (156 km per px at zoom 0 on the equator; the latitude factor is left out: it only
+        # zooms out a little). The view centres on the data, which may reach beyond the area.
+        span = max(bounds["x"][1] - bounds["x"][0], bounds["y"][1] - bounds["y"][0], 1.0)
+        zoom = float(np.clip(math.log2(156543.0 * 200.0 / span), 1.0, 19.0))
+    return rrb.MapView(name="map", origin=ent.MAP, zoom=zoom)
+
+
+def _rates() -> rrb.BarChartView:
+    return rrb.BarChartView(
+        name="rates Mbit/s, band=QoS",
+        origin=ent.RATES,
+        plot_legend=rrb.PlotLegend(visible=False),
+    )
+
+
+def _status() -> rrb.TextDocumentView:
+    return rrb.TextDocumentView(name="mission", origin=ent.STATUS)
+
+
 def _tree() -> rrb.GraphView:
     # Node positions come from our tree layout; the force simulation would scramble them.
     off = {"enabled": False}
@@ -83,13 +110,22 @@ def _metrics() -> rrb.Grid:
         )
         for name in ent.METRIC_NAMES
     ]
+    # The legend carries the series name, which says what the numbers mean.
+    plots.append(
+        rrb.TimeSeriesView(
+            name="mission phase",
+            origin=ent.PHASE_METRIC,
+            plot_legend=rrb.PlotLegend(corner="LeftTop", visible=True),
+        )
+    )
     return rrb.Grid(*plots, grid_columns=3)
 
 
 def _explanations() -> rrb.TextLogView:
     return rrb.TextLogView(
-        name="explanation",
-        origin=ent.EXPLANATION,
+        name="explanation and phase changes",
+        origin="/",
+        contents=[f"+ /{ent.EXPLANATION}", f"+ /{ent.PHASE}"],
         columns=rrb.TextLogColumns(
             timeline_columns=[rrb.components.TimelineColumn(ent.SIM_TIME)],
             text_log_columns=["body"],  # one entity and one level: those columns say nothing
@@ -99,8 +135,10 @@ def _explanations() -> rrb.TextLogView:
 
 def default_blueprint(bounds: dict[str, tuple[float, float]] | None = None) -> rrb.Blueprint:
     """The layout; with the flight-area ``bounds`` the 3-D camera starts framed on them."""
-    left = rrb.Vertical(_scene(bounds), _metrics(), row_shares=[2, 1])
-    right = rrb.Vertical(_tree(), _explanations(), row_shares=[3, 2])
+    side = rrb.Vertical(_map(bounds), _rates(), row_shares=[1, 1])
+    top = rrb.Horizontal(_scene(bounds), side, column_shares=[5, 2])
+    left = rrb.Vertical(top, _metrics(), row_shares=[2, 1])
+    right = rrb.Vertical(_status(), _tree(), _explanations(), row_shares=[1, 4, 3])
     return rrb.Blueprint(
         rrb.Horizontal(left, right, column_shares=[3, 2]),
         rrb.TimePanel(timeline=ent.SIM_TIME, state="collapsed"),

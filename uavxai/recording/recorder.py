@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from collections import defaultdict
+from collections.abc import Sequence
 from pathlib import Path
 from types import TracebackType
 
@@ -19,10 +20,12 @@ import numpy as np
 import rerun as rr
 
 from uavxai.avoidance.types import Decision
+from uavxai.dynamics.geodesy import LocalFrame
 from uavxai.dynamics.state import TrafficState
 from uavxai.recording import entities as ent
 from uavxai.recording.aircraft_model import aircraft_mesh
 from uavxai.recording.blueprint import default_blueprint
+from uavxai.recording.mission_log import MissionLog
 from uavxai.recording.traffic_log import TrafficLog, aircraft_paths
 from uavxai.recording.tree_graph import tree_graph
 
@@ -49,9 +52,11 @@ class RunRecorder:
         self._stream = rr.RecordingStream(recording_name, recording_id=recording_id)
         self._flush_period_s = LIVE_FLUSH_S if spawn else FILE_FLUSH_S
         self._traffic = TrafficLog(self._stream)
+        self._mission = MissionLog(self._stream)
         self._metrics: dict[str, list[tuple[float, int, float]]] = defaultdict(list)
         self._decision = 0
         self._last_flush_t = -math.inf
+        self._last_t = -math.inf  # the latest sim time seen, where the run ends on close
         self._closed = False
         self._spawn = spawn
         self._sinks_open = False
@@ -90,6 +95,13 @@ class RunRecorder:
         log(ent.PLAN, _line_style(PLAN_COLOR, rr.Radius.ui_points(3.0)), static=True)
         for name in ent.METRIC_NAMES:
             log(ent.metric_path(name), rr.SeriesLines(names=name, widths=2.0), static=True)
+        # Users move (log_users): only their style is static; static positions would hide the
+        # moving ones, as static data shadows a timeline.
+        # Labels (user number and rate) on hover only: ten overlapping labels hide the scene;
+        # the rate bars carry the numbers.
+        log(ent.USERS, rr.Points3D.from_fields(radii=[12.0], show_labels=False), static=True)
+        log(ent.SERVICE_POINT, rr.Points3D.from_fields(radii=[18.0]), static=True)
+        self._mission.log_styles()
 
     # ---- the pipeline's calls -------------------------------------------------------------
 
@@ -101,12 +113,24 @@ class RunRecorder:
         search_path: np.ndarray | None,
         intruder_ids: list[str],
         goal: np.ndarray,
+        origin: LocalFrame | object | None = None,
     ) -> None:
-        """The static scene: flight area, users, service point and its search, goal, models."""
+        """The static scene: flight area, users, service point and its search, goal, models.
+
+        ``origin`` (a LocalFrame, or the scenario's ``world.origin``) turns on the map view:
+        aircraft, users, orbit and service points are then also logged as GeoPoints. Users and
+        the service point are logged at t = 0 (not static), so ``log_users`` and
+        ``log_service_point`` can move them.
+        """
         if not self.enabled:
             return
+        if origin is not None:
+            frame = origin if isinstance(origin, LocalFrame) else LocalFrame.from_origin(origin)
+            self._mission.frame = frame
         self._open_sinks(bounds)
         log = self._stream.log
+        self._stream.set_time(ent.SIM_TIME, duration=0.0)
+        self._stream.set_time(ent.DECISION, sequence=self._decision)
         lo = np.array([bounds["x"][0], bounds["y"][0], bounds["h"][0]], dtype=np.float64)
         hi = np.array([bounds["x"][1], bounds["y"][1], bounds["h"][1]], dtype=np.float64)
         box = rr.Boxes3D(
@@ -121,15 +145,15 @@ class RunRecorder:
         labels = [f"user {i + 1}" for i in range(len(users))]
         log(
             ent.USERS,
-            rr.Points3D(users, radii=12.0, colors=(52, 152, 219), labels=labels, show_labels=False),
-            static=True,
+            rr.Points3D.from_fields(positions=users, colors=[(52, 152, 219)], labels=labels),
         )
         if service_point is not None:
             sp = np.asarray(service_point, dtype=np.float64).reshape(1, 3)
             log(
                 ent.SERVICE_POINT,
-                rr.Points3D(sp, radii=18.0, colors=(155, 89, 182), labels="service point"),
-                static=True,
+                rr.Points3D.from_fields(
+                    positions=sp, colors=[(155, 89, 182)], labels=["service point"]
+                ),
             )
         if search_path is not None and len(search_path) > 1:
             strip = rr.LineStrips3D(
@@ -149,11 +173,68 @@ class RunRecorder:
         if not self.enabled:
             return
         self._traffic.append(state, self._decision)
+        self._mission.traffic_geo(state.t, self._decision, state.pos)
+        self._maybe_flush(state.t)
+
+    def log_users(
+        self,
+        t: float,
+        users_xyz: np.ndarray,
+        rate_bps: np.ndarray,
+        qos_bps: float,
+        uav_pos: np.ndarray,
+    ) -> None:
+        """The users (K, 3) where they are at ``t`` with their current rates (K,) bit/s.
+
+        Colours users by rate against ``qos_bps`` (red below, green at or above, grey with no
+        rate), draws a link from ``uav_pos`` to each user with a rate, the rate bars, their map
+        points and the status text. Cheap (copies); sent in batches.
+        """
+        if not self.enabled:
+            return
+        self._mission.users(t, self._decision, users_xyz, rate_bps, qos_bps, uav_pos)
+        self._maybe_flush(t)
+
+    def log_phase(self, t: float, phase: str, why: str = "") -> None:
+        """The mission phase (e.g. ``Phase.ON_STATION.value``); only changes are recorded, so
+        calling it every sample is fine. ``why`` goes into the phase log."""
+        if not self.enabled:
+            return
+        self._mission.phase(t, self._decision, phase, why)
+        self._maybe_flush(t)
+
+    def log_orbit(self, t: float, centre: np.ndarray | None, radius_m: float) -> None:
+        """The loiter circle in force from ``t`` (centre (3,) m, at its height); ``None`` or a
+        radius <= 0 removes it. Repeats of the same orbit are dropped."""
+        if not self.enabled:
+            return
+        self._mission.orbit(t, self._decision, centre, radius_m)
+
+    def log_service_point(self, t: float, xyz: np.ndarray) -> None:
+        """A service point chosen at ``t``: it becomes ``world/service_point`` and joins the
+        history under ``world/service_points`` labelled with its time."""
+        if not self.enabled:
+            return
+        self._mission.service_point(t, self._decision, xyz)
+
+    def log_tracks(
+        self, t: float, ids: Sequence[object], pos: np.ndarray, sigma_m: np.ndarray
+    ) -> None:
+        """The planner's belief: track ``ids[i]`` at ``pos[i]`` with 1-sigma ``sigma_m[i]``,
+        drawn under ``world/tracks/N`` as a sphere of radius 2 sigma. Tracks missing from a
+        call disappear from then on."""
+        if not self.enabled:
+            return
+        self._mission.tracks(t, self._decision, ids, pos, sigma_m)
+        self._maybe_flush(t)
+
+    def _maybe_flush(self, t: float) -> None:
+        self._last_t = max(self._last_t, t)
         if self._last_flush_t == -math.inf:
-            self._last_flush_t = state.t
-        if state.t - self._last_flush_t >= self._flush_period_s:
+            self._last_flush_t = t
+        if t - self._last_flush_t >= self._flush_period_s:
             self._flush()
-            self._last_flush_t = state.t
+            self._last_flush_t = t
 
     def log_decision(self, k: int, t: float, decision: Decision, intruder_ids: list[str]) -> None:
         """Decision ``k`` at sim time ``t``: its search tree, planned path and explanation."""
@@ -199,6 +280,8 @@ class RunRecorder:
         self._closed = True
         if self.enabled:
             self._open_sinks(None)
+            if math.isfinite(self._last_t):
+                self._mission.end(self._last_t, self._decision)
             self._flush()
             self._stream.flush(timeout_sec=60.0)  # a vanished viewer must not hang the run
             self._stream.disconnect()
@@ -218,6 +301,7 @@ class RunRecorder:
 
     def _flush(self) -> None:
         self._traffic.flush()
+        self._mission.flush()
         for name, rows in self._metrics.items():
             if not rows:
                 continue

@@ -21,6 +21,7 @@ Avoidance is therefore on in every phase. ``mission.service_s: 0`` or an explici
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -179,6 +180,18 @@ class Mission(Observer):
             d_min_m=d_min,
             words=(f"on station: orbiting the service point at {c.radius_m:.0f} m{near}", ""),
         )
+
+    def move_station(self, ep: Episode, point: Sequence[float], why: str) -> None:
+        """A re-planned service point: the orbit moves there (now, if on station)."""
+        t = ep.state.t
+        self.config = dataclasses.replace(self.config, station=tuple(float(v) for v in point))
+        self.service_points.append((round(t, 3), *self.config.station))
+        c = self.config
+        self.announce(f"service point moved: {why}", self.phase.value)
+        if self.phase == Phase.ON_STATION:
+            ep.path.orbit(*c.station, c.radius_m, c.clockwise, c.speed_mps, t)
+        elif self.phase == Phase.TRANSIT:
+            ep.path.altitude(c.station[2], t)
 
     def on_end(self, ep: Episode, summary: dict) -> None:
         summary["mission"] = {

@@ -228,3 +228,106 @@ class Energy(Observer):
             "capacity_wh": self.spec.capacity_wh,
             "reserve_soc": self.battery.reserve_soc,
         }
+
+
+class Service(Observer):
+    """The communication service, every sample: users walk (``comms.users.mobility``); while
+    the mission serves (on station or avoiding) the rates delivered from the flown position
+    are accounted with fading drawn per sample, and while avoiding, what the planned orbit
+    would have delivered under the same fading (the service lost to avoidance). Writes
+    ``users.csv`` and ``service.csv`` (SPEC §4); re-plans the service point every
+    ``service.replan_s`` and when a user drops below the QoS rate, moving the orbit."""
+
+    def __init__(self, scenario, channel, power_w, out: Path | None, replan=None) -> None:
+        from uavxai.comms.delivery import Delivery
+        from uavxai.comms.mobility import UserMobility
+
+        self.scenario = scenario
+        self.channel = channel
+        self.walk = UserMobility.from_scenario(scenario, users=channel.users)
+        rng = np.random.default_rng([scenario.seed, 0x736572])  # the fading's own stream
+        self.delivery = Delivery(channel, np.asarray(power_w, dtype=float), rng=rng)
+        self.replan = replan  # (users (K,3)) -> (service point (3,), power (K,)), or None
+        self.replan_s = getattr(scenario.service, "replan_s", None)
+        self._last_plan_t = 0.0
+        self._break: tuple[float, float] | None = None  # (t, orbit bearing) when avoiding began
+        self._files = []
+        if out is not None:
+            self._users = (out / "users.csv").open("w")
+            self._users.write("t,user,x,y\n")
+            self._service = (out / "service.csv").open("w")
+            self._service.write("t,user,power_w,sinr_db,rate_bps\n")
+            self._files = [self._users, self._service]
+
+    def on_sample(self, ep: Episode, state: TrafficState) -> None:
+        from uavxai.comms.orbit_rate import orbit_bearing, orbit_position
+
+        m, t, dt = ep.mission, state.t, ep.clock.sample_s
+        users = self.walk.positions
+        if self._files:
+            self._users.write(
+                "".join(f"{t:.3f},{k},{u[0]:.3f},{u[1]:.3f}\n" for k, u in enumerate(users))
+            )
+        if m is not None and m.serving and m.outcome is None:  # each sample: the dt after it
+            c = m.config
+            avoiding = m.phase.value == "avoiding"
+            planned = None
+            if avoiding:
+                if self._break is None:
+                    self._break = (t, orbit_bearing(c.station, state.pos[0]))
+                t0, bearing0 = self._break
+                planned = orbit_position(
+                    c.station, c.radius_m, bearing0, t - t0, c.speed_mps, c.clockwise
+                )
+            else:
+                self._break = None
+            rows = self.delivery.sample(t, state.pos[0], users, dt, planned, avoiding)
+            if self._files:
+                self._service.write("".join(
+                    f"{r[0]:.3f},{r[1]},{r[2]:.6g},{r[3]:.4f},{r[4]:.6g}\n" for r in rows
+                ))  # fmt: skip
+            ep.sample_metrics["delivered_rate_bps"] = float(sum(r[4] for r in rows))
+            self._maybe_replan(ep, users, rows)
+        self.walk.advance(dt)
+
+    def _maybe_replan(self, ep: Episode, users: np.ndarray, rows) -> None:
+        if self.replan is None or not self.walk.moving:
+            return
+        t = ep.state.t
+        due = self.replan_s is not None and t - self._last_plan_t >= self.replan_s
+        qos = self.scenario.comms.qos_rate_bps
+        # QoS drop judged on the mean channel, not one fading draw
+        from uavxai.comms.delivery import rates_at
+
+        _, mean = rates_at(self.channel, ep.state.pos[0], users, self.delivery.power_w)
+        dropped = bool(np.any((mean[0] < qos) & (self.delivery.power_w > 0)))
+        if not (due or (dropped and t - self._last_plan_t >= 10.0)):
+            return
+        self._last_plan_t = t
+        point, power = self.replan(users)
+        self.delivery.set_power(power)
+        ep.mission.move_station(ep, point, "users moved" if due else "a user fell below QoS")
+
+    def on_start(self, ep: Episode) -> None:
+        from uavxai.comms.orbit_rate import orbit_average
+
+        if ep.mission is not None:  # what the plan promised: the orbit's mean, fading-free
+            c = ep.mission.config
+            avg = orbit_average(self.channel, c.station, c.radius_m, self.delivery.power_w)
+            self.predicted_bps = float(avg.sum_rate_bps)
+
+    def on_end(self, ep: Episode, summary: dict) -> None:
+        if ep.mission is None:
+            return
+        mission = summary.setdefault("mission", {})
+        mission.update(self.delivery.summary())
+        mission["predicted_orbit_sum_rate_bps"] = self.predicted_bps
+        energy = summary.get("energy", {}).get("energy_wh")
+        bits = mission.get("delivered_bits", 0.0)
+        mission["energy_wh"] = energy
+        mission["battery_soc_end"] = summary.get("energy", {}).get("battery_soc_end")
+        mission["bits_per_joule"] = bits / (energy * 3600.0) if energy else None
+
+    def close(self) -> None:
+        for f in self._files:
+            f.close()

@@ -26,6 +26,7 @@ from uavxai.sim.observers import (
     Pacing,
     ProgressBar,
     Rerun,
+    Service,
     Throughput,
     Trust,
 )
@@ -102,6 +103,11 @@ def run_episode(
         TrajectoryCSV(out / "trajectory.csv"),
         DecisionsJSONL(out / "decisions.jsonl"),
     ]
+    mission = mission_of(sc, goal)
+    if mission is not None:
+        observers.append(
+            Service(sc, observers[0].channel, service.power_w, out, replan=_replanner(sc))
+        )
     record = sc.log.rerun if record is None else record
     if record or spawn or rerun_file is not None:
         observers.append(_rerun(sc, service, None if spawn else (rerun_file or out / "run.rrd")))
@@ -116,13 +122,27 @@ def run_episode(
         dynamics="jsbsim",
         path=mavlink_path(sc, mavlink if mavlink is not None else sc.bridge.mavlink),
         observers=observers,
-        mission=mission_of(sc, goal),
+        mission=mission,
     )
     summary = result.summary
     summary.update(service.to_summary())
     summary["goal_is_service_point"] = sc.ownship.goal is None
     summary["versions"] = versions()
     return summary
+
+
+def _replanner(sc: Scenario):
+    """Re-plan the service point for users where they are now, with the scenario's planner."""
+    from uavxai.service.stage import plan_service
+
+    def replan(users: np.ndarray):
+        comms = sc.comms
+        users_now = comms.users.model_copy(update={"positions": [tuple(u[:2]) for u in users]})
+        moved = sc.model_copy(update={"comms": comms.model_copy(update={"users": users_now})})
+        plan = plan_service(moved)
+        return plan.service_point, plan.power_w
+
+    return replan
 
 
 def _rerun(sc: Scenario, service, path: Path | None) -> Rerun:
