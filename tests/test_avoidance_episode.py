@@ -20,8 +20,11 @@ HOLD = 4
 
 
 def small_scenario(**avoidance):
+    # The paper's setting: exact intruder states, the drawn traffic only.
     return default_scenario(
         "episode-test",
+        surveillance={"model": "truth"},
+        intruders={"flow": "none"},
         ownship={
             "start": {"x": 700, "y": 700, "h": 120, "heading_deg": 45, "speed_mps": 20},
             "goal": [1000, 1000, 100],
@@ -139,7 +142,12 @@ def test_observation_size_is_independent_of_the_intruder_count():
 
 def test_default_goal():
     assert default_goal(default_scenario("g")) == (1000.0, 1000.0, 100.0)
-    high = default_scenario("g", world={"h": [150, 300]}, ownship={"start": {"h": 200}})
+    high = default_scenario(
+        "g",
+        world={"h": [150, 300]},
+        ownship={"start": {"h": 200}},
+        intruders={"altitude_m": [160, 200]},
+    )
     assert default_goal(high) == (1000.0, 1000.0, 150.0)  # 100 m clamped into world.h
     assert default_goal(default_scenario("g", ownship={"goal": [1, 2, 120]})) == (1.0, 2.0, 120.0)
 

@@ -142,7 +142,8 @@ def test_users_from_seed_or_positions():
     assert a.shape == (10, 3) and (a[:, 2] == 0).all()
     assert ((a[:, :2] >= 750) & (a[:, :2] <= 1250)).all()
     assert not np.array_equal(a, draw_users(default_scenario(seed=8)))
-    fixed = default_scenario(comms={"users": {"positions": [[1.0, 2.0], [3.0, 4.0]]}})
+    users = {"positions": [[1.0, 2.0], [3.0, 4.0]], "region": {"x": [0, 10], "y": [0, 10]}}
+    fixed = default_scenario(comms={"users": users})
     np.testing.assert_array_equal(draw_users(fixed), [[1, 2, 0], [3, 4, 0]])
 
 

@@ -151,6 +151,7 @@ HEAD_ON = default_scenario(
     },
     intruders={"list": [{"x": 1500, "y": 1000, "h": 120, "heading_deg": 270, "speed_mps": 22}]},
     avoidance={"max_steps": 200},
+    surveillance={"model": "truth"},  # the setting the shipped models were trained in
 )
 
 

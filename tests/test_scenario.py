@@ -143,3 +143,210 @@ def test_console_script_runs() -> None:
         text=True,
     )
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
+
+
+# ------------------------------------------------------------------ reference and new sections
+def _sub_model(ann: object, listed: bool = False) -> tuple[type | None, bool]:
+    """The pydantic model inside an annotation (``X | None``, ``list[X]``, ``Annotated``),
+    and whether it sits inside a list."""
+    import typing
+
+    from pydantic import BaseModel
+
+    if isinstance(ann, type) and issubclass(ann, BaseModel):
+        return ann, listed
+    inner = listed or typing.get_origin(ann) is list
+    for arg in typing.get_args(ann):
+        found = _sub_model(arg, inner)
+        if found[0] is not None:
+            return found
+    return None, False
+
+
+def _schema_keys(model: type, prefix: str = "") -> list[str]:
+    """Every dotted key of the schema, sections included, descending into sub-models and
+    lists of models (``intruders.list[].x``)."""
+    keys = []
+    for name, field in model.model_fields.items():
+        keys.append(prefix + name)
+        sub, listed = _sub_model(field.annotation)
+        if sub is not None:
+            keys += _schema_keys(sub, prefix + name + ("[]." if listed else "."))
+    return keys
+
+
+def test_reference_documents_every_schema_key() -> None:
+    from uavxai.scenario import Scenario
+
+    doc = (REPO / "docs" / "scenario.md").read_text(encoding="utf-8")
+    keys = _schema_keys(Scenario)
+    assert "intruders.list[].speed_mps" in keys and "surveillance.sensor.sigma_m" in keys
+    sections = {k.rsplit(".", 1)[0].removesuffix("[]") for k in keys if "." in k}
+    leaves = [k for k in keys if k not in sections]
+    assert len(leaves) > 90
+    missing = [k for k in leaves if f"`{k}`" not in doc]
+    assert not missing, f"not in docs/scenario.md: {missing}"
+
+
+SPEC_KEYS = [  # SPEC §3 sections and the "Also" keys
+    "environment.wind.speed_mps", "environment.wind.from_deg", "environment.turbulence",
+    "surveillance.model", "surveillance.rate_hz", "surveillance.nacp", "surveillance.nacv",
+    "surveillance.latency_s", "surveillance.dropout", "surveillance.noncooperative",
+    "surveillance.sensor.range_m", "surveillance.sensor.fov_deg", "surveillance.sensor.sigma_m",
+    "mission.service_s", "mission.return_home", "comms.users.mobility.model",
+    "comms.users.mobility.speed_mps", "comms.users.mobility.pause_s", "service.platform",
+    "service.replan_s", "avoidance.actions", "intruders.flow",
+]
+
+
+def test_spec_sections_are_in_the_schema_and_the_reference() -> None:
+    from uavxai.scenario import Scenario
+
+    keys = set(_schema_keys(Scenario))
+    doc = (REPO / "docs" / "scenario.md").read_text(encoding="utf-8")
+    for key in SPEC_KEYS:
+        assert key in keys, key
+        assert f"`{key}`" in doc, key
+
+
+def test_new_sections_default_to_what_the_code_does_without_them() -> None:
+    """The engine reads these sections with getattr defaults; the schema's defaults must be
+    the same, so adding the sections changed nothing for scenarios that omit them."""
+    from types import SimpleNamespace
+
+    from uavxai.comms.mobility import UserMobility
+    from uavxai.dynamics.environment import EnvironmentConfig
+    from uavxai.sim.mission import MissionConfig
+    from uavxai.surveillance.adsb import SurveillanceConfig
+
+    sc = default_scenario()
+    bare = SimpleNamespace(**{k: getattr(sc, k) for k in ("ownship", "avoidance", "comms")})
+    assert SurveillanceConfig.from_scenario(sc) == SurveillanceConfig()
+    assert EnvironmentConfig.from_scenario(sc) == EnvironmentConfig()
+    assert MissionConfig.from_scenario(sc, (1000, 1000, 120)) == MissionConfig.from_scenario(
+        bare, (1000, 1000, 120)
+    )
+    a, b = UserMobility.from_scenario(sc), UserMobility.from_scenario(
+        SimpleNamespace(seed=sc.seed, comms=SimpleNamespace(users=SimpleNamespace(
+            positions=None, count=sc.comms.users.count, region=sc.comms.users.region)))
+    )
+    assert (a.model, a.speed_mps, a.pause_s) == (b.model, b.speed_mps, b.pause_s)
+    assert sc.surveillance.model == "adsb" and sc.intruders.flow == "replace"
+    assert sc.mission.service_s == 300 and sc.mission.return_home is True
+    assert sc.environment.wind.from_deg == 270 and sc.environment.turbulence == "none"
+
+
+def test_scenarios_using_the_new_sections_validate(tmp_path: Path) -> None:
+    text = """
+name: windy
+environment: {wind: {speed_mps: 8, from_deg: 200}, turbulence: moderate}
+surveillance: {model: truth, rate_hz: 2, nacp: 9, nacv: 1, latency_s: 0.2, dropout: 0.1,
+               noncooperative: 0.25, sensor: {range_m: 800, fov_deg: 120, sigma_m: 5}}
+mission: {service_s: 0, return_home: false}
+comms: {users: {mobility: {model: random_waypoint, speed_mps: [1, 2], pause_s: 10}}}
+service: {platform: hover, replan_s: 60}
+avoidance: {actions: vertical}
+intruders: {flow: none}
+"""
+    path = tmp_path / "windy.yaml"
+    path.write_text(text)
+    sc = load_scenario(path)
+    assert sc.environment.wind.speed_mps == 8 and sc.surveillance.sensor.fov_deg == 120
+    assert sc.comms.users.mobility.speed_mps == (1, 2) and sc.intruders.flow == "none"
+    path.write_text("name: x\nsurveillance: {sensor: null}\n")
+    assert load_scenario(path).surveillance.sensor is None
+
+
+# --------------------------------------------------------------- validate catches what run refuses
+RUN_REFUSES: list[tuple[str, tuple[str, ...]]] = [
+    ("service: {checkpoint: /nonexistent/model.pt}", ("service.checkpoint", "no such file")),
+    ("avoidance: {planner: dqn, checkpoint: nope.pt}", ("avoidance.checkpoint", "no such file")),
+    ("comms: {users: {positions: [[1000, 1000], [100, 100]]}}",
+     ("positions[1]", "outside comms.users.region")),
+    ("dynamics: {rate_hz: 30, trajectory_hz: 120}", ("rate_hz", "whole multiple")),
+    ("dynamics: {rate_hz: 100, trajectory_hz: 30}", ("rate_hz", "whole multiple")),
+    ("avoidance: {decision_period_s: 1.0e-9}", ("decision_period_s", "whole number")),
+    ("avoidance: {decision_period_s: 1.05}", ("decision_period_s", "whole number")),
+    ("avoidance: {decision_period_s: 0.25}", ("decision_period_s", "trajectory samples")),
+    ("bridge: {command_timeout_s: 0.5}", ("command_timeout_s", "longer than")),
+    ("world: {origin: {lat_deg: 90}}", ("world.origin.lat_deg", "85")),
+    ("ownship: {start: {speed_mps: 8}}", ("ownship.start.speed_mps", "between 12 and 30")),
+    ("ownship: {start: {speed_mps: 35}}", ("ownship.start.speed_mps", "between 12 and 30")),
+    ("avoidance: {speed_mps: [40, 50]}", ("avoidance.speed_mps", "between 12 and 30")),
+    ("intruders: {speed_mps: [20, 45]}", ("intruders.speed_mps", "between 12 and 30")),
+    ("intruders: {list: [{x: 500, y: 500, h: 120, heading_deg: 0, speed_mps: 70}]}",
+     ("intruders.list.0.speed_mps", "between 12 and 30")),
+    ("intruders: {list: [{x: 500, y: 500, h: -100, heading_deg: 0, speed_mps: 20}]}",
+     ("intruders.list.0", "world bounds", "h [50.0, 300.0]")),
+    ("intruders: {list: [{x: 500, y: 500, h: 900, heading_deg: 0, speed_mps: 20}]}",
+     ("intruders.list.0", "world bounds")),
+    ("intruders: {altitude_m: [200, 400]}", ("intruders.altitude_m", "world.h")),
+]
+
+
+@pytest.mark.parametrize(("body", "words"), RUN_REFUSES, ids=[w[0] for _, w in RUN_REFUSES])
+def test_validate_refuses_what_run_would(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], body: str, words: tuple[str, ...]
+) -> None:
+    path = tmp_path / "s.yaml"
+    path.write_text(f"name: s\n{body}\n")
+    for command in (["validate", str(path)], ["run", str(path), "--out", str(tmp_path / "o")]):
+        assert main(command) == 2, command
+        err = capsys.readouterr().err
+        assert str(path) in err and "Traceback" not in err and "docs/scenario.md" in err
+        for w in words:
+            assert w in err, f"{w!r} not in:\n{err}"
+    assert not (tmp_path / "o").exists()  # refused before anything was written
+
+
+def test_flyable_speeds_are_the_ones_jsbsim_reads() -> None:
+    """The schema reads the speed limits from the aircraft XML without JSBSim; JSBSim, loading
+    the same aircraft, must report the same numbers."""
+    from uavxai.dynamics.aircraft import Aircraft
+    from uavxai.dynamics.geodesy import LocalFrame
+    from uavxai.scenario import aircraft_speed_range
+
+    sc = default_scenario()
+    a = Aircraft("uav_fw", LocalFrame.from_origin(sc.world.origin), 1 / 120, seed=1)
+    try:
+        assert aircraft_speed_range("uav_fw") == pytest.approx(a.speed_range)
+    finally:
+        a.close()
+
+
+def test_relative_checkpoints_resolve_against_the_scenario_folder(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    folder = tmp_path / "study"
+    (folder / "models").mkdir(parents=True)
+    (folder / "models" / "model.pt").write_bytes(b"not checked here")
+    path = folder / "s.yaml"
+    path.write_text(
+        "name: s\nservice: {checkpoint: models/model.pt}\n"
+        "avoidance: {planner: dqn, checkpoint: ./models/model.pt}\n"
+    )
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)  # the working folder must not matter
+    sc = load_scenario(path)
+    expected = str((folder / "models" / "model.pt").resolve())
+    assert Path(sc.service.checkpoint).resolve() == Path(expected)
+    assert Path(sc.avoidance.checkpoint).is_absolute()
+    assert Path(sc.avoidance.checkpoint).resolve() == Path(expected)
+
+
+def test_shipped_scenarios_by_name(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.chdir(tmp_path)  # no scenarios/ folder here: the name must resolve to the package
+    assert load_scenario("demo") == load_scenario(scenarios_dir() / "demo.yaml")
+    assert load_scenario("head_on.yaml").name == "head_on"
+    assert main(["validate", "demo"]) == 0
+    assert "valid scenario 'demo'" in capsys.readouterr().out
+    assert main(["validate", "nosuch"]) == 2
+    err = capsys.readouterr().err
+    assert "no such scenario file" in err
+    for name in ("demo", "head_on", "dense", "crossing_swarm", "suburban"):
+        assert name in err
+    (tmp_path / "demo").mkdir()  # a folder of that name is not taken for the shipped file
+    assert main(["validate", "demo"]) == 2

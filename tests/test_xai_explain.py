@@ -24,6 +24,7 @@ def run_dir(tmp_path_factory):
         ownship={"start": {"x": 1000, "y": 300, "h": 120, "heading_deg": 0, "speed_mps": 20}},
         intruders={"list": [{"x": 1000, "y": 800, "h": 120, "heading_deg": 180, "speed_mps": 20}]},
         avoidance={"mcts": {"simulations": 60, "depth": 3}},
+        surveillance={"model": "truth"},
     )
     result = run_episode("mcts", sc, seed=0, keep_decisions=True)
     folder = tmp_path_factory.mktemp("run")

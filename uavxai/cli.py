@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import fcntl
+import fnmatch
 import json
 import os
 import shutil
@@ -209,7 +210,14 @@ def _version() -> str:
 
 
 MARKER = ".uavxai-run"  # in every output folder uavxai creates; also its lock file
-_HELD_LOCKS: list[Any] = []  # open lock files: held until the process ends
+# What uavxai writes into an output folder: a folder made before the marker existed, holding
+# nothing but these, is taken as ours (so `make demo` keeps working on an older runs/demo).
+OUR_OUTPUTS = (
+    "summary.json", "trajectory.csv", "decisions.jsonl", "*.rrd", "users.csv", "service.csv",
+    "results.csv", "episodes.csv", "*.png", "model.pt", "model.json", "learning_curve.csv",
+    "train_report.json",
+)
+_HELD_LOCKS: dict[Path, Any] = {}  # folder -> its open, locked marker: held until we exit
 
 
 def _dangerous(path: Path) -> str | None:
@@ -243,6 +251,11 @@ def prepare_out_dir(out: Path, force: bool) -> Path:
             raise UserError(f"--out {out}: exists and is not a folder.")
         had_marker = (out / MARKER).is_file()
         out.mkdir(parents=True, exist_ok=True)
+        key = out.resolve()
+        # a folder this process locked before (main() called twice): release, then lock anew
+        old = _HELD_LOCKS.pop(key, None)
+        if old is not None:
+            old.close()
         lock = open(out / MARKER, "a+", encoding="utf-8")  # noqa: SIM115 - held open on purpose
     except OSError as exc:
         raise UserError(
@@ -265,7 +278,11 @@ def prepare_out_dir(out: Path, force: bool) -> Path:
                     f"--out {out}: the folder exists and is not empty; choose another folder or "
                     "pass --force to overwrite it."
                 )
-            if not had_marker:
+            legacy = all(
+                p.is_file() and any(fnmatch.fnmatch(p.name, g) for g in OUR_OUTPUTS)
+                for p in others
+            )
+            if not (had_marker or legacy):
                 raise UserError(
                     f"--out {out}: refusing --force, this folder was not written by uavxai (it "
                     f"has no {MARKER} marker); empty it yourself or choose another --out."
@@ -281,19 +298,15 @@ def prepare_out_dir(out: Path, force: bool) -> Path:
             json.dumps({"uavxai": _version(), "pid": os.getpid(), "argv": sys.argv[1:]}) + "\n"
         )
         lock.flush()
-    except OSError as exc:
+    except BaseException as exc:
+        if not had_marker:  # refused a folder that is not ours: leave no marker in it
+            (out / MARKER).unlink(missing_ok=True)
         lock.close()
-        raise UserError(f"--out {out}: cannot prepare this folder ({exc}).") from None
-    except BaseException:
-        lock.close()
+        if isinstance(exc, OSError):
+            raise UserError(f"--out {out}: cannot prepare this folder ({exc}).") from None
         raise
-    _HELD_LOCKS.append(lock)
+    _HELD_LOCKS[key] = lock
     return out
-
-
-# Commands that fly the service stage and so need its model (train makes one; evaluate flies
-# only the avoidance stage).
-_NEEDS_SERVICE_MODEL = ("run", "validate", "service")
 
 
 def _load(args: argparse.Namespace):
@@ -302,39 +315,7 @@ def _load(args: argparse.Namespace):
     scenario = load_scenario(args.scenario)
     if getattr(args, "seed", None) is not None:
         scenario = scenario.with_seed(args.seed)
-    if args.command in _NEEDS_SERVICE_MODEL:
-        _check_service_model(scenario, getattr(args, "planner", None), args.scenario)
     return scenario
-
-
-def shipped_service_model(k: int, power_levels: int, access: str) -> Path:
-    """Where the shipped service model for (K, L, access) lives (as
-    uavxai.service.stage.shipped_checkpoint, without importing torch)."""
-    from uavxai.paths import service_checkpoints_dir
-
-    return service_checkpoints_dir() / f"d3qn_k{k}_l{power_levels}_{access}.pt"
-
-
-def _check_service_model(sc: Any, planner: str | None, source: str) -> None:
-    """What the service stage would refuse at run time, refused by `validate` already: a
-    learned planner with no checkpoint and no shipped model that fits."""
-    from uavxai.errors import ScenarioError
-    from uavxai.paths import service_checkpoints_dir
-
-    planner = planner or sc.service.planner
-    if planner not in ("d3qn", "dqn") or sc.service.checkpoint is not None:
-        return
-    c = sc.comms
-    if planner == "d3qn" and shipped_service_model(c.users.k, c.power_levels, c.access).is_file():
-        return
-    have = sorted(p.name for p in service_checkpoints_dir().glob("*.pt"))
-    raise ScenarioError(
-        f"{source}: 'service.planner' = {planner!r} with 'service.checkpoint' null needs a "
-        f"shipped model for K = {c.users.k} users, power_levels = {c.power_levels}, access = "
-        f"{c.access}; shipped: {', '.join(have) or 'none'}. Train one with `uavxai train "
-        f"SCENARIO --stage service --algo {planner}` and set service.checkpoint to its "
-        "model.pt, or use service.planner: grid or random. See docs/scenario.md."
-    )
 
 
 def _cell(value: Any) -> str | None:
@@ -365,20 +346,17 @@ def print_report(title: str, report: dict[str, Any], path: Path, max_rows: int =
     table = Table(title=title, show_header=True, header_style="bold")
     table.add_column("field", no_wrap=True)
     table.add_column("value", overflow="fold")
-    rows = 0
+    rows = []
     for key, value in report.items():
         items = value.items() if isinstance(value, dict) else [(None, value)]
         for sub, v in items:
             cell = _cell(v)
-            if cell is None:
-                continue
-            if rows == max_rows:
-                table.add_row("...", f"more in {path.name}")
-                break
-            table.add_row(key if sub is None else f"{key}.{sub}", cell)
-            rows += 1
-        if rows == max_rows:
-            break
+            if cell is not None:
+                rows.append((key if sub is None else f"{key}.{sub}", cell))
+    for name, cell in rows[:max_rows]:
+        table.add_row(name, cell)
+    if len(rows) > max_rows:
+        table.add_row("...", f"{len(rows) - max_rows} more in {path.name}")
     console = Console(soft_wrap=False, width=max(100, Console().width))
     console.print(table)
     console.print(f"full report: {path}")

@@ -9,6 +9,8 @@ from __future__ import annotations
 from importlib.resources import files
 from pathlib import Path
 
+from uavxai.errors import ScenarioError
+
 
 def _dir(package: str) -> Path:
     return Path(str(files(package)))
@@ -29,3 +31,34 @@ def service_checkpoints_dir() -> Path:
 
 def avoidance_checkpoints_dir() -> Path:
     return _dir("uavxai.avoidance") / "checkpoints"
+
+
+def shipped_scenarios() -> list[str]:
+    """Names of the scenarios that ship with the package (``demo``, ``head_on``, ...)."""
+    return sorted(p.stem for p in scenarios_dir().glob("*.yaml"))
+
+
+def resolve_scenario(path: str | Path) -> Path:
+    """The scenario file ``path`` names: a file, or the name of a shipped scenario (``demo``
+    or ``demo.yaml``), so that a user of the installed wheel can run ``uavxai run demo``.
+    A file of that name in the working folder wins over the shipped one."""
+    text = str(path)
+    if "\x00" in text:
+        raise ScenarioError(f"{text!r}: a file name cannot contain a NUL byte.")
+    p = Path(path)
+    try:
+        if p.is_file():
+            return p
+        exists = p.exists()
+    except OSError as exc:  # e.g. a name too long for the file system
+        raise ScenarioError(f"{text[:200]}: cannot read the scenario file ({exc}).") from None
+    if exists:
+        raise ScenarioError(f"{p}: not a file (expected a .yaml scenario file).")
+    shipped = shipped_scenarios()
+    stem = p.name.removesuffix(".yaml")
+    if p.parent == Path(".") and stem in shipped:
+        return scenarios_dir() / f"{stem}.yaml"
+    raise ScenarioError(
+        f"{text[:200]}: no such scenario file (expected a .yaml file, or the name of a shipped "
+        f"scenario: {', '.join(shipped)})."
+    )

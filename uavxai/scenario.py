@@ -1,13 +1,23 @@
-"""Scenario files: the typed schema of SPEC §3, its defaults, and friendly validation errors.
+"""Scenario files: the typed schema, its defaults, and friendly validation errors.
 
-Every model forbids unknown keys; a misspelt key is reported with the nearest valid one.
-Units are SI; only fields ending in ``_deg`` are degrees.
+The reference of every key (default, unit, allowed values) is docs/scenario.md; a test checks
+that it names every key of these models. Every model forbids unknown keys; a misspelt key is
+reported with the nearest valid one. Units are SI; only fields ending in ``_deg`` are degrees.
+
+Scenario files are untrusted input: the YAML loader bounds the file size, the nesting depth and
+the node count with aliases expanded (a few hundred bytes of nested anchors would otherwise
+expand to gigabytes), refuses duplicate keys, and every number the schema accepts is finite and
+bounded, so that a bad file ends in :class:`ScenarioError` within milliseconds.
 """
 
 from __future__ import annotations
 
 import difflib
 import math
+import re
+import reprlib
+import xml.etree.ElementTree as ET
+from functools import cache
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -22,10 +32,29 @@ from pydantic import (
 )
 
 from uavxai.errors import ScenarioError, UserError
-from uavxai.paths import aircraft_dir
+from uavxai.paths import aircraft_dir, resolve_scenario
 
-PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
-Finite = Annotated[float, Field(allow_inf_nan=False)]
+REFERENCE = "docs/scenario.md"
+# Distances are bounded so that no arithmetic downstream overflows or loses every digit of a
+# metre (1e6 m = 1000 km, far beyond any flight area of this simulator).
+MAX_M = 1.0e6
+PositiveFloat = Annotated[float, Field(gt=0, le=MAX_M, allow_inf_nan=False)]
+Finite = Annotated[float, Field(ge=-MAX_M, le=MAX_M, allow_inf_nan=False)]
+Probability = Annotated[float, Field(ge=0, le=1, allow_inf_nan=False)]
+MAX_HEIGHT_M = 20_000.0  # above the ground; JSBSim's standard atmosphere is valid far above
+MAX_INTRUDERS = 500
+MAX_USERS = 64
+_SLUG = re.compile(r"[A-Za-z0-9_.-]+")
+
+
+def check_slug(value: str, what: str) -> str:
+    """A name that becomes a folder name: letters, digits, '-', '_', '.'; not '.' or '..'."""
+    if not _SLUG.fullmatch(value) or value in (".", ".."):
+        raise ValueError(
+            f"{what} must be a plain name of letters, digits, '-', '_' and '.' (it names a "
+            "folder), not '.' or '..'"
+        )
+    return value
 
 
 def _ordered(value: tuple[float, float], what: str) -> tuple[float, float]:
@@ -41,13 +70,14 @@ class _Model(BaseModel):
 
 # --------------------------------------------------------------------------------------- world
 class Origin(_Model):
-    lat_deg: Annotated[float, Field(ge=-90, le=90)] = 34.1230
+    # the local ENU frame is a tangent plane: near the poles it collapses, so |lat| <= 85
+    lat_deg: Annotated[float, Field(ge=-85, le=85)] = 34.1230
     lon_deg: Annotated[float, Field(ge=-180, le=180)] = 108.8370
     alt_m: Annotated[float, Field(ge=-500, le=9000)] = 400.0
 
 
 class DynamicsConfig(_Model):
-    """How the co-simulation steps (not in SPEC §3; added)."""
+    """How the co-simulation steps (docs/scenario.md)."""
 
     rate_hz: Annotated[float, Field(ge=30, le=1000)] = 120.0  # JSBSim integration rate
     trajectory_hz: Annotated[float, Field(ge=1, le=120)] = 10.0  # rows of trajectory.csv
@@ -70,15 +100,14 @@ class World(_Model):
         _ordered(v, "world.h")
         if v[0] <= 0:
             raise ValueError(f"world.h must be above the ground (min > 0 m), got [{v[0]}, {v[1]}]")
+        if v[1] > MAX_HEIGHT_M:
+            raise ValueError(f"world.h must stay below {MAX_HEIGHT_M:g} m, got [{v[0]}, {v[1]}]")
         return v
 
     def contains(self, x: float, y: float, h: float | None = None) -> bool:
         ok = self.x[0] <= x <= self.x[1] and self.y[0] <= y <= self.y[1]
         return ok and (h is None or self.h[0] <= h <= self.h[1])
 
-    @property
-    def diagonal_m(self) -> float:
-        return math.dist((self.x[0], self.y[0], self.h[0]), (self.x[1], self.y[1], self.h[1]))
 
 
 # --------------------------------------------------------------------------------------- comms
@@ -92,10 +121,48 @@ class Region(_Model):
         return _ordered(v, f"region.{info.field_name}")
 
 
+WalkSpeed = Annotated[float, Field(ge=0, le=50, allow_inf_nan=False)]
+PauseS = Annotated[float, Field(ge=0, le=86_400, allow_inf_nan=False)]
+
+
+def _number_or_range(v: Any, what: str) -> Any:
+    """One number (a fixed value) or ``[min, max]`` with min <= max, as uavxai.comms.mobility
+    takes them."""
+    if isinstance(v, tuple) and v[0] > v[1]:
+        raise ValueError(f"{what} must be a number or [min, max] with min <= max")
+    return v
+
+
+class Mobility(_Model):
+    """How ground users move (uavxai.comms.mobility; its defaults, walking pace)."""
+
+    model: Literal["static", "random_waypoint"] = "static"
+    speed_mps: WalkSpeed | tuple[WalkSpeed, WalkSpeed] = (0.5, 1.5)
+    pause_s: PauseS | tuple[PauseS, PauseS] = (0.0, 30.0)
+
+    @field_validator("speed_mps", "pause_s")
+    @classmethod
+    def _range(cls, v: Any, info: Any) -> Any:
+        return _number_or_range(v, f"comms.users.mobility.{info.field_name}")
+
+    @model_validator(mode="after")
+    def _walking(self) -> Mobility:
+        lo = self.speed_mps if isinstance(self.speed_mps, float) else self.speed_mps[0]
+        if self.model == "random_waypoint" and not lo > 0:
+            raise ValueError(
+                "speed_mps must be > 0 for model random_waypoint (model: static is for users "
+                "who stand still)"
+            )
+        return self
+
+
 class Users(_Model):
-    count: Annotated[int, Field(ge=1, le=64)] = 10
-    positions: list[tuple[Finite, Finite]] | None = None
+    count: Annotated[int, Field(ge=1, le=MAX_USERS)] = 10
+    positions: Annotated[
+        list[tuple[Finite, Finite]], Field(min_length=1, max_length=MAX_USERS)
+    ] | None = None
     region: Region = Region()
+    mobility: Mobility = Mobility()
 
     @model_validator(mode="after")
     def _count_matches(self) -> Users:
@@ -105,6 +172,15 @@ class Users(_Model):
                 f"count is {self.count} but {len(self.positions)} positions are given; "
                 "give one of them, or make them agree"
             )
+        r = self.region
+        for i, (x, y) in enumerate(self.positions or []):
+            if not (r.x[0] <= x <= r.x[1] and r.y[0] <= y <= r.y[1]):
+                # the service-point search runs inside the region: a user outside it may be
+                # out of reach of every candidate point (rate 0)
+                raise ValueError(
+                    f"positions[{i}] = [{x:g}, {y:g}] lies outside comms.users.region "
+                    f"x {list(r.x)}, y {list(r.y)}; widen the region or move the user"
+                )
         return self
 
     @property
@@ -121,15 +197,42 @@ class Comms(_Model):
     fading: Literal["rayleigh", "rician", "none"] = "rayleigh"
     p_max_w: Annotated[float, Field(gt=0, le=1000)] = 1.0
     power_levels: Annotated[int, Field(ge=2, le=32)] = 6
-    qos_rate_bps: Annotated[float, Field(ge=0)] = 1.0e5
+    qos_rate_bps: Annotated[float, Field(ge=0, le=1e12)] = 1.0e5
     access: Literal["shared", "ofdma"] = "shared"
+
+
+def _checkpoint_exists(value: str | None, what: str) -> str | None:
+    """A checkpoint named in the scenario must exist (relative paths were made absolute
+    against the scenario's folder by :func:`load_scenario`)."""
+    if value is None:
+        return value
+    if "\x00" in value:
+        raise ValueError(f"{what} contains a NUL byte")
+    try:
+        exists = Path(value).is_file()
+    except OSError as exc:  # e.g. a name longer than the file system allows
+        raise ValueError(f"cannot look up {_short(value)} ({exc.strerror})") from None
+    if not exists:
+        raise ValueError(
+            f"{_printable(value, 200)}: no such file; give the model.pt written by `uavxai "
+            "train` (relative paths are taken from the scenario file's folder), or null for the "
+            "shipped model"
+        )
+    return value
 
 
 class Service(_Model):
     planner: Literal["d3qn", "dqn", "random", "grid"] = "d3qn"
-    checkpoint: str | None = None
+    checkpoint: Annotated[str, Field(max_length=4096)] | None = None
     steps: Annotated[int, Field(ge=1, le=100_000)] = 100
     step_m: Annotated[float, Field(gt=0, le=500)] = 10.0
+    platform: Literal["orbit", "hover"] = "orbit"
+    replan_s: Annotated[float, Field(gt=0, le=86_400)] | None = None
+
+    @field_validator("checkpoint")
+    @classmethod
+    def _ckpt(cls, v: str | None) -> str | None:
+        return _checkpoint_exists(v, "service.checkpoint")
 
 
 # ------------------------------------------------------------------------------------- aircraft
@@ -141,10 +244,18 @@ class Start(_Model):
     speed_mps: Annotated[float, Field(gt=0, le=100)] = 20.0
 
 
+AircraftName = Annotated[str, Field(min_length=1, max_length=100)]
+
+
 class Ownship(_Model):
-    aircraft: str = "uav_fw"
+    aircraft: AircraftName = "uav_fw"
     start: Start = Start()
     goal: tuple[Finite, Finite, Finite] | None = None
+
+    @field_validator("aircraft")
+    @classmethod
+    def _slug(cls, v: str) -> str:
+        return check_slug(v, "ownship.aircraft")
 
 
 class IntruderSpec(_Model):
@@ -156,17 +267,24 @@ class IntruderSpec(_Model):
     behaviour: Literal["straight", "random_turns", "goal_seeking"] | None = None
 
 
-IntruderList = list[IntruderSpec]  # alias: the field below is called `list`
+# alias: the field below is called `list`; capped like `count`
+IntruderList = Annotated[list[IntruderSpec], Field(max_length=MAX_INTRUDERS)]
 
 
 class Intruders(_Model):
-    count: Annotated[int, Field(ge=0, le=500)] = 20
-    aircraft: str = "uav_fw"
+    count: Annotated[int, Field(ge=0, le=MAX_INTRUDERS)] = 20
+    aircraft: AircraftName = "uav_fw"
     behaviour: Literal["straight", "random_turns", "goal_seeking"] = "straight"
     speed_mps: tuple[PositiveFloat, PositiveFloat] = (15.0, 30.0)
     altitude_m: tuple[PositiveFloat, PositiveFloat] = (100.0, 140.0)
-    min_start_distance_m: Annotated[float, Field(ge=0)] = 300.0
+    min_start_distance_m: Annotated[float, Field(ge=0, le=MAX_M)] = 300.0
     list: IntruderList | None = None
+    flow: Literal["replace", "none"] = "replace"
+
+    @field_validator("aircraft")
+    @classmethod
+    def _slug(cls, v: str) -> str:
+        return check_slug(v, "intruders.aircraft")
 
     @field_validator("speed_mps", "altitude_m")
     @classmethod
@@ -188,11 +306,18 @@ class MCTSConfig(_Model):
     action_hold_s: Annotated[float, Field(gt=0, le=60)] = 4.0
 
 
+class NMAC(_Model):
+    """The near-mid-air-collision cylinder that evaluations count (500 ft x 100 ft)."""
+
+    horizontal_m: Annotated[float, Field(gt=0, le=10_000)] = 152.4
+    vertical_m: Annotated[float, Field(gt=0, le=10_000)] = 30.48
+
+
 class Avoidance(_Model):
     planner: Literal["mcts", "mcts_fast", "exhaustive", "dqn", "safe_dqn", "none"] = "mcts"
-    checkpoint: str | None = None  # for dqn / safe_dqn; null: the shipped model
-    d_min_m: PositiveFloat = 50.0
-    goal_radius_m: PositiveFloat = 50.0
+    checkpoint: Annotated[str, Field(max_length=4096)] | None = None  # dqn / safe_dqn
+    d_min_m: Annotated[float, Field(gt=0, le=10_000)] = 50.0
+    goal_radius_m: Annotated[float, Field(gt=0, le=100_000)] = 50.0
     decision_period_s: Annotated[float, Field(gt=0, le=60)] = 1.0
     max_steps: Annotated[int, Field(ge=1, le=100_000)] = 400
     bank_limit_deg: Annotated[float, Field(gt=0, le=60)] = 30.0
@@ -200,11 +325,18 @@ class Avoidance(_Model):
     accel_mps2: Annotated[float, Field(ge=0, le=10)] = 1.0
     speed_mps: tuple[PositiveFloat, PositiveFloat] = (12.0, 30.0)
     mcts: MCTSConfig = MCTSConfig()
+    actions: Literal["paper", "vertical"] = "paper"
+    nmac: NMAC = NMAC()
 
     @field_validator("speed_mps")
     @classmethod
     def _speed(cls, v: tuple[float, float]) -> tuple[float, float]:
         return _ordered(v, "avoidance.speed_mps")
+
+    @field_validator("checkpoint")
+    @classmethod
+    def _ckpt(cls, v: str | None) -> str | None:
+        return _checkpoint_exists(v, "avoidance.checkpoint")
 
     @model_validator(mode="after")
     def _steps(self) -> Avoidance:
@@ -218,10 +350,11 @@ class Avoidance(_Model):
 
 # --------------------------------------------------------------------------------------- bridge
 class Bridge(_Model):
-    mavlink: str | None = None
+    mavlink: Annotated[str, Field(max_length=500)] | None = None
     system_id: Annotated[int, Field(ge=1, le=255)] = 1
     signing_key_hex: str | None = None
     command_timeout_s: Annotated[float, Field(gt=0, le=600)] = 3.0  # failsafe: wings level
+    override_s: Annotated[float, Field(ge=0, le=86_400)] = 30.0  # operator command holds this
 
     @field_validator("signing_key_hex")
     @classmethod
@@ -248,6 +381,42 @@ class Log(_Model):
     rerun: bool = True
 
 
+# ---------------------------------------------------------------------------------- environment
+class Wind(_Model):
+    speed_mps: Annotated[float, Field(ge=0, le=100)] = 0.0
+    from_deg: Annotated[float, Field(ge=0, le=360)] = 270.0  # blows FROM, clockwise from north
+
+
+class Environment(_Model):
+    wind: Wind = Wind()
+    turbulence: Literal["none", "light", "moderate", "severe"] = "none"
+
+
+# --------------------------------------------------------------------------------- surveillance
+class Sensor(_Model):
+    range_m: Annotated[float, Field(ge=0, le=MAX_M)] = 1000.0
+    fov_deg: Annotated[float, Field(ge=0, le=360)] = 220.0
+    sigma_m: Annotated[float, Field(ge=0, le=10_000)] = 10.0
+
+
+class Surveillance(_Model):
+    model: Literal["adsb", "truth"] = "adsb"
+    rate_hz: Annotated[float, Field(gt=0, le=100)] = 1.0
+    nacp: Annotated[int, Field(ge=5, le=11)] = 10  # DO-260B categories with a bound
+    nacv: Annotated[int, Field(ge=1, le=4)] = 2
+    latency_s: Annotated[float, Field(ge=0, le=60)] = 0.5
+    dropout: Annotated[float, Field(ge=0, lt=1)] = 0.05
+    noncooperative: Probability = 0.0
+    sensor: Sensor | None = Sensor()  # null: no onboard sensor
+
+
+# -------------------------------------------------------------------------------------- mission
+class Mission(_Model):
+    service_s: Annotated[float, Field(ge=0, le=86_400)] = 300.0
+    return_home: bool = True
+    orbit_radius_m: Annotated[float, Field(gt=0, le=10_000)] | None = None  # null: from bank
+
+
 # ------------------------------------------------------------------------------------- scenario
 class Scenario(_Model):
     name: Annotated[str, Field(min_length=1, max_length=200)]
@@ -261,6 +430,47 @@ class Scenario(_Model):
     avoidance: Avoidance = Avoidance()
     bridge: Bridge = Bridge()
     log: Log = Log()
+    environment: Environment = Environment()
+    surveillance: Surveillance = Surveillance()
+    mission: Mission = Mission()
+
+    @field_validator("name")
+    @classmethod
+    def _name(cls, v: str) -> str:
+        return check_slug(v, "name")
+
+    @model_validator(mode="after")
+    def _timing(self) -> Scenario:
+        """What the simulation clock (uavxai.sim.clock) and the bridge's failsafe would refuse,
+        refused here already so that `validate` says it."""
+        rate, traj = self.dynamics.rate_hz, self.dynamics.trajectory_hz
+        period = self.avoidance.decision_period_s
+        tick = 1.0 / rate
+        sample = _whole_ticks(1.0 / traj, tick)
+        if sample is None:
+            raise ValueError(
+                f"dynamics.rate_hz ({rate:g}) must be a whole multiple of dynamics.trajectory_hz "
+                f"({traj:g}), e.g. 120 and 10"
+            )
+        decision = _whole_ticks(period, tick)
+        if decision is None:
+            raise ValueError(
+                f"avoidance.decision_period_s = {period:g} s must be a whole number (>= 1) of "
+                f"integrator steps of 1 / dynamics.rate_hz = {tick:g} s"
+            )
+        if decision % sample:
+            raise ValueError(
+                f"avoidance.decision_period_s = {period:g} s must be a whole number of "
+                f"trajectory samples (1 / dynamics.trajectory_hz = {1 / traj:g} s)"
+            )
+        timeout = self.bridge.command_timeout_s
+        if not timeout > period:
+            raise ValueError(
+                f"bridge.command_timeout_s = {timeout:g} s must be longer than "
+                f"avoidance.decision_period_s = {period:g} s, or the failsafe overrides the "
+                "planner between its decisions"
+            )
+        return self
 
     @model_validator(mode="after")
     def _geometry(self) -> Scenario:
@@ -281,9 +491,17 @@ class Scenario(_Model):
                 f"comms.users.region x {list(r.x)}, y {list(r.y)} must lie inside the world "
                 f"x {list(w.x)}, y {list(w.y)}"
             )
-        for spec in self.intruders.list or []:
-            if not w.contains(spec.x, spec.y):
-                raise ValueError(f"intruder at ({spec.x}, {spec.y}) lies outside the world bounds")
+        for i, spec in enumerate(self.intruders.list or []):
+            if not w.contains(spec.x, spec.y, spec.h):
+                raise ValueError(
+                    f"intruders.list.{i} at ({spec.x:g}, {spec.y:g}, {spec.h:g}) lies outside the "
+                    f"world bounds x {list(w.x)}, y {list(w.y)}, h {list(w.h)}"
+                )
+        lo, hi = self.intruders.altitude_m
+        if self.intruders.list is None and not (w.h[0] <= lo and hi <= w.h[1]):
+            raise ValueError(
+                f"intruders.altitude_m = [{lo:g}, {hi:g}] must lie inside world.h {list(w.h)}"
+            )
         for name in {self.ownship.aircraft, self.intruders.aircraft}:
             if not (aircraft_dir() / name / f"{name}.xml").is_file():
                 known = sorted(
@@ -292,10 +510,75 @@ class Scenario(_Model):
                 raise ValueError(
                     f"aircraft '{name}' is not a folder under aircraft/; known: {known}"
                 )
+        self._flyable()
         return self
+
+    def _flyable(self) -> None:
+        """Speeds the aircraft can fly, from the same numbers JSBSim reads (the autopilot's
+        ap/speed-min-mps and ap/speed-max-mps, see uavxai.dynamics.world._check_speed)."""
+        own, intr = self.ownship.aircraft, self.intruders.aircraft
+        lo, hi = aircraft_speed_range(own)
+        s = self.ownship.start.speed_mps
+        if not lo <= s <= hi:
+            raise ValueError(
+                f"ownship.start.speed_mps = {s:g} m/s: aircraft '{own}' flies between {lo:g} and "
+                f"{hi:g} m/s"
+            )
+        a = self.avoidance.speed_mps
+        if max(lo, a[0]) >= min(hi, a[1]):
+            raise ValueError(
+                f"avoidance.speed_mps = {list(a)}: aircraft '{own}' flies between {lo:g} and "
+                f"{hi:g} m/s; the two ranges must overlap"
+            )
+        lo, hi = aircraft_speed_range(intr)
+        for i, spec in enumerate(self.intruders.list or []):
+            if not lo <= spec.speed_mps <= hi:
+                raise ValueError(
+                    f"intruders.list.{i}.speed_mps = {spec.speed_mps:g} m/s: aircraft '{intr}' "
+                    f"flies between {lo:g} and {hi:g} m/s"
+                )
+        r = self.intruders.speed_mps
+        if self.intruders.list is None and not (lo <= r[0] and r[1] <= hi):
+            raise ValueError(
+                f"intruders.speed_mps = {list(r)}: aircraft '{intr}' flies between {lo:g} and "
+                f"{hi:g} m/s; the drawn speeds must lie inside"
+            )
 
     def with_seed(self, seed: int) -> Scenario:
         return self.model_copy(update={"seed": int(seed)})
+
+
+_TICK_TOL = 1e-6  # as uavxai.sim.clock.whole_ticks
+
+
+def _whole_ticks(seconds: float, tick_s: float) -> int | None:
+    """``seconds`` as a whole number (>= 1) of ``tick_s``, or None (the clock's rule)."""
+    n = round(seconds / tick_s)
+    if n < 1 or abs(n * tick_s - seconds) > _TICK_TOL * max(1.0, seconds):
+        return None
+    return n
+
+
+@cache
+def aircraft_speed_range(name: str) -> tuple[float, float]:
+    """The airspeeds (m/s) the aircraft's autopilot accepts: the initial values of
+    ``ap/speed-min-mps`` and ``ap/speed-max-mps`` in its XML, which JSBSim loads and
+    :attr:`uavxai.dynamics.aircraft.Aircraft.speed_range` reads back (a test checks both
+    agree). Read without starting JSBSim, so that validation stays cheap."""
+    found: dict[str, float] = {}
+    folder = aircraft_dir() / name
+    for xml in sorted(folder.rglob("*.xml")):
+        try:
+            root = ET.parse(xml).getroot()
+        except (ET.ParseError, OSError):
+            continue
+        for prop in root.iter("property"):
+            key = (prop.text or "").strip()
+            if key in ("ap/speed-min-mps", "ap/speed-max-mps") and "value" in prop.attrib:
+                found[key] = float(prop.attrib["value"])
+    if len(found) < 2:  # an aircraft without the speed limits: no limit known beyond the schema
+        return 0.0, math.inf
+    return found["ap/speed-min-mps"], found["ap/speed-max-mps"]
 
 
 # ----------------------------------------------------------------------------------- loading
@@ -336,25 +619,44 @@ def _first_model(ann: Any) -> type[BaseModel] | None:
     return None
 
 
+_REPR = reprlib.Repr()  # Python 3.11: no keyword arguments yet
+_REPR.maxlevel, _REPR.maxtuple, _REPR.maxlist, _REPR.maxdict = 2, 4, 4, 3
+_REPR.maxstring, _REPR.maxlong, _REPR.maxother = 60, 40, 60
+
+
+def _short(value: Any) -> str:
+    """A bounded repr: reprlib stops after a few items and levels, so a value built from a
+    billion aliases costs as little to show as a small one."""
+    if isinstance(value, dict):
+        return "a mapping"
+    shown = _REPR.repr(value)
+    return shown if len(shown) <= 80 else shown[:77] + "..."
+
+
+def _printable(text: str, limit: int = 120) -> str:
+    """``text`` with control characters escaped (no raw ANSI escapes reach the terminal),
+    cut to ``limit`` characters."""
+    text = text[: limit * 4]
+    clean = "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+    return clean if len(clean) <= limit else clean[: limit - 3] + "..."
+
+
 def _describe(err: dict[str, Any]) -> str:
-    loc = ".".join(str(p) for p in err["loc"])
+    loc = _printable(".".join(str(p) for p in err["loc"]))
     kind = err["type"]
     value = err.get("input")
     if kind == "extra_forbidden":
         key = str(err["loc"][-1])
         allowed = _allowed_keys(Scenario, err["loc"])
-        near = difflib.get_close_matches(key, allowed, n=1, cutoff=0.5)
+        near = difflib.get_close_matches(key[:100], allowed, n=1, cutoff=0.5)
         hint = f" Did you mean '{near[0]}'?" if near else ""
         return f"'{loc}': unknown key.{hint} Allowed here: {', '.join(allowed)}."
     if kind == "missing":
         return f"'{loc}': required but missing."
-    msg = err["msg"].removeprefix("Value error, ")
+    msg = _printable(err["msg"].removeprefix("Value error, "), 400)
     if not loc:
         return f"{msg}."
-    shown = repr(value) if not isinstance(value, dict) else "a mapping"
-    if len(shown) > 80:
-        shown = shown[:77] + "..."
-    return f"'{loc}' = {shown}: {msg}."
+    return f"'{loc}' = {_short(value)}: {msg}."
 
 
 def parse_scenario(data: Any, source: str = "<scenario>") -> Scenario:
@@ -363,36 +665,192 @@ def parse_scenario(data: Any, source: str = "<scenario>") -> Scenario:
         kind = type(data).__name__ if data is not None else "an empty document"
         raise ScenarioError(
             f"{source}: a scenario must be a YAML mapping of keys (name, world, comms, ...), "
-            f"got {kind}."
+            f"got {kind}. See {REFERENCE}."
         )
     try:
         return Scenario.model_validate(data)
     except ValidationError as exc:
-        lines = [_describe(e) for e in exc.errors()]
+        errors = exc.errors()
+        lines = [_describe(e) for e in errors[:10]]
+        if len(errors) > 10:
+            lines.append(f"... and {len(errors) - 10} more")
+        n = len(errors)
         raise ScenarioError(
-            f"{source}: invalid scenario ({len(lines)} problem{'s' if len(lines) > 1 else ''}):\n  "
+            f"{source}: invalid scenario ({n} problem{'s' if n > 1 else ''}):\n  "
             + "\n  ".join(lines)
-            + "\nSee the scenario reference in README.md (units: m, s, rad; *_deg in degrees)."
+            + f"\nSee the scenario reference {REFERENCE} (units: m, s; *_deg in degrees)."
         ) from None
+    except RecursionError:  # data built in Python, not by load_scenario's bounded loader
+        raise ScenarioError(f"{source}: the scenario is nested too deeply.") from None
 
 
-def load_scenario(path: str | Path) -> Scenario:
-    """Read and validate a scenario YAML file; raises :class:`ScenarioError` on any problem."""
-    p = Path(path)
-    if p.is_dir() or not p.exists():
-        raise ScenarioError(f"{p}: no such scenario file (expected a .yaml file).")
+# ------------------------------------------------------------------------------ bounded YAML
+MAX_FILE_BYTES = 256_000  # a scenario with 500 listed intruders is about 40 kB
+MAX_DEPTH = 32  # the schema nests 4 deep; lists of lists add 2
+MAX_NODES = 20_000  # with aliases expanded; 500 listed intruders are about 6,600
+
+
+class _BoundedLoader(yaml.SafeLoader):
+    """PyYAML's safe loader, bounded: nesting depth, node count with every alias expanded,
+    integer length; duplicate keys are an error (PyYAML keeps the last one silently)."""
+
+    def __init__(self, stream: str) -> None:
+        super().__init__(stream)
+        self._depth = 0
+        self._nodes = 0
+
+    def compose_node(self, parent: Any, index: Any) -> Any:  # noqa: D102
+        self._depth += 1
+        self._nodes += 1
+        if self._depth > MAX_DEPTH:
+            raise yaml.constructor.ConstructorError(
+                None, None, f"nested deeper than {MAX_DEPTH} levels", self.peek_event().start_mark
+            )
+        if self._nodes > MAX_NODES:
+            raise yaml.constructor.ConstructorError(
+                None, None, f"more than {MAX_NODES} values", self.peek_event().start_mark
+            )
+        try:
+            return super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
+
+    def construct_mapping(self, node: Any, deep: bool = False) -> Any:  # noqa: D102
+        if isinstance(node, yaml.MappingNode):
+            seen: set[Any] = set()
+            for key_node, _ in node.value:
+                if key_node.tag == "tag:yaml.org,2002:merge" or not isinstance(
+                    key_node, yaml.ScalarNode
+                ):
+                    continue
+                key = key_node.value
+                if key in seen:
+                    raise yaml.constructor.ConstructorError(
+                        "while reading a mapping",
+                        node.start_mark,
+                        f"duplicate key '{_short(key)[1:-1]}' (YAML keeps only one: give it once)",
+                        key_node.start_mark,
+                    )
+                seen.add(key)
+        return super().construct_mapping(node, deep=deep)
+
+    def construct_yaml_int(self, node: Any) -> int:  # noqa: D102
+        if len(node.value) > 40:
+            raise yaml.constructor.ConstructorError(
+                None, None, f"an integer of {len(node.value)} characters is too large",
+                node.start_mark,
+            )
+        return super().construct_yaml_int(node)
+
+
+_BoundedLoader.add_constructor("tag:yaml.org,2002:int", _BoundedLoader.construct_yaml_int)
+
+
+class _CycleError(Exception):
+    def __init__(self, mark: Any) -> None:
+        self.mark = mark
+
+
+def _expanded_size(root: Any) -> int:
+    """Number of nodes of the composed document with every alias expanded, stopping as soon as
+    it passes MAX_NODES (the "billion laughs" file: 400 bytes, 10^9 nodes once expanded)."""
+    memo: dict[int, int] = {}
+
+    def size(node: Any) -> int:
+        key = id(node)
+        if key in memo:
+            if memo[key] < 0:
+                raise _CycleError(node.start_mark)
+            return memo[key]
+        memo[key] = -1  # being counted: meeting it again inside itself is a cycle
+        total = 1
+        if isinstance(node, yaml.SequenceNode):
+            for child in node.value:
+                total += size(child)
+                if total > MAX_NODES:
+                    break
+        elif isinstance(node, yaml.MappingNode):
+            for k, v in node.value:
+                total += size(k) + size(v)
+                if total > MAX_NODES:
+                    break
+        memo[key] = total
+        return total
+
+    return size(root)
+
+
+def safe_yaml(text: str, source: str) -> Any:
+    """Parse untrusted YAML text within bounded time and memory; :class:`ScenarioError`
+    naming ``source`` and the line on any problem."""
+    if len(text) > MAX_FILE_BYTES:
+        raise ScenarioError(
+            f"{source}: {len(text)} characters is too large for a scenario file (at most "
+            f"{MAX_FILE_BYTES}); see {REFERENCE}."
+        )
+    loader = None
     try:
-        text = p.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ScenarioError(f"{p}: cannot read the scenario file ({exc}).") from None
-    try:
-        data = yaml.safe_load(text)
+        loader = _BoundedLoader(text)  # its reader checks the characters already
+        root = loader.get_single_node()
+        if root is None:
+            return None
+        if _expanded_size(root) > MAX_NODES:
+            raise ScenarioError(
+                f"{source}: with its aliases (*name) expanded the file holds more than "
+                f"{MAX_NODES} values; a scenario needs far fewer. Write the values out or "
+                "use fewer nested aliases."
+            )
+        return loader.construct_document(root)
+    except _CycleError as cycle:
+        raise ScenarioError(
+            f"{source}: not valid YAML at line {cycle.mark.line + 1}: an alias (*name) refers to "
+            "the mapping or list that contains it, which never ends."
+        ) from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
         problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
-        raise ScenarioError(f"{p}: not valid YAML{where}: {problem}.") from None
-    return parse_scenario(data, str(p))
+        raise ScenarioError(f"{source}: not valid YAML{where}: {problem}.") from None
+    except (ValueError, OverflowError, RecursionError) as exc:  # e.g. int('1' * 5000)
+        raise ScenarioError(
+            f"{source}: not a readable scenario ({type(exc).__name__}: {_short(str(exc))})."
+        ) from None
+    finally:
+        if loader is not None:
+            loader.dispose()
+
+
+def _absolute_paths(data: Any, folder: Path) -> Any:
+    """Relative checkpoint paths resolve against the scenario file's folder, here, once, so
+    that every process (local workers, Ray workers) sees the same absolute path."""
+    if not isinstance(data, dict):
+        return data
+    for section in ("service", "avoidance"):
+        sub = data.get(section)
+        if isinstance(sub, dict):
+            ckpt = sub.get("checkpoint")
+            if isinstance(ckpt, str) and ckpt and "\x00" not in ckpt:
+                try:
+                    path = Path(ckpt).expanduser()
+                except RuntimeError:  # ~user that does not exist: reported as no such file
+                    path = Path(ckpt)
+                if not path.is_absolute():
+                    path = folder / path
+                data = {**data, section: {**sub, "checkpoint": str(path)}}
+    return data
+
+
+def load_scenario(path: str | Path) -> Scenario:
+    """Read and validate a scenario YAML file; raises :class:`ScenarioError` on any problem.
+
+    ``path`` may also be the name of a shipped scenario (``demo``, ``head_on``, ...)."""
+    p = resolve_scenario(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ScenarioError(f"{p}: cannot read the scenario file ({exc}).") from None
+    data = safe_yaml(text, str(p))
+    return parse_scenario(_absolute_paths(data, p.resolve().parent), str(p))
 
 
 def default_scenario(name: str = "demo", **overrides: Any) -> Scenario:
