@@ -64,6 +64,7 @@ EPISODE_COLUMNS = (
     "min_separation_m",
     "flight_time_s",
     "decision_ms_p50",
+    "nmac",
 )
 # The columns whose values depend on the machine, not on the seed.
 TIMING_COLUMNS = ("decision_ms_p50",)
@@ -121,6 +122,7 @@ def run_campaign_episode(
         if math.isfinite(r.min_separation_m)
         else math.inf,
         "flight_time_s": round(float(r.flight_time_s), 3),
+        "nmac": int(r.nmac),
         "decision_ms_p50": round(float(np.median(ms)), 4) if ms else math.nan,
         "decision_ms": ms,
     }

@@ -124,7 +124,7 @@ class Episode:
         self.steps = 0
         self.min_separation_m = self.state.min_separation()
         self.decision_ms: list[float] = []
-        self.sample_metrics: dict[str, float] = {}  # per-sample scratch observers share
+        self.sample_metrics: dict = {}  # per-sample values observers share (rates, users)
         self._overridden = False
         self.nmac = False  # any near mid-air collision (the judge's cylinder) so far
         self.nmac = False  # any near mid-air collision (the judge's cylinder) so far

@@ -127,17 +127,34 @@ class Rerun(Observer):
         self._setup = setup
         self._ms = 0.0
         self._ids: list[str] = []
+        self._points = 0  # service points already recorded
 
     def on_start(self, ep: Episode) -> None:
         self._ids = list(ep.state.ids[1:])
         self.recorder.log_setup(intruder_ids=self._ids, goal=np.asarray(ep.goal), **self._setup)
 
     def on_decision(self, ep: Episode, event: DecisionEvent) -> None:
+        from uavxai.recording.mission_log import tracks_of
+
         self._ms = event.decision.ms
         self.recorder.log_decision(event.step, event.t, event.decision, self._ids)
+        self.recorder.log_tracks(event.t, *tracks_of(event.intruders))  # belief beside truth
 
     def on_sample(self, ep: Episode, state: TrafficState) -> None:
-        self.recorder.log_traffic(state)
+        rec, m, t = self.recorder, ep.mission, state.t
+        rec.log_traffic(state)
+        if "users_xyz" in ep.sample_metrics:
+            qos = ep.sample_metrics.get("qos_bps", 0.0)
+            rates = ep.sample_metrics["user_rates_bps"]
+            rec.log_users(t, ep.sample_metrics["users_xyz"], rates, qos, state.pos[0])
+        if m is not None:
+            rec.log_phase(t, m.phase.value)
+            c = m.config
+            rec.log_orbit(t, c.station if m.serving else None, c.radius_m)
+            while self._points < len(m.service_points):
+                _, *xyz = m.service_points[self._points]
+                rec.log_service_point(t, np.asarray(xyz))
+                self._points += 1
         self.recorder.log_metrics(
             state.t,
             sum_rate_bps=ep.sample_metrics.get("sum_rate_bps", math.nan),
@@ -249,6 +266,7 @@ class Service(Observer):
         self.delivery = Delivery(channel, np.asarray(power_w, dtype=float), rng=rng)
         self.replan = replan  # (users (K,3)) -> (service point (3,), power (K,)), or None
         self.replan_s = getattr(scenario.service, "replan_s", None)
+        self.qos_bps = float(scenario.comms.qos_rate_bps)
         self._last_plan_t = 0.0
         self._break: tuple[float, float] | None = None  # (t, orbit bearing) when avoiding began
         self._files = []
@@ -264,6 +282,9 @@ class Service(Observer):
 
         m, t, dt = ep.mission, state.t, ep.clock.sample_s
         users = self.walk.positions
+        ep.sample_metrics["users_xyz"] = users
+        ep.sample_metrics["qos_bps"] = self.qos_bps
+        ep.sample_metrics["user_rates_bps"] = np.zeros(len(users))  # not served: grey
         if self._files:
             self._users.write(
                 "".join(f"{t:.3f},{k},{u[0]:.3f},{u[1]:.3f}\n" for k, u in enumerate(users))
@@ -286,7 +307,9 @@ class Service(Observer):
                 self._service.write("".join(
                     f"{r[0]:.3f},{r[1]},{r[2]:.6g},{r[3]:.4f},{r[4]:.6g}\n" for r in rows
                 ))  # fmt: skip
-            ep.sample_metrics["delivered_rate_bps"] = float(sum(r[4] for r in rows))
+            rates = np.array([r[4] for r in rows])
+            ep.sample_metrics["user_rates_bps"] = rates
+            ep.sample_metrics["delivered_rate_bps"] = float(rates.sum())
             self._maybe_replan(ep, users, rows)
         self.walk.advance(dt)
 

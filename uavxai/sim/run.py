@@ -159,6 +159,7 @@ def _rerun(sc: Scenario, service, path: Path | None) -> Rerun:
         "users": service.users,
         "service_point": service.service_point,
         "search_path": service.visited,
+        "origin": sc.world.origin,
     }
     return Rerun(recorder, setup)
 
