@@ -28,6 +28,7 @@ import csv
 import math
 import multiprocessing
 import os
+import sys
 import time
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
@@ -53,6 +54,18 @@ RESULT_COLUMNS = (
     "mean_min_separation_m",
     "decision_ms_p50",
     "out_of_bounds_rate",
+    "fdm_failure_rate",
+    "nmac_rate",
+    "nmac_rate_lo",
+    "nmac_rate_hi",
+    "collision_rate_lo",
+    "collision_rate_hi",
+    "risk_ratio",
+    "risk_ratio_lo",
+    "risk_ratio_hi",
+    "collision_risk_ratio",
+    "collision_risk_ratio_lo",
+    "collision_risk_ratio_hi",
 )
 EPISODE_COLUMNS = (
     "method",
@@ -292,34 +305,61 @@ def _check(scenario, methods, intruders, episodes, dynamics, workers) -> None:
 
 # --------------------------------------------------------------------------------- results
 def summarise(rows: Iterable[dict]) -> list[dict]:
-    """One ``results.csv`` row per (method, intruders), in first-seen order."""
+    """One ``results.csv`` row per (method, intruders), in first-seen order.
+
+    Rates come with their 95 % Wilson interval; the risk ratio is NMAC(method) / NMAC(none)
+    on the same encounters (the detect-and-avoid field's figure of merit), with a paired
+    bootstrap interval; ``collision_risk_ratio`` the same for collisions. Both are empty
+    (nan) when ``none`` was not flown at that intruder count."""
+    rows = list(rows)
     groups: dict[tuple[str, int], list[dict]] = {}
     for r in rows:
         groups.setdefault((r["method"], int(r["intruders"])), []).append(r)
-    results = []
-    for (method, n), rs in groups.items():
-        outcomes = [r["outcome"] for r in rs]
-        seps = [float(r["min_separation_m"]) for r in rs]
-        seps = [s for s in seps if math.isfinite(s)]
-        ms = [m for r in rs for m in r.get("decision_ms", ())]
-        if not ms:  # rows read back from episodes.csv carry only their own median
-            ms = [float(r["decision_ms_p50"]) for r in rs]
-        k = len(rs)
-        results.append(
-            {
-                "method": method,
-                "intruders": n,
-                "episodes": k,
-                "goal_rate": outcomes.count("goal") / k,
-                "collision_rate": outcomes.count("collision") / k,
-                "timeout_rate": outcomes.count("timeout") / k,
-                "mean_steps": float(np.mean([int(r["steps"]) for r in rs])),
-                "mean_min_separation_m": float(np.mean(seps)) if seps else math.nan,
-                "decision_ms_p50": float(np.nanmedian(ms)) if ms else math.nan,
-                "out_of_bounds_rate": outcomes.count("out_of_bounds") / k,
-            }
-        )
-    return results
+    return [_summary_row(method, n, rs, groups.get(("none", n))) for (method, n), rs in
+            groups.items()]  # fmt: skip
+
+
+def _events(rs: Sequence[dict], key: str) -> dict[int, bool]:
+    """Per encounter (seed): did it happen? ``key`` 'collision' or 'nmac'."""
+    if key == "collision":
+        return {int(r["seed"]): r["outcome"] == "collision" for r in rs}
+    return {int(r["seed"]): bool(int(float(r.get("nmac", 0)))) for r in rs}
+
+
+def _summary_row(method: str, n: int, rs: list[dict], baseline: list[dict] | None) -> dict:
+    from uavxai.metrics import rate, risk_ratio
+
+    outcomes = [r["outcome"] for r in rs]
+    seps = [float(r["min_separation_m"]) for r in rs]
+    seps = [s for s in seps if math.isfinite(s)]
+    ms = [m for r in rs for m in r.get("decision_ms", ())]
+    if not ms:  # rows read back from episodes.csv carry only their own median
+        ms = [float(r["decision_ms_p50"]) for r in rs]
+    k = len(rs)
+    row = {
+        "method": method,
+        "intruders": n,
+        "episodes": k,
+        "goal_rate": outcomes.count("goal") / k,
+        "collision_rate": outcomes.count("collision") / k,
+        "timeout_rate": outcomes.count("timeout") / k,
+        "mean_steps": float(np.mean([int(r["steps"]) for r in rs])),
+        "mean_min_separation_m": float(np.mean(seps)) if seps else math.nan,
+        "decision_ms_p50": float(np.nanmedian(ms)) if ms else math.nan,
+        "out_of_bounds_rate": outcomes.count("out_of_bounds") / k,
+        "fdm_failure_rate": outcomes.count("fdm_failure") / k,
+    }
+    for key, prefix in (("collision", "collision_rate"), ("nmac", "nmac_rate")):
+        r = rate(list(_events(rs, key).values()))
+        row[prefix], row[f"{prefix}_lo"], row[f"{prefix}_hi"] = r.rate, r.lo, r.hi
+    for key, prefix in (("nmac", "risk_ratio"), ("collision", "collision_risk_ratio")):
+        row[prefix] = row[f"{prefix}_lo"] = row[f"{prefix}_hi"] = math.nan
+        if baseline is not None:
+            mine, base = _events(rs, key), _events(baseline, key)
+            seeds = sorted(set(mine) & set(base))  # the same encounters only
+            rr = risk_ratio([mine[s] for s in seeds], [base[s] for s in seeds])
+            row[prefix], row[f"{prefix}_lo"], row[f"{prefix}_hi"] = rr.ratio, rr.lo, rr.hi
+    return row
 
 
 def write_csv(path: Path, columns: Sequence[str], rows: Iterable[dict]) -> None:
@@ -332,7 +372,9 @@ def write_csv(path: Path, columns: Sequence[str], rows: Iterable[dict]) -> None:
 
 def _cell(v):
     if isinstance(v, float):
-        return f"{v:.6g}" if math.isfinite(v) else ("inf" if v > 0 else "nan")
+        if math.isnan(v):
+            return ""  # not defined (e.g. a risk ratio without `none` flown)
+        return f"{v:.6g}" if math.isfinite(v) else ("inf" if v > 0 else "-inf")
     return v
 
 
@@ -415,7 +457,7 @@ def merge_campaigns(sources: Sequence[str | Path], out: str | Path, title: str =
             raise UserError(f"{key[0]} at {key[1]} intruders appears in more than one source.")
         seen.add(key)
         for k in RESULT_COLUMNS[1:]:
-            r[k] = int(r[k]) if k in ("intruders", "episodes") else float(r[k])
+            r[k] = int(r[k]) if k in ("intruders", "episodes") else float(r[k] or "nan")
     out.mkdir(parents=True, exist_ok=True)
     write_csv(out / "results.csv", RESULT_COLUMNS, results)
     write_csv(out / "episodes.csv", EPISODE_COLUMNS, episodes)
@@ -447,7 +489,8 @@ def evaluate_command(
     for m in methods:
         _planner(scenario, m)
     total = len(methods) * len(intruders) * episodes
-    console = Console(stderr=True)
+    # Piped output gets a wide table rather than column names cut to fit 80 characters.
+    console = Console(stderr=True, width=None if sys.stderr.isatty() else 200)
     wall0 = time.perf_counter()
     goal = episode_goal(scenario)
     where = "ownship.goal" if scenario.ownship.goal is not None else "the service point"
@@ -485,15 +528,21 @@ def evaluate_command(
 def _table(results: Sequence[dict]):
     from rich.table import Table
 
-    t = Table("method", "intruders", "episodes", "goal", "collision", "timeout", "steps", "ms p50")
+    def ci(r: dict, key: str) -> str:
+        v, lo, hi = r[key], r[f"{key}_lo"], r[f"{key}_hi"]
+        return "-" if math.isnan(v) else f"{v:.3f} [{lo:.3f}, {hi:.3f}]"
+
+    t = Table("method", "intruders", "episodes", "goal", "collision (95 % CI)", "NMAC (95 % CI)",
+              "risk ratio (95 % CI)", "steps", "ms p50")  # fmt: skip
     for r in results:
         t.add_row(
             r["method"],
             str(r["intruders"]),
             str(r["episodes"]),
             f"{r['goal_rate']:.3f}",
-            f"{r['collision_rate']:.3f}",
-            f"{r['timeout_rate']:.3f}",
+            ci(r, "collision_rate"),
+            ci(r, "nmac_rate"),
+            ci(r, "risk_ratio"),
             f"{r['mean_steps']:.1f}",
             f"{r['decision_ms_p50']:.2f}",
         )

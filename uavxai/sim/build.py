@@ -122,7 +122,7 @@ def fly(
 
 def _nmac_cylinder(scenario: Scenario) -> tuple[float, float]:
     """The scenario's NMAC cylinder (``avoidance.nmac``), 500 ft x 100 ft by default."""
-    from uavxai.sim.judge import NMAC_HORIZONTAL_M, NMAC_VERTICAL_M
+    from uavxai.metrics import NMAC_HORIZONTAL_M, NMAC_VERTICAL_M
 
     nmac = getattr(scenario.avoidance, "nmac", None)
     return (

@@ -178,7 +178,7 @@ class Episode:
             self.state = self.world.state()
             self.path.on_sample(self.state)
             sep = self.judge.separation(prev, self.state)
-            self.nmac = self.nmac or self.judge.nmac(self.state)
+            self.nmac = self.nmac or self.judge.nmac(prev, self.state)
             flown_min = min(flown_min, sep)
             self.min_separation_m = min(self.min_separation_m, sep)
             for o in self.observers:

@@ -14,13 +14,9 @@ import numpy as np
 
 from uavxai.dynamics.state import TrafficState
 from uavxai.geometry import closest_approach
+from uavxai.metrics import NMAC_HORIZONTAL_M, NMAC_VERTICAL_M, nmac
 from uavxai.scenario import World
 from uavxai.vocabulary import Outcome
-
-# Near mid-air collision, as the detect-and-avoid field defines it: a cylinder of 500 ft
-# horizontally and 100 ft vertically around the ownship.
-NMAC_HORIZONTAL_M = 152.4
-NMAC_VERTICAL_M = 30.48
 
 
 class Judge:
@@ -38,16 +34,14 @@ class Judge:
         self.goal_radius_m = goal_radius_m
         self.nmac_m = nmac_m
 
-    def nmac(self, now: TrafficState) -> bool:
-        """Is any intruder inside the NMAC cylinder now? (Checked every sample: at 10 Hz
-        two aircraft close at most a few metres between samples, against a 152 m radius.)"""
-        if now.n < 2:
-            return False
-        rel = now.pos[1:] - now.pos[0]
-        inside = (np.hypot(rel[:, 0], rel[:, 1]) < self.nmac_m[0]) & (
-            np.abs(rel[:, 2]) < self.nmac_m[1]
-        )
-        return bool(inside.any())
+    def nmac(self, prev: TrafficState, now: TrafficState) -> bool:
+        """Did any intruder come inside the NMAC cylinder between two samples (both moving
+        linearly, :func:`uavxai.metrics.nmac`)?"""
+        if now.n < 2 or prev.ids != now.ids:
+            prev = now  # a replaced row: judge the newcomer where it is
+        own = np.stack([prev.pos[0], now.pos[0]])
+        intruders = np.stack([prev.pos[1:], now.pos[1:]])
+        return bool(nmac(own, intruders, *self.nmac_m).any()) if now.n > 1 else False
 
     def separation(self, prev: TrafficState, now: TrafficState) -> float:
         """Smallest ownship-intruder distance between two samples (inf without intruders).
