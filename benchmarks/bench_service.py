@@ -6,7 +6,7 @@ through the four Al-Hourani sets) it
 
 1. solves the exact optimum over the search lattice and the discrete power levels (grid),
 2. trains a D3QN from scratch on the layout for ``--episodes`` episodes (as `uavxai train`),
-3. runs the `uavxai service` planner (shipped model, fine-tuned on the layout),
+3. runs the `uavxai service` planner (the shipped universal D3QN, zero-shot, refined),
 
 and prints the objective R/2^lambda of each over the optimum and over the naive placement
 (users' centroid at 100 m, equal power). "model" is the policy `uavxai train` saves (the

@@ -19,6 +19,8 @@ INTRUDERS = [
     Intruder(3, 1150.0, 1020.0, 120.0, -20.0, 0.0),
     Intruder(8, 960.0, 1200.0, 120.0, 0.0, -15.0),
 ]
+# The brute force below predicts as the paper does: constant velocity, every collision 0.
+PAPER = {"intruder_model": "cv", "late_collision_value": 0.0}
 
 
 def brute_force_values(cfg: PlannerConfig) -> np.ndarray:
@@ -50,7 +52,7 @@ def brute_force_values(cfg: PlannerConfig) -> np.ndarray:
 
 
 def test_exhaustive_finds_the_best_sequence():
-    cfg = PlannerConfig(depth=2)
+    cfg = PlannerConfig(depth=2, **PAPER)
     values = brute_force_values(cfg)
     assert values.min() == 0.0 and values.max() > 0.5  # some sequences collide, some not
     d = ExhaustivePlanner(cfg).plan(OWN, INTRUDERS, GOAL)
@@ -74,11 +76,11 @@ def test_exhaustive_tree_holds_every_sequence():
 
 
 def test_mcts_never_picks_a_collision_when_exhaustive_sees_a_way_out():
-    cfg = PlannerConfig(depth=2, simulations=300)
+    cfg = PlannerConfig(depth=2, simulations=300, **PAPER)
     values = brute_force_values(cfg).max(axis=1)
     assert np.any(values == 0.0) and np.any(values > 0.0)
     for seed in range(3):
-        d = MCTSPlanner(PlannerConfig(depth=2, simulations=300, seed=seed)).plan(
+        d = MCTSPlanner(PlannerConfig(depth=2, simulations=300, seed=seed, **PAPER)).plan(
             OWN, INTRUDERS, GOAL
         )
         assert values[d.action] > 0.0

@@ -11,7 +11,7 @@ import pytest
 from uavxai.cli import main as cli_main
 from uavxai.comms.service_env import ServiceEnv
 from uavxai.errors import CheckpointError, UserError
-from uavxai.paths import scenarios_dir, service_checkpoints_dir
+from uavxai.paths import scenarios_dir
 from uavxai.scenario import default_scenario, load_scenario
 from uavxai.service import d3qn
 from uavxai.service.stage import plan_service, run_service_stage
@@ -98,11 +98,12 @@ def test_checkpoint_problems_are_user_errors(tmp_path):
     (tmp_path / "text.pt").write_text("hello")
     with pytest.raises(CheckpointError, match=r"text\.pt: not a readable model"):
         plan_service(small(checkpoint=str(tmp_path / "text.pt")), "d3qn")
-    # K = 3 has no shipped model: the message says how to make one
-    with pytest.raises(CheckpointError, match="uavxai train SCENARIO --stage service"):
+    # the shipped universal models serve K = 2..20 with power_levels = 6
+    with pytest.raises(CheckpointError, match="no shipped d3qn model for power_levels = 3"):
         plan_service(small(), "d3qn")
-    with pytest.raises(CheckpointError, match="no shipped dqn model"):
-        plan_service(default_scenario(), "dqn")
+    many = default_scenario(comms={"users": {"count": 21}})
+    with pytest.raises(CheckpointError, match="serves K = 2..20 users, the scenario has 21"):
+        plan_service(many, "dqn")
     # a model for another K
     net = d3qn.BranchingQNetwork(3 + 4, 4, 3, 40, 3, dueling=True)
     d3qn.save_checkpoint(tmp_path / "k4.pt", net, "d3qn", d3qn.D3QNConfig(), {})
@@ -112,25 +113,13 @@ def test_checkpoint_problems_are_user_errors(tmp_path):
         plan_service(small(), "simulated_annealing")
 
 
-def test_shipped_models_cover_both_access_modes():
-    for access in ("shared", "ofdma"):
-        path = service_checkpoints_dir() / f"d3qn_k10_l6_{access}.pt"
-        assert path.stat().st_size < 1_000_000
-        meta = json.loads(path.with_suffix(".json").read_text())
-        assert meta["access"] == access and meta["k"] == 10 and meta["power_levels"] == 6
-        assert sorted(meta["environments"]) == sorted(
-            ["suburban", "urban", "dense_urban", "highrise_urban"]
-        )
-        _, info = d3qn.load_checkpoint(path)
-        assert info["meta"] == meta
-
-
 def test_demo_scenario_out_of_the_box():
-    """`service.checkpoint: null`: the shipped model, fine-tuned on the demo layout."""
+    """`service.checkpoint: null`: the shipped universal model, zero-shot."""
     sc = load_scenario(scenarios_dir() / "demo.yaml")
     result = plan_service(sc)
     assert result.planner == "d3qn"
-    assert result.extras["checkpoint"] == "shipped:d3qn_k10_l6_shared.pt"
+    assert result.extras["checkpoint"] == "shipped:universal_d3qn_l6.pt"
+    assert result.objective >= result.extras["d3qn_alone_objective"]
     assert result.qos_satisfied == 10
     # every user served and the search beats the naive placement (centroid, 100 m, equal power)
     assert result.objective > result.naive_objective

@@ -15,8 +15,13 @@ visits uniform, the choice arbitrary and the confidence meaningless. A node met 
 first time is expanded: its 9 children are computed at once, vectorised, and kept (child
 states are deterministic, so every later simulation reuses them). The value at the end of
 the walk is 1 for the goal, 0 for a collision or leaving the map, 0.1 for a time-out and
-``1 - d(o, g) / d_max`` otherwise (eqs 13/14); it is backed up along the walk. Each tree
-level holds its action for ``action_hold_s``.
+``1 - d(o, g) / d_max`` otherwise (eqs 13/14); it is backed up along the walk. Beyond the
+paper, a collision predicted ``t`` seconds ahead is worth ``late_collision_value * t /
+horizon`` (below 0.1): when every line meets someone (likely among manoeuvring traffic with
+its protected zones grown, see :mod:`uavxai.avoidance.model`) the search still prefers the
+line that meets them latest, which re-planning can turn into a miss; with 0 every collision
+is worth 0 as in the paper. Each tree level holds its action for ``action_hold_s``.
+Intruders are predicted as ``PlannerConfig.intruder_model`` says (:func:`predict_levels`).
 """
 
 from __future__ import annotations
@@ -35,9 +40,11 @@ from uavxai.avoidance.model import (
     TIMEOUT,
     Children,
     EncounterModel,
+    G,
     Track,
     accel_command,
     bank_command,
+    intruder_margin,
     ownship_state,
     place_children,
 )
@@ -216,12 +223,38 @@ def intruder_arrays(intruders: Sequence[Intruder]) -> tuple[np.ndarray, np.ndarr
     return a[:, :3], a[:, 3:]
 
 
+def intruder_turn_rates(intruders: Sequence[Intruder], config: PlannerConfig) -> np.ndarray | None:
+    """(N,) turn rates the planner predicts with: the intruders' estimates (within what the
+    intruder bank limit allows), or None (straight) for the constant-velocity model."""
+    if config.intruder_model == "cv" or not intruders:
+        return None
+    rate = np.array([i.turn_rate for i in intruders], dtype=float)
+    speed = np.maximum(np.hypot([i.vx for i in intruders], [i.vy for i in intruders]), 1.0)
+    # a noisy estimate must not predict a turn tighter than a coordinated turn can be
+    limit = G * math.tan(math.radians(config.intruder_bank_limit_deg)) / speed
+    return np.clip(rate, -limit, limit)
+
+
 def predict_levels(
     model: EncounterModel, intruders: Sequence[Intruder], depth: int, hold_s: float
 ) -> list[Track]:
-    """Constant-velocity tracks for each tree level, computed once per decision."""
+    """The intruders' tracks for each tree level, computed once per decision: constant
+    velocity or a constant turn (``intruder_model``), with the margin that their possible
+    manoeuvres and track uncertainty add to ``d_min`` (:func:`intruder_margin`)."""
+    cfg = model.config
     pos, vel = intruder_arrays(intruders)
-    return [model.predict(pos, vel, hold_s, t0=d * hold_s) for d in range(depth)]
+    turn = intruder_turn_rates(intruders, cfg)
+    margin = intruder_margin(
+        cfg,
+        vel,
+        np.zeros(len(intruders)) if turn is None else turn,
+        np.array([i.sigma_m for i in intruders]),
+        np.array([i.sigma_v for i in intruders]),
+    )
+    return [
+        model.predict(pos, vel, hold_s, t0=d * hold_s, turn_rate=turn, margin=margin)
+        for d in range(depth)
+    ]
 
 
 def decision_from_tree(
@@ -270,7 +303,9 @@ def decision_from_tree(
         np.array([action]),
         goal,
         period,
-        model.predict(pos, vel, period, index=False),
+        model.predict(
+            pos, vel, period, index=False, turn_rate=intruder_turn_rates(intruders, cfg)
+        ),
         cull=False,
         exact=True,
     )
@@ -406,10 +441,10 @@ class TreeBuilder:
         # Terminal children are scored now; open ones at the depth limit when a walk first
         # ends there (see leaf_value); open ones above it are never scored.
         if at_limit:
-            self.value.extend(_VALUE_OF[code].tolist() if ended else _OPEN)
+            self.value.extend(self._terminal_values(code, seg, d) if ended else _OPEN)
             self.is_leaf.extend(_TRUE)
         elif ended:
-            self.value.extend(_VALUE_OF[code].tolist())
+            self.value.extend(self._terminal_values(code, seg, d))
             self.is_leaf.extend([k != NONE for k in codes])
         else:
             self.value.extend(_OPEN)
@@ -427,6 +462,17 @@ class TreeBuilder:
         self.closest.append(seg.closest)
         self.t_closest.append(seg.t_closest)
         return first
+
+    def _terminal_values(self, code: np.ndarray, seg, d: int) -> list[float]:
+        """The values of the 9 children with terminal ``code`` (eq 14), a collision worth
+        ``late_collision_value`` times how late in the horizon it comes."""
+        values = _VALUE_OF[code]
+        late = self.model.config.late_collision_value
+        hit = code == COLLISION
+        if late > 0 and hit.any():
+            t = d * self.hold_s + np.nan_to_num(seg.t_event)
+            values = np.where(hit, late * t / (self.depth_limit * self.hold_s), values)
+        return values.tolist()
 
     def leaf_value(self, node: int) -> float:
         """Eq 13 at an open node: 1 - d(o, g) / d_max."""

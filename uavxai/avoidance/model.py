@@ -10,9 +10,16 @@ the commanded acceleration within the speed limits; the altitude moves towards t
 altitude (the target the JSBSim autopilot holds) at a bounded climb rate. Everything is in
 closed form over a grid of sub-steps, so a segment costs a fixed number of numpy calls.
 
-Intruders come as a :class:`Track`: their positions at the segment's sub-step instants
-(constant velocity when predicted). Within one sub-step both aircraft move on straight lines
-(the ownship on the exact chord of its arc), so separation is known at *every* instant:
+Intruders come as a :class:`Track`: their positions at the segment's sub-step instants,
+predicted at constant velocity or, with their estimated turn rate, on a constant-rate turn
+(:func:`turn_positions`), and optionally a *margin* per intruder and instant that the
+separation must clear on top of ``d_min``: ``uncertainty_k`` sigmas of the track's position
+error, plus how far the intruder could stray from its prediction by banking anywhere within
+its limit (:func:`manoeuvre_spread`, covered ``reach_horizon_s`` ahead), see
+:func:`intruder_margin`. A line that enters that grown zone counts as a collision, and its
+``min_sep`` is the distance left after the margin, so outcome and separation agree. Within
+one sub-step both aircraft move on straight lines (the ownship on the exact chord of its
+arc), so separation is known at *every* instant:
 
 * collision (3-D separation below ``d_min`` anywhere, a pass-through between samples
   included) is always decided exactly: either the closest approach on every sub-step is
@@ -36,7 +43,7 @@ rotation is one multiplication.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -65,18 +72,6 @@ def ownship_state(own: Ownship) -> np.ndarray:
     """One state row from the planner-API ownship."""
     phi = own.bank if own.phi is None else own.phi
     return np.array([own.x, own.y, own.h, own.speed, own.heading, phi, own.bank], dtype=float)
-
-
-def state_to_ownship(state: np.ndarray) -> Ownship:
-    return Ownship(
-        x=float(state[X]),
-        y=float(state[Y]),
-        h=float(state[H]),
-        speed=float(state[V]),
-        heading=float(state[PSI]),
-        bank=float(state[PHI_CMD]),
-        phi=float(state[PHI]),
-    )
 
 
 def bank_command(current_cmd, action, cfg: PlannerConfig):
@@ -108,14 +103,28 @@ class Track:
     step_max: float = 0.0  # longest straight piece of any path (one sub-step), m
     index_distance: float = 0.0  # queries up to this distance use the grid
     cells: dict[tuple[int, int], list] = field(default_factory=dict, repr=False)
+    # (n+1, N) separation needed beyond d_min at each instant (what the intruder might do,
+    # how uncertain its track is), non-decreasing in time; None: none. The ball above
+    # includes it, so that culling by ``near`` stays exact.
+    margin: np.ndarray | None = field(default=None, repr=False)
 
     @classmethod
-    def of(cls, pos: np.ndarray, index_distance: float = 0.0) -> Track:
+    def of(
+        cls, pos: np.ndarray, index_distance: float = 0.0, margin: np.ndarray | None = None
+    ) -> Track:
         pos = np.asarray(pos, dtype=float)
         if pos.ndim != 3 or pos.shape[2] != 3 or pos.shape[0] < 2:
             raise ValueError(f"intruder positions must be (n+1, N, 3) with n >= 1, got {pos.shape}")
         centre = 0.5 * (pos.min(axis=0) + pos.max(axis=0))
         radius = np.sqrt(np.max(np.sum((pos - centre) ** 2, axis=2), axis=0))
+        if margin is not None:
+            margin = np.asarray(margin, dtype=float)
+            if margin.shape != pos.shape[:2]:
+                raise ValueError(f"margin must be {pos.shape[:2]}, got {margin.shape}")
+            if not np.any(margin):
+                margin = None
+            else:
+                radius = radius + margin.max(axis=0, initial=0.0)
         steps = np.sqrt(np.sum(np.diff(pos, axis=0) ** 2, axis=2))
         track = cls(
             pos=pos,
@@ -125,6 +134,7 @@ class Track:
             radius=radius,
             step_max=float(steps.max()) if steps.size else 0.0,
             index_distance=index_distance if pos.shape[1] >= _INDEX_MIN else 0.0,
+            margin=margin,
         )
         if track.index_distance > 0:
             track._file(index_distance)
@@ -178,6 +188,87 @@ class Track:
 _INDEX_MIN = 6  # below this many intruders a plain distance test is as fast as the grid
 _NO_INTRUDERS = np.zeros(0, dtype=int)
 _NO_INTRUDERS.flags.writeable = False
+
+
+def turn_positions(
+    pos: np.ndarray, vel: np.ndarray, t: np.ndarray, turn_rate: np.ndarray | None = None
+) -> np.ndarray:
+    """(T, N, 3) positions at times ``t`` (T,) of aircraft now at ``pos`` (N, 3) with
+    velocity ``vel`` (N, 3), turning at ``turn_rate`` (N,) rad/s clockwise (None: straight)
+    at constant speed and climb rate."""
+    pos, vel = np.asarray(pos, dtype=float), np.asarray(vel, dtype=float)
+    t = np.asarray(t, dtype=float)
+    if turn_rate is None or not np.any(turn_rate):
+        return pos[None, :, :] + t[:, None, None] * vel[None, :, :]
+    w = np.asarray(turn_rate, dtype=float)[None, :]
+    # v(s) = v0 e^{-i w s} (clockwise in the x + iy plane); its integral to t is
+    # v0 t e^{-i w t / 2} sinc(w t / 2 pi), exact and smooth through w = 0.
+    wt = w * t[:, None]
+    v0 = vel[:, 0] + 1j * vel[:, 1]
+    dxy = v0[None, :] * t[:, None] * np.exp(-0.5j * wt) * np.sinc(wt / (2.0 * np.pi))
+    out = np.empty((t.size, pos.shape[0], 3))
+    out[:, :, 0] = pos[None, :, 0] + dxy.real
+    out[:, :, 1] = pos[None, :, 1] + dxy.imag
+    out[:, :, 2] = pos[None, :, 2] + t[:, None] * vel[None, :, 2]
+    return out
+
+
+def manoeuvre_spread(
+    vel: np.ndarray, turn_rate: np.ndarray, t: np.ndarray, bank_limit_rad: float
+) -> np.ndarray:
+    """(T, N) how far from its constant-turn prediction an aircraft can be at times ``t``
+    if it changes its bank now to anything within ``bank_limit_rad`` (a coordinated turn at
+    its speed: turn rates within +-g tan(limit) / V): the larger of the two extreme turns'
+    distances from the nominal one, kept non-decreasing in time. The set of positions
+    reachable by then lies within this distance of the nominal position."""
+    speed = np.maximum(np.hypot(vel[:, 0], vel[:, 1]), 1.0)
+    w_max = G * math.tan(bank_limit_rad) / speed
+    w = np.clip(np.asarray(turn_rate, dtype=float), -w_max, w_max)
+    nominal = turn_positions(np.zeros_like(vel), vel, t, w)
+    spread = np.zeros((t.size, vel.shape[0]))
+    for extreme in (w_max, -w_max):
+        d = turn_positions(np.zeros_like(vel), vel, t, extreme) - nominal
+        spread = np.maximum(spread, np.hypot(d[..., 0], d[..., 1]))
+    return np.maximum.accumulate(spread, axis=0)
+
+
+def intruder_margin(
+    config: PlannerConfig,
+    vel: np.ndarray,
+    turn_rate: np.ndarray,
+    sigma_m: np.ndarray | None = None,
+    sigma_v: np.ndarray | None = None,
+) -> Callable[[np.ndarray], np.ndarray] | None:
+    """The separation needed beyond ``d_min`` from each intruder, as a function of the time
+    ``t`` (T,) from now, (T, N); None when there is none.
+
+    Two parts add up: the track's uncertainty, ``uncertainty_k`` sigmas of
+    ``sqrt(sigma_m^2 + (sigma_v t)^2)``; and with ``intruder_model="reachable"`` what the
+    intruder could do next, :func:`manoeuvre_spread` at ``min(t, reach_horizon_s)``. The
+    reachable set is covered only that far ahead because re-planning every decision period
+    answers what comes later; beyond it the whole set would cover most of a crowded sky (a
+    15 m/s intruder can be anywhere within 240 m of its prediction after 16 s).
+    """
+    n = vel.shape[0]
+    sm = np.zeros(n) if sigma_m is None else np.asarray(sigma_m, dtype=float)
+    sv = np.zeros(n) if sigma_v is None else np.asarray(sigma_v, dtype=float)
+    k = config.uncertainty_k
+    reach = config.intruder_model == "reachable" and config.reach_horizon_s > 0
+    uncertain = k > 0 and (np.any(sm) or np.any(sv))
+    if not n or not (reach or uncertain):
+        return None
+    limit = math.radians(config.intruder_bank_limit_deg)
+    horizon = config.reach_horizon_s
+
+    def margin(t: np.ndarray) -> np.ndarray:
+        out = np.zeros((t.size, n))
+        if uncertain:
+            out += k * np.sqrt(sm[None] ** 2 + (sv[None] * t[:, None]) ** 2)
+        if reach:
+            out += manoeuvre_spread(vel, turn_rate, np.minimum(t, horizon), limit)
+        return out
+
+    return margin
 
 
 # ----------------------------------------------------------------------------------- segments
@@ -278,10 +369,12 @@ class _Intruders:
     h: np.ndarray  # (1 or B, n+1, k)
     ids: np.ndarray  # (k,) their indices in the track(s)
     step_max: float  # longest straight piece of any of their paths
+    margin: np.ndarray | None = None  # (1 or B, n+1, k) separation needed beyond d_min
 
     @classmethod
     def of(cls, track: Track, near: np.ndarray) -> _Intruders:
-        return cls(track.xy[:, near][None], track.h[:, near][None], near, track.step_max)
+        margin = None if track.margin is None else track.margin[:, near][None]
+        return cls(track.xy[:, near][None], track.h[:, near][None], near, track.step_max, margin)
 
 
 # Where a batch of paths stays: a vertical cylinder.
@@ -328,13 +421,19 @@ class EncounterModel:
         t0: float = 0.0,
         *,
         index: bool = True,
+        turn_rate: np.ndarray | None = None,
+        margin: Callable[[np.ndarray], np.ndarray] | None = None,
     ) -> Track:
-        """Constant-velocity track over [t0, t0 + duration] of intruders now at ``pos``;
-        ``index``: filed for quick :meth:`Track.near` queries within an ownship's reach."""
+        """Track over [t0, t0 + duration] of intruders now at ``pos`` with velocity ``vel``:
+        constant velocity, or with ``turn_rate`` (N,) rad/s (+ clockwise, a right turn) a
+        constant-rate turn at constant speed; ``index``: filed for quick :meth:`Track.near`
+        queries within an ownship's reach. ``margin(t)`` gives the (T, N) separation needed
+        beyond ``d_min`` at times ``t`` (T,) from now (see :func:`intruder_margin`)."""
         n = self.substeps(duration)
         t = t0 + (duration / n) * np.arange(n + 1)
         distance = self.reach(0.0, duration) + self.config.d_min_m if index else 0.0
-        return Track.of(pos[None, :, :] + t[:, None, None] * vel[None, :, :], distance)
+        extra = None if margin is None else margin(t)
+        return Track.of(turn_positions(pos, vel, t, turn_rate), distance, extra)
 
     def reach(self, speed: float, duration: float) -> float:
         """The farthest (3-D) an ownship at ``speed`` can get from its start in ``duration``."""
@@ -387,11 +486,16 @@ class EncounterModel:
         ``tracks[levels[b]]``: the edges of several tree levels in one batch."""
         n = max(self._check(duration, t) for t in tracks)
         body, xy, hs, end, box = self._place(states, actions, goal, duration, n)
+        margin = None
+        if any(t.margin is not None for t in tracks):
+            margin = np.stack([np.zeros(t.h.shape) if t.margin is None else t.margin
+                               for t in tracks])[levels]  # fmt: skip
         seen = _Intruders(
             xy=np.stack([t.xy for t in tracks])[levels],
             h=np.stack([t.h for t in tracks])[levels],
             ids=np.arange(tracks[0].count),
             step_max=max(t.step_max for t in tracks),
+            margin=margin,
         )
         own_step = self._own_step(body, duration / n)
         return self._events(end, xy, hs, goal, seen, box, duration / n, own_step, True)
@@ -611,9 +715,22 @@ class EncounterModel:
             sep2 += rel_xy.imag**2
             sep2 += rel_h**2
             slack = 0.5 * (own_step + seen.step_max) + 1e-6
-            if exact or sep2.min() < (cfg.d_min_m + slack) ** 2:
+            margin = seen.margin
+            if margin is None:
+                close = sep2.min() < (cfg.d_min_m + slack) ** 2
+            else:
+                # A sub-step needs its end's (larger) margin all along, so each instant is
+                # held to the larger of its own and the next one's.
+                ahead = np.concatenate([margin[:, 1:], margin[:, -1:]], axis=1)
+                close = (np.sqrt(sep2) - np.maximum(margin, ahead)).min() < cfg.d_min_m + slack
+            if exact or close:
                 sep2, frac = _closest_on_chords(rel_xy, rel_h, sep2)  # (B, n, k) per sub-step
-                k_hit = _first_true(sep2.min(axis=2) < cfg.d_min_m**2)
+                if margin is None:
+                    k_hit = _first_true(sep2.min(axis=2) < cfg.d_min_m**2)
+                else:
+                    # The margin grows with time: a sub-step needs its end's.
+                    need = cfg.d_min_m + margin[:, 1:]
+                    k_hit = _first_true((sep2 < need**2).any(axis=2))
 
         k_out = never
         if self._near_wall(box):
@@ -658,12 +775,23 @@ class EncounterModel:
             last = k_event + (1 if frac is None else 0)  # instants vs sub-steps
             after = np.arange(sep2.shape[1])[None, :] > last[:, None]
             sep2 = np.where(after[..., None], np.inf, sep2)
-        flat = sep2.reshape(B, -1).argmin(axis=1)
-        k_min, j_min = np.divmod(flat, k)
+        if seen.margin is None:
+            flat = sep2.reshape(B, -1).argmin(axis=1)
+            k_min, j_min = np.divmod(flat, k)
+            min_sep = np.sqrt(sep2[rows, k_min, j_min])
+        else:
+            # With margins the separation that counts is what is left if the intruder stands
+            # its margin off its predicted track towards us (clipped at 0): below d_min
+            # exactly when the line collides, so outcome and separation tell one story.
+            m = seen.margin[:, 1:] if frac is not None else seen.margin
+            gap = np.sqrt(sep2) - m
+            flat = gap.reshape(B, -1).argmin(axis=1)
+            k_min, j_min = np.divmod(flat, k)
+            min_sep = np.maximum(gap[rows, k_min, j_min], 0.0)
         t_closest = k_min * dt if frac is None else (k_min + frac[rows, k_min, j_min]) * dt
         return Segment(
             end=end,
-            min_sep=np.sqrt(sep2[rows, k_min, j_min]),
+            min_sep=min_sep,
             closest=seen.ids[j_min],
             t_closest=t_closest,
             event=event,

@@ -50,6 +50,9 @@ class Intruder:
     age_s: float = 0.0  # age of the report the estimate rests on, s
 
 
+INTRUDER_MODELS = ("cv", "ct", "reachable")
+
+
 @dataclass(frozen=True)
 class PlannerConfig:
     """Fields as the scenario's `avoidance` section, plus the flight-area bounds."""
@@ -78,8 +81,40 @@ class PlannerConfig:
     # (at 20 m/s and 30 deg bank, 0.5 s gives 0.2 m).
     substep_s: float = 0.5
     seed: int = 0
+    # How the planner predicts intruders (see uavxai.avoidance.model.intruder_margin):
+    # "cv" constant velocity (the paper), "ct" a constant turn at the estimated turn rate,
+    # "reachable" that turn, with the separation needed grown by how far the intruder could
+    # stray from it within reach_horizon_s by banking anywhere within intruder_bank_limit_deg.
+    intruder_model: str = "reachable"
+    reach_horizon_s: float = 3.0
+    intruder_bank_limit_deg: float = 30.0
+    # The separation needed grows by uncertainty_k sigmas of the track's position error,
+    # sqrt(sigma_m^2 + (sigma_v t)^2) at t seconds ahead.
+    uncertainty_k: float = 2.0
+    # Value of a line that collides at the end of the search horizon (linear from 0 at once):
+    # when every line meets someone, the search still prefers the one that meets them later,
+    # which re-planning can still turn into a miss. 0: every collision is worth 0 (the paper).
+    late_collision_value: float = 0.05
 
     def __post_init__(self) -> None:
+        if self.intruder_model not in INTRUDER_MODELS:
+            raise UserError(
+                f"PlannerConfig.intruder_model must be one of {', '.join(INTRUDER_MODELS)}, "
+                f"got {self.intruder_model!r}."
+            )
+        for name in ("reach_horizon_s", "uncertainty_k", "late_collision_value"):
+            if not getattr(self, name) >= 0:
+                raise UserError(f"PlannerConfig.{name} must be >= 0, got {getattr(self, name)}.")
+        if not 0 < self.intruder_bank_limit_deg < 90:
+            raise UserError(
+                "PlannerConfig.intruder_bank_limit_deg must be in (0, 90), "
+                f"got {self.intruder_bank_limit_deg}."
+            )
+        if self.late_collision_value >= 0.1:
+            raise UserError(
+                "PlannerConfig.late_collision_value must be below the time-out's value 0.1, "
+                f"got {self.late_collision_value}."
+            )
         for name in ("x_bounds", "y_bounds", "h_bounds", "speed_mps"):
             lo, hi = getattr(self, name)
             if not lo < hi:
@@ -246,7 +281,8 @@ class Decision:
 
     ``predicted_min_separation_m`` is the "trust" figure: the smallest 3-D separation the
     planner predicts over the *next decision period* only (the chosen action held for
-    ``decision_period_s``, every intruder at constant velocity, closest approach solved
+    ``decision_period_s``, every intruder on its predicted track (constant velocity, or its
+    turn with ``intruder_model`` ct/reachable; no margin added), closest approach solved
     exactly), i.e. over exactly what the dynamics fly before the next decision.
     ``branch_min_separation_m`` covers the chosen branch's whole planned line instead.
     """

@@ -4,12 +4,14 @@
 uniform in the region from ``default_rng(seed)``), runs the chosen planner and reports the
 link at the chosen point. Planners:
 
-- ``d3qn`` — with ``service.checkpoint: null`` the model shipped for (K, L, access) is
-  fine-tuned on this layout for ``FINETUNE_EPISODES`` search episodes (a few seconds) and then
-  flown greedily; the service point is the best position visited by the whole search. With a
-  checkpoint from ``uavxai train`` (a path relative to the working directory) the model is
-  flown greedily as trained.
-- ``dqn`` — a checkpoint from ``uavxai train --algo dqn`` flown greedily (nothing is shipped).
+- ``d3qn`` — with ``service.checkpoint: null`` the shipped universal D3QN
+  (``universal.py``: one model for any K from 2 to 20, both access modes, all environments)
+  is flown greedily, zero-shot (no training on the layout), and its best visited point is
+  polished by ``universal.refine`` (lattice neighbours and power levels, best improvement);
+  ``extras`` report the D3QN alone (``d3qn_alone_objective``) beside what is returned. A
+  ``service.checkpoint`` written by ``python -m uavxai.service.universal`` is used the same
+  way; one written by ``uavxai train`` (a per-layout model) is flown greedily as trained.
+- ``dqn`` — the same with the shipped DQN ablation (no dueling, no double targets).
 - ``random`` — ``service.steps`` random lattice points with random power levels.
 - ``grid`` — the exact optimum over the lattice and the discrete power levels.
 
@@ -25,24 +27,17 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import torch
 
 from uavxai.comms.channel import Channel
 from uavxai.comms.service_env import ServiceEnv, levels_to_power
 from uavxai.errors import CheckpointError, UserError
 from uavxai.paths import service_checkpoints_dir
 from uavxai.scenario import Scenario
-from uavxai.service import d3qn
+from uavxai.service import d3qn, universal
 from uavxai.service.grid import solve_grid
 from uavxai.service.random_search import random_search
 
-FINETUNE_EPISODES = 30
-FINETUNE_CONFIG = d3qn.D3QNConfig(
-    episodes=FINETUNE_EPISODES,
-    learning_starts=200,
-    start_e=0.3,
-    end_e=0.1,
-    exploration_fraction=0.7,
-)
 ERGODIC_DRAWS = 2000
 PLANNERS = ("d3qn", "dqn", "random", "grid")
 
@@ -123,18 +118,75 @@ def plan_service(scenario: Scenario, planner: str | None = None) -> ServiceResul
 def _learned_search(
     scenario: Scenario, env: ServiceEnv, algo: str
 ) -> tuple[d3qn.Episode, dict[str, Any]]:
-    net, info, shipped = resolve_checkpoint(scenario, algo)
-    report: dict[str, Any] = {"checkpoint": info["path"]}
-    if not shipped:  # trained for this scenario by `uavxai train`: fly it as it is
-        return d3qn.rollout(net, d3qn.fading_free(env)), report
-    # The shipped model is a prior over layouts: adapt it to this one, and keep the best
-    # position the whole search visited (the fine-tune episodes and the final greedy flight).
-    cfg = d3qn.D3QNConfig(**{**d3qn.config_dict(FINETUNE_CONFIG), "seed": scenario.seed})
-    result = d3qn.train(env, cfg, init=net)
-    report["finetune_episodes"] = cfg.episodes
-    greedy = d3qn.rollout(result.net, d3qn.fading_free(env))
-    best = result.best if result.best.objective > greedy.objective else greedy
-    return best, report
+    given = scenario.service.checkpoint
+    if given is not None and not _is_universal(Path(given)):
+        # A per-layout model from `uavxai train`: fly it as it is.
+        net, info, _ = resolve_checkpoint(scenario, algo)
+        return d3qn.rollout(net, d3qn.fading_free(env)), {"checkpoint": info["path"]}
+    policy, label = universal_policy(scenario, algo)
+    free = d3qn.fading_free(env)
+    flight = universal.fly(policy, free)
+    position, levels, objective, rounds = universal.refine(
+        free.channel, free.space, free.power_levels, flight.position, flight.levels
+    )
+    report = {
+        "checkpoint": label,
+        "d3qn_alone_objective": float(flight.objective),
+        "d3qn_alone_point": [float(v) for v in flight.position],
+        "flight_steps": len(flight.path) - 1,
+        "refine_rounds": int(rounds),
+    }
+    path = np.vstack([flight.path, position[None]])
+    return d3qn.Episode(objective, position, levels, path), report
+
+
+def _is_universal(path: Path) -> bool:
+    try:
+        data = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception:  # noqa: BLE001 - resolve_checkpoint reports unreadable files
+        return False
+    return isinstance(data, dict) and data.get("format") == universal.CHECKPOINT_FORMAT
+
+
+_POLICIES: dict[str, tuple[universal.NumpyPolicy, dict[str, Any]]] = {}
+
+
+def universal_policy(scenario: Scenario, algo: str) -> tuple[universal.NumpyPolicy, str]:
+    """The universal model for ``algo`` (``service.checkpoint`` or the shipped one), checked
+    against the scenario's K and power levels; loaded once per process."""
+    c = scenario.comms
+    given = scenario.service.checkpoint
+    path = Path(given) if given is not None else universal.shipped_path(algo, c.power_levels)
+    if given is None and not path.is_file():
+        have = sorted(p.name for p in service_checkpoints_dir().glob("universal_*.pt"))
+        raise CheckpointError(
+            f"no shipped {algo} model for power_levels = {c.power_levels}; shipped: "
+            f"{', '.join(have) or 'none'}. Set comms.power_levels: 6, train one with "
+            f"`python -m uavxai.service.universal --algo {algo}`, or use service.planner: grid "
+            "or random."
+        )
+    key = str(path.resolve())
+    if key not in _POLICIES:
+        net, info = universal.load(path)
+        _POLICIES[key] = (universal.NumpyPolicy(net), info)
+    policy, info = _POLICIES[key]
+    problems = []
+    if info["algo"] != algo:
+        problems.append(f"it is a {info['algo']} model but the planner is {algo}")
+    if not 2 <= c.users.k <= info["k_max"]:
+        problems.append(f"it serves K = 2..{info['k_max']} users, the scenario has {c.users.k}")
+    if info["power_levels"] != c.power_levels:
+        problems.append(
+            f"it was trained for power_levels = {info['power_levels']}, the scenario has "
+            f"{c.power_levels}"
+        )
+    if problems:
+        raise CheckpointError(
+            f"service model {path}: does not fit this scenario: {'; '.join(problems)}. Use "
+            "service.planner: grid or random, or train a matching model with "
+            f"`python -m uavxai.service.universal --algo {algo}`."
+        )
+    return policy, (str(path) if given is not None else f"shipped:{path.name}")
 
 
 def shipped_checkpoint(k: int, power_levels: int, access: str) -> Path:
@@ -144,23 +196,15 @@ def shipped_checkpoint(k: int, power_levels: int, access: str) -> Path:
 def resolve_checkpoint(
     scenario: Scenario, algo: str
 ) -> tuple[d3qn.BranchingQNetwork, dict[str, Any], bool]:
-    """The model for ``algo``: ``service.checkpoint`` if set, else the shipped one."""
+    """A per-layout model written by `uavxai train` (``service.checkpoint``)."""
     c = scenario.comms
     k, L = c.users.k, c.power_levels
     train_hint = f"`uavxai train SCENARIO --stage service --algo {algo}`"
     given = scenario.service.checkpoint
     if given is None:
-        path = shipped_checkpoint(k, L, c.access)
-        if algo != "d3qn" or not path.is_file():
-            have = sorted(p.name for p in service_checkpoints_dir().glob("*.pt"))
-            raise CheckpointError(
-                f"no shipped {algo} model fits this scenario (K = {k} users, power_levels = "
-                f"{L}, access = {c.access}); shipped: {', '.join(have) or 'none'}. Train one "
-                f"with {train_hint} and set service.checkpoint to its model.pt, or use "
-                "service.planner: grid or random."
-            )
-    else:
-        path = Path(given)
+        path = universal.shipped_path(algo, L)
+        raise CheckpointError(f"no per-layout {algo} model given; the shipped one is {path}.")
+    path = Path(given)
     net, info = d3qn.load_checkpoint(path)
     problems = []
     if info["algo"] != algo:
@@ -176,8 +220,8 @@ def resolve_checkpoint(
             f"service.checkpoint {path}: does not fit this scenario: {'; '.join(problems)}. "
             f"Train a matching model with {train_hint}."
         )
-    info["path"] = str(path) if given is not None else f"shipped:{path.name}"
-    return net, info, given is None
+    info["path"] = str(path)
+    return net, info, False
 
 
 def _report(

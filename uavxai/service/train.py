@@ -16,9 +16,9 @@ of the paper — the other one and the random baseline with the same budget, the
 within 5 % of the final level (the mean of the last 10 % of episodes); it is reported for the
 greedy objective (``episodes_to_converge``) and for the training reward (``..._return``).
 
-``python -m uavxai.service.train shipped`` regenerates ``uavxai/service/checkpoints``: one
-D3QN per access mode for K = 10, L = 6, trained on a fresh random layout, environment and
-fading for every episode (so it is a prior, fine-tuned on the actual layout at run time).
+``python -m uavxai.service.train shipped`` regenerates ``uavxai/service/checkpoints``: the
+universal D3QN and DQN of ``universal.py`` (any K from 2 to 20, both access modes, all four
+environments), used zero-shot by ``service.planner: d3qn|dqn``.
 """
 
 from __future__ import annotations
@@ -26,7 +26,6 @@ from __future__ import annotations
 import argparse
 import copy
 import csv
-import json
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -35,11 +34,8 @@ from typing import Any
 import numpy as np
 import torch
 
-from uavxai import __version__
-from uavxai.comms.channel import ENVIRONMENTS
 from uavxai.comms.service_env import ServiceEnv
-from uavxai.paths import service_checkpoints_dir
-from uavxai.scenario import Scenario, default_scenario
+from uavxai.scenario import Scenario
 from uavxai.service import d3qn, dqn
 from uavxai.service.grid import solve_grid
 from uavxai.service.random_search import random_search
@@ -47,8 +43,6 @@ from uavxai.service.random_search import random_search
 DEFAULT_EPISODES = 300
 CONVERGENCE_TOLERANCE = 0.05
 SMOOTHING_EPISODES = 10
-SHIPPED_EPISODES = 1500
-FADINGS = ("none", "rayleigh", "rician")
 
 
 def episodes_to_converge(
@@ -259,81 +253,20 @@ def _plot(
 
 
 # ------------------------------------------------------------------------- shipped checkpoints
-def random_layout_envs(
-    access: str, seed: int, k: int = 10, power_levels: int = 6
-) -> Callable[[int], ServiceEnv]:
-    """A fresh environment per episode: users uniform in the default region, a random
-    Al-Hourani environment and fading; everything else at the scenario defaults."""
-    environments = list(ENVIRONMENTS)
-
-    def make(episode: int) -> ServiceEnv:
-        rng = np.random.default_rng([seed, episode])
-        scenario = default_scenario(
-            "pretrain",
-            seed=int(rng.integers(2**31 - 1)),
-            comms={
-                "users": {"count": k},
-                "access": access,
-                "power_levels": power_levels,
-                "environment": environments[rng.integers(len(environments))],
-                "fading": FADINGS[rng.integers(len(FADINGS))],
-            },
-        )
-        return ServiceEnv.from_scenario(scenario)
-
-    return make
-
-
-def train_shipped(access: str, episodes: int, out_dir: Path, seed: int = 0) -> Path:
-    from rich.progress import Progress
-
-    torch.set_num_threads(1)
-    cfg = d3qn.D3QNConfig(episodes=episodes, seed=seed)
-    make = random_layout_envs(access, seed)
-    with Progress() as progress:
-        task = progress.add_task(f"d3qn {access}", total=episodes)
-        result = d3qn.train(make, cfg, on_episode=lambda *_: progress.advance(task))
-    last = result.curve[-max(1, episodes // 10) :]
-    trained_on = {
-        "algo": "d3qn",
-        "k": 10,
-        "power_levels": 6,
-        "access": access,
-        "episodes": episodes,
-        "layouts": "a new one per episode: 10 users uniform in x, y in [750, 1250] m",
-        "environments": list(ENVIRONMENTS),
-        "fading": list(FADINGS),
-        "other_parameters": "scenario defaults (2 GHz, 1 MHz, -100 dBm, 1 W, QoS 100 kbit/s, "
-        "100 steps of 10 m from (1000, 1000, 100) m, world.h [50, 300] m)",
-        "seed": seed,
-        "config": d3qn.config_dict(cfg),
-        "greedy_over_naive_last_10pct": float(
-            np.mean([row["greedy_objective"] / row["reward_scale"] for row in last])
-        ),
-        "wall_s": round(result.wall_s, 1),
-        "uavxai_version": __version__,
-        "torch_version": str(torch.__version__),
-        "command": f"python -m uavxai.service.train shipped --access {access} "
-        f"--episodes {episodes} --seed {seed}",
-    }
-    out_dir.mkdir(parents=True, exist_ok=True)
-    path = out_dir / f"d3qn_k10_l6_{access}.pt"
-    d3qn.save_checkpoint(path, result.net, "d3qn", cfg, trained_on)
-    path.with_suffix(".json").write_text(json.dumps(trained_on, indent=2) + "\n")
-    return path
-
-
 def main(argv: list[str] | None = None) -> None:
+    """``python -m uavxai.service.train shipped``: regenerate the shipped universal models
+    (D3QN and the DQN ablation) with ``uavxai.service.universal``."""
+    from uavxai.service import universal
+
     parser = argparse.ArgumentParser(prog="python -m uavxai.service.train")
     sub = parser.add_subparsers(dest="command", required=True)
-    s = sub.add_parser("shipped", help="regenerate the shipped D3QN checkpoints")
-    s.add_argument("--access", choices=("shared", "ofdma", "both"), default="both")
-    s.add_argument("--episodes", type=int, default=SHIPPED_EPISODES)
+    s = sub.add_parser("shipped", help="regenerate the shipped universal D3QN and DQN")
+    s.add_argument("--algo", choices=("d3qn", "dqn", "both"), default="both")
+    s.add_argument("--minutes", type=float, default=universal.UniversalConfig.minutes)
     s.add_argument("--seed", type=int, default=0)
-    s.add_argument("--out", type=Path, default=service_checkpoints_dir())
     args = parser.parse_args(argv)
-    for access in ("shared", "ofdma") if args.access == "both" else (args.access,):
-        print(train_shipped(access, args.episodes, args.out, args.seed))
+    for algo in ("d3qn", "dqn") if args.algo == "both" else (args.algo,):
+        universal.main(["--algo", algo, "--minutes", str(args.minutes), "--seed", str(args.seed)])
 
 
 if __name__ == "__main__":
