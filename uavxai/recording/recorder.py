@@ -10,7 +10,10 @@ Each recorder owns its own ``rr.RecordingStream``, so several in one process sta
 
 from __future__ import annotations
 
+import logging
 import math
+import os
+import sys
 from collections import defaultdict
 from collections.abc import Sequence
 from pathlib import Path
@@ -29,6 +32,7 @@ from uavxai.recording.mission_log import MissionLog
 from uavxai.recording.traffic_log import TrafficLog, aircraft_paths
 from uavxai.recording.tree_graph import tree_graph
 
+log = logging.getLogger(__name__)
 FILE_FLUSH_S = 30.0
 LIVE_FLUSH_S = 0.5
 
@@ -73,14 +77,28 @@ class RunRecorder:
             return
         self._sinks_open = True
         sinks: list[rr.FileSink | rr.GrpcSink] = []
-        if self._spawn:
-            self._stream.spawn(connect=False)
+        if self._spawn and self._spawn_viewer():
             sinks.append(rr.GrpcSink())
         if self.path is not None:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             sinks.append(rr.FileSink(self.path))
         # The blueprint must go with the sinks: one given only at init is not written to files.
         self._stream.set_sinks(*sinks, default_blueprint=default_blueprint(bounds))
+
+    def _spawn_viewer(self) -> bool:
+        """Start the rerun viewer installed with rerun-sdk (next to this Python, so an
+        unactivated venv finds it too); a viewer that cannot start costs the live view, never
+        the run or its recording file."""
+        here = str(Path(sys.executable).parent)
+        if here not in os.environ.get("PATH", "").split(os.pathsep):
+            os.environ["PATH"] = here + os.pathsep + os.environ.get("PATH", "")
+        try:
+            self._stream.spawn(connect=False)
+        except Exception as exc:  # noqa: BLE001 - no viewer (no display, not installed)
+            log.warning("cannot start the rerun viewer (%s); recording to the file only", exc)
+            self._spawn = False
+            return False
+        return True
 
     def _log_styles(self) -> None:
         log = self._stream.log
@@ -283,8 +301,11 @@ class RunRecorder:
             if math.isfinite(self._last_t):
                 self._mission.end(self._last_t, self._decision)
             self._flush()
-            self._stream.flush(timeout_sec=60.0)  # a vanished viewer must not hang the run
-            self._stream.disconnect()
+            try:
+                self._stream.flush(timeout_sec=10.0)  # a vanished viewer must not hang the run
+                self._stream.disconnect()
+            except Exception as exc:  # noqa: BLE001 - the viewer went away; the file is whole
+                log.warning("rerun viewer: %s; the recording file is complete", exc)
 
     def __enter__(self) -> RunRecorder:
         return self

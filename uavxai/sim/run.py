@@ -110,7 +110,8 @@ def run_episode(
         )
     record = sc.log.rerun if record is None else record
     if record or spawn or rerun_file is not None:
-        observers.append(_rerun(sc, service, None if spawn else (rerun_file or out / "run.rrd")))
+        # --spawn records to the file too: a viewer problem never loses the run's recording
+        observers.append(_rerun(sc, service, rerun_file or out / "run.rrd", spawn))
     if realtime:
         observers.append(Pacing(realtime))
     if progress is not None:
@@ -145,12 +146,12 @@ def _replanner(sc: Scenario):
     return replan
 
 
-def _rerun(sc: Scenario, service, path: Path | None) -> Rerun:
+def _rerun(sc: Scenario, service, path: Path, spawn: bool) -> Rerun:
     from uavxai.recording.recorder import RunRecorder
 
     recorder = RunRecorder(
         path,
-        spawn=path is None,
+        spawn=spawn,
         recording_name="uavxai",
         recording_id=f"{sc.name}-seed{sc.seed}",
     )
@@ -256,13 +257,12 @@ def report(summary: dict, out: Path, rerun_file: Path | None, spawn: bool) -> No
             f"{e['sim_realtime_factor'] or 0:.1f}x real time"
         )
     console.print(f"outputs in {out}/ (summary.json, trajectory.csv, decisions.jsonl)")
-    if not spawn:
-        rrd = rerun_file or out / "run.rrd"
-        if len(eps) > 1 and rerun_file is None:
-            rrd = out / "episode-000" / "run.rrd"
-        if rrd.exists():
-            viewer = Path(sys.executable).parent / "rerun"  # installed with rerun-sdk
-            viewer_cmd = str(viewer) if viewer.exists() else "rerun"
-            console.print(f"recording: {rrd}  — open it with:  {viewer_cmd} {rrd}")
+    rrd = rerun_file or out / "run.rrd"  # written with or without --spawn
+    if len(eps) > 1 and rerun_file is None:
+        rrd = out / "episode-000" / "run.rrd"
+    if rrd.exists():
+        viewer = Path(sys.executable).parent / "rerun"  # installed with rerun-sdk
+        viewer_cmd = str(viewer) if viewer.exists() else "rerun"
+        console.print(f"recording: {rrd}  — open it with:  {viewer_cmd} {rrd}")
     first = out if len(eps) == 1 else out / "episode-000"
     console.print(f"explain a decision:  uavxai explain {first} --decision 0")
