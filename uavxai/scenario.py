@@ -33,6 +33,7 @@ from pydantic import (
 
 from uavxai.errors import ScenarioError, UserError
 from uavxai.paths import aircraft_dir, resolve_scenario
+from uavxai.vocabulary import AVOIDANCE_PLANNERS, SERVICE_PLANNERS
 
 REFERENCE = "docs/scenario.md"
 # Distances are bounded so that no arithmetic downstream overflows or loses every digit of a
@@ -222,7 +223,7 @@ def _checkpoint_exists(value: str | None, what: str) -> str | None:
 
 
 class Service(_Model):
-    planner: Literal["d3qn", "dqn", "random", "grid"] = "d3qn"
+    planner: Literal[SERVICE_PLANNERS] = "d3qn"  # type: ignore[valid-type]
     checkpoint: Annotated[str, Field(max_length=4096)] | None = None
     steps: Annotated[int, Field(ge=1, le=100_000)] = 100
     step_m: Annotated[float, Field(gt=0, le=500)] = 10.0
@@ -314,7 +315,7 @@ class NMAC(_Model):
 
 
 class Avoidance(_Model):
-    planner: Literal["mcts", "mcts_fast", "exhaustive", "dqn", "safe_dqn", "none"] = "mcts"
+    planner: Literal[AVOIDANCE_PLANNERS] = "mcts"  # type: ignore[valid-type]
     checkpoint: Annotated[str, Field(max_length=4096)] | None = None  # dqn / safe_dqn
     d_min_m: Annotated[float, Field(gt=0, le=10_000)] = 50.0
     goal_radius_m: Annotated[float, Field(gt=0, le=100_000)] = 50.0

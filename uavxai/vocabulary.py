@@ -73,6 +73,13 @@ def action_name(a: int) -> str:
     return ACTIONS[a].name
 
 
+# Planner names: the scenario schema validates against these; the registries
+# (uavxai.avoidance.planners, uavxai.service.stage) provide one factory for each and check at
+# import that they cover exactly these names, so a name is written once.
+AVOIDANCE_PLANNERS = ("mcts", "mcts_fast", "exhaustive", "mvp", "dqn", "safe_dqn", "none")
+SERVICE_PLANNERS = ("d3qn", "dqn", "random", "grid")
+
+
 class Outcome(StrEnum):
     """How an episode ends (SPEC §4). The values are what files and tables say."""
 

@@ -337,8 +337,6 @@ class MVPPlanner:
             d_min_m=cfg.d_min_m,
             branch_min_separation_m=float(seg.min_sep[action]),
         )
-        from uavxai.xai.explain import counterfactual  # xai reads planner types: import late
-
-        decision.words = (why, counterfactual(decision))
+        decision.words = (why, "")  # MVP's own reason; the options' separations are evidence
         decision.ms = 1000.0 * (time.perf_counter() - t0)
         return decision

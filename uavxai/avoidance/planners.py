@@ -19,6 +19,7 @@ from uavxai.avoidance.mcts import MCTSPlanner
 from uavxai.avoidance.mvp import MVPPlanner
 from uavxai.avoidance.types import Planner, PlannerConfig
 from uavxai.errors import UserError
+from uavxai.vocabulary import AVOIDANCE_PLANNERS
 
 # The paper's Tree-fast: few simulations, a shallow tree, short holds.
 TREE_FAST = {"simulations": 40, "depth": 2, "action_hold_s": 2.0}
@@ -84,3 +85,6 @@ def make_planner(
             f"unknown avoidance planner '{name}'; choose one of {', '.join(PLANNERS)}."
         )
     return factory(config or PlannerConfig(), checkpoint)
+
+# The registry provides every planner the vocabulary names, and nothing else.
+assert tuple(sorted(PLANNERS)) == tuple(sorted(AVOIDANCE_PLANNERS)), sorted(PLANNERS)
