@@ -9,6 +9,7 @@ autopilot's setpoints — the same path an external peer on ``--mavlink`` uses.
 from __future__ import annotations
 
 import json
+import math
 import sys
 from pathlib import Path
 
@@ -38,7 +39,9 @@ def mavlink_path(scenario: Scenario, link: str | None):
     """The command path of ``uavxai run``: encoder -> bytes -> bridge -> autopilot."""
     from uavxai.bridges.bridge import MavlinkBridge
     from uavxai.bridges.protocol import CommandEncoder
+    from uavxai.bridges.signing import default_state_path
     from uavxai.dynamics.geodesy import LocalFrame
+    from uavxai.scenario import aircraft_speed_range
 
     sc, av = scenario, scenario.avoidance
     key = bytes.fromhex(sc.bridge.signing_key_hex) if sc.bridge.signing_key_hex else None
@@ -64,6 +67,14 @@ def mavlink_path(scenario: Scenario, link: str | None):
             command_timeout_s=sc.bridge.command_timeout_s,
             params=params,
             home=(start.x, start.y, start.h),
+            # every command, the planner's or a ground station's, is clamped to these
+            alt_limits_m=tuple(sc.world.h),
+            speed_limits_mps=aircraft_speed_range(sc.ownship.aircraft),
+            bank_limit_rad=math.radians(av.bank_limit_deg),
+            accel_limit_mps2=av.accel_mps2,
+            xy_limits_m=(tuple(sc.world.x), tuple(sc.world.y)),
+            # the link's signing timestamps outlive the run: no replay into the next one
+            signing_state=default_state_path(key) if key else None,
         )
         encoder = CommandEncoder(sc.bridge.system_id, sc.bridge.system_id, signing_key=key)
         override_s = float(getattr(sc.bridge, "override_s", 30.0))
