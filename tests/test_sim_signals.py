@@ -41,3 +41,31 @@ def test_a_signal_leaves_whole_files_and_an_interrupted_summary(tmp_path: Path, 
 
     chunks = RrdReader(out / "run.rrd").stream().to_chunks()
     assert any(c.entity_path == "/xai/tree" for c in chunks)
+
+
+def test_sigterm_on_evaluate_keeps_finished_episodes_and_stops_the_workers(tmp_path: Path):
+    scenario = tmp_path / "quick.yaml"
+    scenario.write_text(
+        "name: quick\nownship: {goal: [1800, 1800, 120]}\nsurveillance: {model: truth}\n"
+    )
+    out = tmp_path / "ev"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "uavxai", "evaluate", str(scenario), "--methods", "none",
+         "--intruders", "5", "--episodes", "400", "--workers", "2", "--out", str(out)],
+        env={**os.environ, "JSBSIM_DEBUG": "0"}, stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    time.sleep(25.0)
+    children = subprocess.run(
+        ["pgrep", "-P", str(proc.pid)], capture_output=True, text=True
+    ).stdout.split()
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err and "kept the" in err
+    rows = (out / "episodes.csv").read_text().splitlines()
+    assert 1 < len(rows) < 401  # the finished ones, not all
+    time.sleep(1.0)
+    alive = [c for c in children if Path(f"/proc/{c}").exists()
+             and "zombie" not in Path(f"/proc/{c}/status").read_text().lower()]  # fmt: skip
+    assert not alive, f"worker processes still running: {alive}"

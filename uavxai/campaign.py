@@ -225,22 +225,27 @@ def _run_pool(scenario, tasks, order, common, workers, on_done) -> dict[int, dic
         "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
     )
     rows: dict[int, dict] = {}
-    with ProcessPoolExecutor(workers, mp_context=context, initializer=_init_worker) as pool:
-        pending: dict[Future, int] = {
-            pool.submit(_run_task, scenario, tasks[k], *common): k for k in order
-        }
-        try:
-            while pending:
-                done, _ = wait(pending, return_when=FIRST_COMPLETED)
-                for f in done:
-                    k = pending.pop(f)
-                    rows[k] = f.result()
-                    if on_done:
-                        on_done(rows[k])
-        except BaseException:
-            for f in pending:
-                f.cancel()
-            raise
+    pool = ProcessPoolExecutor(workers, mp_context=context, initializer=_init_worker)
+    pending: dict[Future, int] = {
+        pool.submit(_run_task, scenario, tasks[k], *common): k for k in order
+    }
+    try:
+        while pending:
+            done, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for f in done:
+                k = pending.pop(f)
+                rows[k] = f.result()
+                if on_done:
+                    on_done(rows[k])
+    except BaseException:
+        # Interrupted (Ctrl-C, SIGTERM) or failed: stop the workers now, not after their
+        # running episodes; the caller keeps what finished.
+        processes = list(getattr(pool, "_processes", {}).values())
+        pool.shutdown(wait=False, cancel_futures=True)
+        for p in processes:
+            p.terminate()
+        raise
+    pool.shutdown()
     return rows
 
 
@@ -498,22 +503,29 @@ def evaluate_command(
     with progress_bar(console) as progress:
         bar = progress.add_task(f"{scenario.name} ({dynamics})", total=total)
 
+        finished: list[dict] = []
+
         def done(row: dict) -> None:
+            finished.append(row)
             progress.update(
                 bar, advance=1, description=f"{row['method']} x{row['intruders']}: {row['outcome']}"
             )
 
-        rows = run_campaign(
-            scenario,
-            methods,
-            intruders,
-            episodes,
-            dynamics=dynamics,
-            workers=workers,
-            ray_address=ray_address,
-            on_done=done,
-            goal=goal,
-        )
+        try:
+            rows = run_campaign(
+                scenario,
+                methods,
+                intruders,
+                episodes,
+                dynamics=dynamics,
+                workers=workers,
+                ray_address=ray_address,
+                on_done=done,
+                goal=goal,
+            )
+        except KeyboardInterrupt:
+            _keep_finished(finished, out, console)
+            raise
     results = summarise(rows)
     out.mkdir(parents=True, exist_ok=True)
     write_csv(out / "episodes.csv", EPISODE_COLUMNS, rows)
@@ -523,6 +535,22 @@ def evaluate_command(
     console.print(_table(results))
     console.print(f"wrote {out / 'results.csv'}, {out / 'episodes.csv'} and {len(plots)} plots")
     return {"episodes": len(rows), "wall_s": wall, "results": results}
+
+
+def _keep_finished(rows: list[dict], out: Path, console) -> None:
+    """An interrupted campaign still writes the episodes that finished (and their results)."""
+    if not rows:
+        return
+    order = {(m, n, e): k for k, (m, n, e) in enumerate(sorted(
+        (r["method"], r["intruders"], r["episode"]) for r in rows))}  # fmt: skip
+    rows = sorted(rows, key=lambda r: order[(r["method"], r["intruders"], r["episode"])])
+    out.mkdir(parents=True, exist_ok=True)
+    write_csv(out / "episodes.csv", EPISODE_COLUMNS, rows)
+    write_csv(out / "results.csv", RESULT_COLUMNS, summarise(rows))
+    console.print(
+        f"interrupted: kept the {len(rows)} finished episodes in {out / 'episodes.csv'} and "
+        f"{out / 'results.csv'}"
+    )
 
 
 def _table(results: Sequence[dict]):
