@@ -45,3 +45,17 @@ def test_jsbsim_replaces_a_leaving_intruder_with_a_new_aircraft() -> None:
         on_edge = min(p[0], 2000 - p[0], p[1], 2000 - p[1])
         assert on_edge < 200 and world.failure() is None  # entered at the edge, flying
         assert np.hypot(*(s.pos[1, :2] - s.pos[0, :2])) >= 300.0
+
+
+def test_newcomers_never_reuse_a_number_when_a_campaign_draws_more_intruders() -> None:
+    """A campaign draws `--intruders 40` from a scenario whose count is 20: newcomers must
+    be numbered after the 40, or two aircraft would share an id (and a track)."""
+    from uavxai.dynamics.traffic import draw_intruders
+
+    sc = default_scenario("flow-ids", intruders={"count": 20}, seed=2)
+    specs = draw_intruders(sc, np.random.default_rng(2), 40)
+    world = KinematicWorld(sc, intruders=specs)
+    world.advance(200.0)
+    ids = world.state().ids[1:]
+    assert len(set(ids)) == len(ids) == 40
+    assert any(int(i.removeprefix("intruder-")) > 40 for i in ids)

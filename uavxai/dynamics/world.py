@@ -71,7 +71,9 @@ class JSBSimWorld(LoiterAutopilot):
         self.intruders = list(intruders)
         self.ids = (OWNSHIP_ID, *(intruder_id(i + 1) for i in range(len(self.intruders))))
         self._pilots = make_pilots(scenario, self.intruders, self.seed)
-        self._flow = TrafficFlow.from_scenario(scenario, seed=self.seed)
+        self._flow = TrafficFlow.from_scenario(
+            scenario, seed=self.seed, first_number=len(self.intruders) + 1
+        )  # numbers never reused: a track, trail or row means one aircraft
         self._guidance_period = max(1, round(GUIDANCE_PERIOD_S / self.dt))
         self._pilot_period = max(1, round(PILOT_PERIOD_S / self.dt))
         self._steps = 0

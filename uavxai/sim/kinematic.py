@@ -70,7 +70,9 @@ class KinematicWorld(LoiterAutopilot):
         self._speed_target: float | None = None
         self._alt_target = float(start.h)
         self._pilots = make_pilots(scenario, self.intruders, self.seed)
-        self._flow = TrafficFlow.from_scenario(scenario, seed=self.seed)
+        self._flow = TrafficFlow.from_scenario(
+            scenario, seed=self.seed, first_number=len(self.intruders) + 1
+        )  # numbers never reused: a track, trail or row means one aircraft
         self._pilot_period = max(1, round(PILOT_PERIOD_S / self.dt))
         self._guidance_period = max(1, round(GUIDANCE_PERIOD_S / self.dt))
         self._steps = 0
