@@ -24,9 +24,18 @@ import numpy as np
 from uavxai.errors import UserError
 
 FLOWS = ("replace", "none")
-# A newcomer never appears closer than this to the ownship (horizontally): an aircraft
-# materialising next to it would be a collision nobody could avoid.
-ENTRY_CLEARANCE_M = 300.0
+# A newcomer never appears closer than this to the ownship (horizontally): real traffic does
+# not materialise in the sky next to anyone; at 1 km a 30 m/s intruder is at least 17 s from
+# a head-on meeting, time for the surveillance picture to hold a track of it. (Every point of
+# the area has perimeter points this far away in a 2 km box.)
+ENTRY_CLEARANCE_M = 1000.0
+
+
+def entry_clearance(x_bounds: tuple[float, float], y_bounds: tuple[float, float]) -> float:
+    """ENTRY_CLEARANCE_M, or half the area's smaller side in a smaller area (from any point
+    some perimeter point is at least that far: an entry can always be drawn)."""
+    half = 0.5 * min(x_bounds[1] - x_bounds[0], y_bounds[1] - y_bounds[0])
+    return min(ENTRY_CLEARANCE_M, 0.999 * half)
 _FLOW_STREAM = 0x464C4F  # "FLO": spawn key apart from the run's other random streams
 
 

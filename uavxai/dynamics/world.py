@@ -18,7 +18,7 @@ import numpy as np
 from uavxai.dynamics.aircraft import FT, Aircraft, heading_from_deg
 from uavxai.dynamics.behaviours import PILOT_PERIOD_S, make_pilots, newcomer_pilot
 from uavxai.dynamics.environment import EnvironmentConfig
-from uavxai.dynamics.flow import ENTRY_CLEARANCE_M, Entry, TrafficFlow
+from uavxai.dynamics.flow import Entry, TrafficFlow, entry_clearance
 from uavxai.dynamics.geodesy import LocalFrame
 from uavxai.dynamics.loiter import GUIDANCE_PERIOD_S, LoiterAutopilot
 from uavxai.dynamics.state import OWNSHIP_ID, TrafficState, intruder_id
@@ -74,6 +74,7 @@ class JSBSimWorld(LoiterAutopilot):
         self._flow = TrafficFlow.from_scenario(
             scenario, seed=self.seed, first_number=len(self.intruders) + 1
         )  # numbers never reused: a track, trail or row means one aircraft
+        self._clearance = entry_clearance(scenario.world.x, scenario.world.y)
         self._guidance_period = max(1, round(GUIDANCE_PERIOD_S / self.dt))
         self._pilot_period = max(1, round(PILOT_PERIOD_S / self.dt))
         self._steps = 0
@@ -188,7 +189,7 @@ class JSBSimWorld(LoiterAutopilot):
             return
         if self._flow is not None and s.n > 1:
             entries = self._flow.replace(
-                s.pos[1:], keep_clear=s.pos[:1], min_distance_m=ENTRY_CLEARANCE_M
+                s.pos[1:], keep_clear=s.pos[:1], min_distance_m=self._clearance
             )
             if entries:
                 self._replace(entries)

@@ -188,6 +188,9 @@ class ProgressBar(Observer):
         self.name = name
         self.task = progress.add_task(name, total=total)
 
+    def on_start(self, ep: Episode) -> None:
+        self.progress.update(self.task, total=ep.max_steps)  # a mission's budget is longer
+
     def on_period(self, ep: Episode, event: DecisionEvent, flown_min_m: float) -> None:
         self.progress.update(self.task, advance=1, description=f"{self.name} t={ep.state.t:5.0f}s")
 
