@@ -97,6 +97,8 @@ class Mission(Observer):
         self.outcome: Outcome | None = None
         self.service_points: list[tuple[float, float, float, float]] = []
         self._battery_low = False
+        self._own_xy: tuple[float, float] | None = None
+        self._horizon_s = 16.0
 
     # ------------------------------------------------------------------------- phases
     def _enter(self, phase: Phase, t: float, why: str, ep: Episode) -> None:
@@ -120,8 +122,23 @@ class Mission(Observer):
 
     @property
     def goal(self) -> tuple[float, float, float]:
-        """Where the avoidance planner steers now."""
-        return self.config.home if self.phase == Phase.RETURNING else self.config.station
+        """Where the avoidance planner steers now: home, the service point, or, avoiding on
+        station, the point of the orbit it would have reached at the end of the planner's
+        horizon (the centre itself would be a goal reached in passing, which would make every
+        option look as good as any other)."""
+        c = self.config
+        if self.phase == Phase.RETURNING:
+            return c.home
+        if self.phase != Phase.AVOIDING or self._own_xy is None:
+            return c.station
+        x, y = self._own_xy
+        ahead = (1.0 if c.clockwise else -1.0) * c.speed_mps * self._horizon_s / c.radius_m
+        b = math.atan2(x - c.station[0], y - c.station[1]) + ahead
+        return (
+            c.station[0] + c.radius_m * math.sin(b),
+            c.station[1] + c.radius_m * math.cos(b),
+            c.station[2],
+        )
 
     @property
     def serving(self) -> bool:
@@ -129,6 +146,8 @@ class Mission(Observer):
 
     def on_sample(self, ep: Episode, state: TrafficState) -> None:
         c, p, t = self.config, state.pos[0], state.t
+        self._own_xy = (float(p[0]), float(p[1]))
+        self._horizon_s = ep.planner.config.depth * ep.planner.config.action_hold_s
         if self.phase == Phase.TRANSIT:
             d = math.hypot(p[0] - c.station[0], p[1] - c.station[1])
             if d <= c.radius_m + ep.judge.goal_radius_m:
