@@ -147,7 +147,7 @@ class Episode:
                 self.path.altitude(goal[2], state.t)
             decision = m.decide(self, own, intruders) if m is not None else None
             if decision is None:  # the avoidance planner flies
-                decision = self.planner.plan(own, intruders, goal, step=self.steps)
+                decision = self.planner.plan(own, intruders, goal, step=self._leg_step())
                 self.path.send(decision, state.t)
         self.decision_ms.append(decision.ms)
         event = DecisionEvent(self.steps, state.t, own, intruders, decision, state)
@@ -156,11 +156,16 @@ class Episode:
             o.on_decision(self, event)
         return event
 
+    def _leg_step(self) -> int:
+        """Decisions taken on the way to the current goal: the planner weighs its time-out
+        (``max_steps``) against these, per leg of a mission."""
+        return self.steps - (self.mission.leg_start_step if self.mission is not None else 0)
+
     def _advise(self, own: Ownship, intruders: list[Intruder], goal) -> Decision:
         """While the operator is in command the planner still looks, and says what it would
         do, but sends nothing."""
         self._overridden = True
-        decision = self.planner.plan(own, intruders, goal, step=self.steps)
+        decision = self.planner.plan(own, intruders, goal, step=self._leg_step())
         decision.words = (
             "operator override: the ground station's commands fly the aircraft; the planner "
             f"would have {decision.explanation}",

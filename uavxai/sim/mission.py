@@ -97,11 +97,14 @@ class Mission(Observer):
         self.outcome: Outcome | None = None
         self.service_points: list[tuple[float, float, float, float]] = []
         self._battery_low = False
+        self.leg_start_step = 0
         self._own_xy: tuple[float, float] | None = None
         self._horizon_s = 16.0
 
     # ------------------------------------------------------------------------- phases
     def _enter(self, phase: Phase, t: float, why: str, ep: Episode) -> None:
+        if phase in (Phase.TRANSIT, Phase.RETURNING):
+            self.leg_start_step = ep.steps  # the planner's step budget counts per leg
         self.phase = phase
         if phase in (Phase.TRANSIT, Phase.RETURNING):  # the height of where it now goes
             ep.path.altitude(self.goal[2], t)
