@@ -158,6 +158,56 @@ class MavlinkBridge:
     ) -> None:
         if not 1 <= system_id <= 255:
             raise ValueError(f"MAVLink system id must be 1..255, got {system_id}")
+        self._init_limits(
+            alt_limits_m, speed_limits_mps, bank_limit_rad, accel_limit_mps2, xy_limits_m
+        )
+        self._clamp_noticed: dict[str, float] = {}
+        self.system_id = system_id
+        self.frame = frame
+        self.counters: dict[str, int] = dict.fromkeys(_COUNTERS, 0)
+        self._sink = sink
+        self._home_setting = home
+        self._home = home
+        self._refusal_reported = False
+        self._watchdog = CommandWatchdog(command_timeout_s)
+        self._params = self._param_table(
+            system_id, command_timeout_s, telemetry_hz, adsb_hz, signing_key, params
+        )
+        self._gates = {
+            "heartbeat": telemetry.RateGate(1.0),
+            "home": telemetry.RateGate(1.0 / HOME_PERIOD_S),
+            "vehicle": telemetry.RateGate(telemetry_hz),
+            "adsb": telemetry.RateGate(adsb_hz),
+        }
+        self._previous_attitude: tuple[float, np.ndarray] | None = None
+        self._now: float | None = None
+        # Publish every intruder's exact state as ADSB_VEHICLE (no surveillance model); off
+        # when a surveillance model's reports are relayed instead.
+        self.truth_adsb = True
+        self.phase = "transit"  # the mission phase, shown as the flight mode
+        self.power = telemetry.Power()  # battery and throttle, when the dynamics model them
+
+        self._init_link(link, system_id, signing_key, signing_state)
+        self._handlers = {
+            "SET_ATTITUDE_TARGET": self._on_attitude_target,
+            "SET_POSITION_TARGET_LOCAL_NED": self._on_position_target,
+            "COMMAND_LONG": self._on_command_long,
+            "COMMAND_INT": self._on_command_int,
+            "PARAM_REQUEST_LIST": self._on_param_request_list,
+            "PARAM_REQUEST_READ": self._on_param_request_read,
+            "PARAM_SET": self._on_param_set,
+        }
+
+    def _init_limits(
+        self,
+        alt_limits_m: tuple[float, float],
+        speed_limits_mps: tuple[float, float],
+        bank_limit_rad: float,
+        accel_limit_mps2: float,
+        xy_limits_m: tuple[tuple[float, float], tuple[float, float]],
+    ) -> None:
+        """Check and keep the limits every command is clamped to (see the module docstring);
+        a bad limit is refused at construction, before any command meets it."""
         self._alt_limits = _interval("alt_limits_m", alt_limits_m, lowest=0.0)
         self._speed_limits = _interval("speed_limits_mps", speed_limits_mps, lowest=0.0)
         self._xy_limits = (
@@ -170,15 +220,18 @@ class MavlinkBridge:
             raise ValueError(f"accel_limit_mps2 must be positive, got {accel_limit_mps2}")
         self._bank_limit = float(bank_limit_rad)
         self._accel_limit = float(accel_limit_mps2)
-        self._clamp_noticed: dict[str, float] = {}
-        self.system_id = system_id
-        self.frame = frame
-        self.counters: dict[str, int] = dict.fromkeys(_COUNTERS, 0)
-        self._sink = sink
-        self._home_setting = home
-        self._home = home
-        self._refusal_reported = False
-        self._watchdog = CommandWatchdog(command_timeout_s)
+
+    def _param_table(
+        self,
+        system_id: int,
+        command_timeout_s: float,
+        telemetry_hz: float,
+        adsb_hz: float,
+        signing_key: bytes | None,
+        params: dict[str, float] | None,
+    ) -> ParamTable:
+        """The bridge's own read-only parameters (its settings and limits) plus ``params``,
+        which may not shadow them."""
         own = {
             "BRG_SYSID": float(system_id),
             "BRG_CMD_TIMEOUT": float(command_timeout_s),
@@ -196,21 +249,17 @@ class MavlinkBridge:
         clash = sorted(set(own) & set(params or {}))
         if clash:
             raise ValueError(f"parameter names {clash} are the bridge's own")
-        self._params = ParamTable(own | dict(params or {}))
-        self._gates = {
-            "heartbeat": telemetry.RateGate(1.0),
-            "home": telemetry.RateGate(1.0 / HOME_PERIOD_S),
-            "vehicle": telemetry.RateGate(telemetry_hz),
-            "adsb": telemetry.RateGate(adsb_hz),
-        }
-        self._previous_attitude: tuple[float, np.ndarray] | None = None
-        self._now: float | None = None
-        # Publish every intruder's exact state as ADSB_VEHICLE (no surveillance model); off
-        # when a surveillance model's reports are relayed instead.
-        self.truth_adsb = True
-        self.phase = "transit"  # the mission phase, shown as the flight mode
-        self.power = telemetry.Power()  # battery and throttle, when the dynamics model them
+        return ParamTable(own | dict(params or {}))
 
+    def _init_link(
+        self,
+        link: str | None,
+        system_id: int,
+        signing_key: bytes | None,
+        signing_state: str | Path | None,
+    ) -> None:
+        """Open the link (if any) and set up the codec, the signature gates and the readers
+        of both inputs (the in-process feed and the link)."""
         self._link = Link(link, system_id) if link is not None else None
         # One codec signs what we send; decoding is done by key-less codecs, because the
         # signature check belongs to the gates (pymavlink's records a timestamp before it
@@ -232,15 +281,6 @@ class MavlinkBridge:
         self._link_reader = (
             FrameReader(decoder, stream=self._link.stream, gate=link_gate) if self._link else None
         )
-        self._handlers = {
-            "SET_ATTITUDE_TARGET": self._on_attitude_target,
-            "SET_POSITION_TARGET_LOCAL_NED": self._on_position_target,
-            "COMMAND_LONG": self._on_command_long,
-            "COMMAND_INT": self._on_command_int,
-            "PARAM_REQUEST_LIST": self._on_param_request_list,
-            "PARAM_REQUEST_READ": self._on_param_request_read,
-            "PARAM_SET": self._on_param_set,
-        }
 
     # ------------------------------------------------------------------ input
     def feed(self, data: bytes) -> int:

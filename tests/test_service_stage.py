@@ -10,7 +10,7 @@ import pytest
 
 from uavxai.cli import main as cli_main
 from uavxai.comms.service_env import ServiceEnv
-from uavxai.errors import CheckpointError, UserError
+from uavxai.errors import CheckpointError, ScenarioError, UserError
 from uavxai.paths import scenarios_dir
 from uavxai.scenario import default_scenario, load_scenario
 from uavxai.service import d3qn
@@ -93,8 +93,9 @@ def test_trained_checkpoint_is_flown_greedily_and_repeatably(tmp_path):
 
 
 def test_checkpoint_problems_are_user_errors(tmp_path):
-    with pytest.raises(CheckpointError, match=r"missing\.pt: no such file"):
-        plan_service(small(checkpoint=str(tmp_path / "missing.pt")), "d3qn")
+    # the scenario itself refuses a checkpoint that does not exist
+    with pytest.raises(ScenarioError, match=r"missing\.pt: no such file"):
+        small(checkpoint=str(tmp_path / "missing.pt"))
     (tmp_path / "text.pt").write_text("hello")
     with pytest.raises(CheckpointError, match=r"text\.pt: not a readable model"):
         plan_service(small(checkpoint=str(tmp_path / "text.pt")), "d3qn")

@@ -114,7 +114,18 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--version", action="version", version=f"uavxai {_version()}")
     sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    # One helper per subcommand; the order here is the order `uavxai --help` lists them in.
+    _add_run(sub)
+    _add_train(sub)
+    _add_evaluate(sub)
+    _add_service(sub)
+    _add_explain(sub)
+    _add_validate(sub)
+    return p
 
+
+def _add_run(sub: argparse._SubParsersAction) -> None:
+    """`uavxai run`: the whole pipeline on a scenario, with its recording and link options."""
     r = sub.add_parser("run", help="service point, then the flight to it among intruders (JSBSim)")
     r.add_argument("scenario", metavar="SCENARIO.yaml")
     r.add_argument("--out", type=Path, help="output folder (default runs/<scenario name>)")
@@ -144,6 +155,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     r.add_argument("--force", action="store_true", help="overwrite an existing output folder")
 
+
+def _add_train(sub: argparse._SubParsersAction) -> None:
+    """`uavxai train`: a learned planner of either stage."""
     t = sub.add_parser("train", help="train a learned planner (progress bar)")
     t.add_argument("scenario", metavar="SCENARIO.yaml")
     t.add_argument("--stage", choices=("service", "avoidance"), default="service")
@@ -158,6 +172,9 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--out", type=Path, help="output folder (default runs/train-<stage>-<algo>)")
     t.add_argument("--force", action="store_true")
 
+
+def _add_evaluate(sub: argparse._SubParsersAction) -> None:
+    """`uavxai evaluate`: a Monte Carlo campaign of the avoidance methods."""
     e = sub.add_parser("evaluate", help="Monte Carlo campaign of the avoidance stage")
     e.add_argument("scenario", metavar="SCENARIO.yaml")
     e.add_argument(
@@ -182,6 +199,9 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--out", type=Path)
     e.add_argument("--force", action="store_true")
 
+
+def _add_service(sub: argparse._SubParsersAction) -> None:
+    """`uavxai service`: the service-point stage alone."""
     s = sub.add_parser("service", help="the service-point stage alone")
     s.add_argument("scenario", metavar="SCENARIO.yaml")
     s.add_argument("--planner", choices=("d3qn", "dqn", "random", "grid"))
@@ -189,6 +209,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", type=Path)
     s.add_argument("--force", action="store_true")
 
+
+def _add_explain(sub: argparse._SubParsersAction) -> None:
+    """`uavxai explain`: a run's decisions in words."""
     x = sub.add_parser("explain", help="explain a decision of a run in words")
     x.add_argument("run_dir", metavar="RUN_DIR", type=Path)
     x.add_argument(
@@ -198,9 +221,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="decision index (default: all, briefly); negative counts from the end",
     )
 
+
+def _add_validate(sub: argparse._SubParsersAction) -> None:
+    """`uavxai validate`: check a scenario file."""
     v = sub.add_parser("validate", help="check a scenario file and exit")
     v.add_argument("scenario", metavar="SCENARIO.yaml")
-    return p
 
 
 def _version() -> str:

@@ -207,6 +207,23 @@ def _short_repr() -> reprlib.Repr:
 _SHORT = _short_repr()
 
 
+class _Source:
+    """Where a checkpoint came from, so that every error names the file and the remedy alike."""
+
+    def __init__(self, p: Path, where: str, algo: str) -> None:
+        self.p = p
+        self.where = where
+        self.algo = algo
+        self.retrain = f"`uavxai train SCENARIO --stage avoidance --algo {algo}`"
+
+    def bad(self, field: str, value: object, allowed: str) -> CheckpointError:
+        """The error for a declared field outside what this uavxai can load."""
+        return CheckpointError(
+            f"{self.where} {self.p}: {field} = {_SHORT.repr(value)}; allowed: {allowed}. Use a "
+            f"model.pt written by {self.retrain}."
+        )
+
+
 def load_checkpoint(path: str | Path | None, algo: str) -> tuple[dict[str, QNetwork], dict]:
     """The networks of a checkpoint for ``algo`` (None: the shipped one), in eval mode.
 
@@ -220,21 +237,27 @@ def load_checkpoint(path: str | Path | None, algo: str) -> tuple[dict[str, QNetw
         raise CheckpointError(f"unknown learned avoidance algorithm '{algo}'; known: {ALGOS}")
     p = Path(path) if path is not None else shipped_checkpoint(algo)
     where = "avoidance.checkpoint" if path is not None else "the shipped checkpoint"
-    retrain = f"`uavxai train SCENARIO --stage avoidance --algo {algo}`"
     if not p.is_file():
         hint = (
             "train one with `uavxai train SCENARIO --stage avoidance --algo "
             f"{algo} --out DIR` and point avoidance.checkpoint at DIR/model.pt"
         )
         raise CheckpointError(f"{where} {p}: no such file; {hint}.")
-
-    def bad(field: str, value: object, allowed: str) -> CheckpointError:
-        return CheckpointError(
-            f"{where} {p}: {field} = {_SHORT.repr(value)}; allowed: {allowed}. Use a model.pt "
-            f"written by {retrain}."
-        )
-
+    src = _Source(p, where, algo)
     _check_archive(p, where, algo)
+    ckpt = _read_checkpoint(src)
+    n_nearest, hidden, meta = _checked_sizes(ckpt, src)
+    n_obs = obs_dim(n_nearest)
+    _check_observation(ckpt, n_nearest, n_obs, src)
+    state_dicts = _checked_state_dicts(ckpt, n_obs, hidden, src)
+    nets = _build_networks(state_dicts, n_obs, hidden, src)
+    info = {"n_nearest": n_nearest, "hidden": hidden, **meta}
+    return nets, info
+
+
+def _read_checkpoint(src: _Source) -> dict:
+    """The unpickled checkpoint dict, once it is known to be an avoidance one for ``src.algo``."""
+    where, p, algo = src.where, src.p, src.algo
     try:
         ckpt = torch.load(p, map_location="cpu", weights_only=True)
     except Exception as exc:  # noqa: BLE001 - any unreadable file is the same user error
@@ -253,16 +276,25 @@ def load_checkpoint(path: str | Path | None, algo: str) -> tuple[dict[str, QNetw
             f"{where} {p}: trained for {_SHORT.repr(ckpt.get('algo'))}, but the planner is "
             f"'{algo}'; use a checkpoint trained with --algo {algo}."
         )
+    return ckpt
+
+
+def _checked_sizes(ckpt: dict, src: _Source) -> tuple[int, list[int], dict]:
+    """The declared ``n_nearest``, ``hidden`` and ``meta``, each within the bounds above.
+
+    Checked before anything is allocated from them: a hostile file could otherwise ask for a
+    network far larger than the tensors it holds.
+    """
     n_nearest = ckpt.get("n_nearest")
     if not _is_int(n_nearest) or not 1 <= n_nearest <= MAX_N_NEAREST:
-        raise bad("n_nearest", n_nearest, f"an integer from 1 to {MAX_N_NEAREST}")
+        raise src.bad("n_nearest", n_nearest, f"an integer from 1 to {MAX_N_NEAREST}")
     hidden = ckpt.get("hidden")
     if (
         not isinstance(hidden, list | tuple)
         or not 1 <= len(hidden) <= MAX_HIDDEN_LAYERS
         or not all(_is_int(h) and 1 <= h <= MAX_HIDDEN_WIDTH for h in hidden)
     ):
-        raise bad(
+        raise src.bad(
             "hidden",
             hidden,
             f"a list of 1 to {MAX_HIDDEN_LAYERS} layer widths, each an integer from 1 to "
@@ -271,8 +303,16 @@ def load_checkpoint(path: str | Path | None, algo: str) -> tuple[dict[str, QNetw
     hidden = [int(h) for h in hidden]
     meta = ckpt.get("meta", {})
     if not isinstance(meta, dict) or not all(isinstance(k, str) for k in meta):
-        raise bad("meta", meta, "a mapping from names to values")
-    n_obs = obs_dim(n_nearest)
+        raise src.bad("meta", meta, "a mapping from names to values")
+    return n_nearest, hidden, meta
+
+
+def _check_observation(ckpt: dict, n_nearest: int, n_obs: int, src: _Source) -> None:
+    """Refuse a network trained on another observation layout than this uavxai's.
+
+    The stored probe is the observation of a fixed encounter at training time; if today's
+    :func:`observe` maps it elsewhere, the network's inputs would silently mean other things.
+    """
     probe = ckpt.get("obs_probe")
     if (
         ckpt.get("obs_dim") != n_obs
@@ -282,13 +322,20 @@ def load_checkpoint(path: str | Path | None, algo: str) -> tuple[dict[str, QNetw
         or not np.allclose(probe.numpy(), _probe_observation(n_nearest), atol=1e-5)
     ):
         raise CheckpointError(
-            f"{where} {p}: trained on an observation that differs from this uavxai's "
+            f"{src.where} {src.p}: trained on an observation that differs from this uavxai's "
             f"(size {_SHORT.repr(ckpt.get('obs_dim'))}, {n_nearest} nearest intruders); "
-            f"retrain it with {retrain}."
+            f"retrain it with {src.retrain}."
         )
+
+
+def _checked_state_dicts(ckpt: dict, n_obs: int, hidden: list[int], src: _Source) -> dict:
+    """The state dicts, each network's tensors of exactly the declared shapes and finite."""
+    where, p, algo, retrain = src.where, src.p, src.algo, src.retrain
     state_dicts = ckpt.get("state_dicts")
     if not isinstance(state_dicts, dict):
-        raise bad("state_dicts", state_dicts, f"one state dict per network {head_names(algo)}")
+        raise src.bad(
+            "state_dicts", state_dicts, f"one state dict per network {head_names(algo)}"
+        )
     expected = _expected_shapes(n_obs, hidden)
     for name in head_names(algo):
         sd = state_dicts.get(name)
@@ -314,19 +361,25 @@ def load_checkpoint(path: str | Path | None, algo: str) -> tuple[dict[str, QNetw
                     f"allowed: finite floating-point weights. The file is damaged; retrain with "
                     f"{retrain}."
                 )
+    return state_dicts
+
+
+def _build_networks(
+    state_dicts: dict, n_obs: int, hidden: list[int], src: _Source
+) -> dict[str, QNetwork]:
+    """One eval-mode :class:`QNetwork` per head of ``src.algo``, loaded from ``state_dicts``."""
     nets: dict[str, QNetwork] = {}
-    for name in head_names(algo):
+    for name in head_names(src.algo):
         net = QNetwork(n_obs, hidden)  # sizes now known to match the stored tensors
         try:
             net.load_state_dict(state_dicts[name])
         except (KeyError, RuntimeError) as exc:
             raise CheckpointError(
-                f"{where} {p}: network '{name}' is missing or has the wrong shape "
+                f"{src.where} {src.p}: network '{name}' is missing or has the wrong shape "
                 f"({str(exc).splitlines()[0]})."
             ) from None
         nets[name] = net.eval()
-    info = {"n_nearest": n_nearest, "hidden": hidden, **meta}
-    return nets, info
+    return nets
 
 
 def _is_int(value: object) -> bool:

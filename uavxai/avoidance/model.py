@@ -685,6 +685,49 @@ class EncounterModel:
         return end
 
     # -------------------------------------------------------------------------------- events
+    def _intruder_hits(
+        self,
+        xy: np.ndarray,
+        hs: np.ndarray,
+        seen: _Intruders,
+        own_step: float,
+        exact: bool,
+        never: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """First conflicting sub-step per branch (``never`` if none), squared separations, and
+        the fraction along each sub-step of the closest point (None: ``sep2`` is per instant).
+
+        Squared distances at the sub-step instants first. No point of a sub-step's relative
+        chord is farther than half its length from an end, so if every sampled distance clears
+        d_min by that much there is no conflict, and the sampled minimum is within L^2 / (8 d)
+        of the true one; otherwise solve every chord.
+        """
+        cfg = self.config
+        k_hit, frac = never, None
+        rel_xy = xy[:, :, None] - seen.xy  # (B, n+1, k)
+        rel_h = hs[:, :, None] - seen.h  # (B or 1, n+1, k)
+        sep2 = rel_xy.real**2
+        sep2 += rel_xy.imag**2
+        sep2 += rel_h**2
+        slack = 0.5 * (own_step + seen.step_max) + 1e-6
+        margin = seen.margin
+        if margin is None:
+            close = sep2.min() < (cfg.d_min_m + slack) ** 2
+        else:
+            # A sub-step needs its end's (larger) margin all along, so each instant is
+            # held to the larger of its own and the next one's.
+            ahead = np.concatenate([margin[:, 1:], margin[:, -1:]], axis=1)
+            close = (np.sqrt(sep2) - np.maximum(margin, ahead)).min() < cfg.d_min_m + slack
+        if exact or close:
+            sep2, frac = _closest_on_chords(rel_xy, rel_h, sep2)  # (B, n, k) per sub-step
+            if margin is None:
+                k_hit = _first_true(sep2.min(axis=2) < cfg.d_min_m**2)
+            else:
+                # The margin grows with time: a sub-step needs its end's.
+                need = cfg.d_min_m + margin[:, 1:]
+                k_hit = _first_true((sep2 < need**2).any(axis=2))
+        return k_hit, sep2, frac
+
     def _events(
         self,
         end: np.ndarray | None,
@@ -703,34 +746,10 @@ class EncounterModel:
         never = np.full(B, n)
         k = 0 if seen is None else seen.ids.size
 
-        # Intruders: squared distances at the sub-step instants first. No point of a
-        # sub-step's relative chord is farther than half its length from an end, so if every
-        # sampled distance clears d_min by that much there is no conflict, and the sampled
-        # minimum is within L^2 / (8 d) of the true one; otherwise solve every chord.
+        # Intruders: cheap sampled distances first, exact chords only near a conflict.
         k_hit, sep2, frac = never, None, None
         if seen is not None and k:
-            rel_xy = xy[:, :, None] - seen.xy  # (B, n+1, k)
-            rel_h = hs[:, :, None] - seen.h  # (B or 1, n+1, k)
-            sep2 = rel_xy.real**2
-            sep2 += rel_xy.imag**2
-            sep2 += rel_h**2
-            slack = 0.5 * (own_step + seen.step_max) + 1e-6
-            margin = seen.margin
-            if margin is None:
-                close = sep2.min() < (cfg.d_min_m + slack) ** 2
-            else:
-                # A sub-step needs its end's (larger) margin all along, so each instant is
-                # held to the larger of its own and the next one's.
-                ahead = np.concatenate([margin[:, 1:], margin[:, -1:]], axis=1)
-                close = (np.sqrt(sep2) - np.maximum(margin, ahead)).min() < cfg.d_min_m + slack
-            if exact or close:
-                sep2, frac = _closest_on_chords(rel_xy, rel_h, sep2)  # (B, n, k) per sub-step
-                if margin is None:
-                    k_hit = _first_true(sep2.min(axis=2) < cfg.d_min_m**2)
-                else:
-                    # The margin grows with time: a sub-step needs its end's.
-                    need = cfg.d_min_m + margin[:, 1:]
-                    k_hit = _first_true((sep2 < need**2).any(axis=2))
+            k_hit, sep2, frac = self._intruder_hits(xy, hs, seen, own_step, exact, never)
 
         k_out = never
         if self._near_wall(box):
@@ -770,35 +789,55 @@ class EncounterModel:
                 end, np.full(B, np.inf), np.full(B, -1), np.zeros(B), event, t_event, xy, hs
             )
 
-        if happened.any():
-            # Separation counts up to the end of the event's sub-step, not beyond.
-            last = k_event + (1 if frac is None else 0)  # instants vs sub-steps
-            after = np.arange(sep2.shape[1])[None, :] > last[:, None]
-            sep2 = np.where(after[..., None], np.inf, sep2)
-        if seen.margin is None:
-            flat = sep2.reshape(B, -1).argmin(axis=1)
-            k_min, j_min = np.divmod(flat, k)
-            min_sep = np.sqrt(sep2[rows, k_min, j_min])
-        else:
-            # With margins the separation that counts is what is left if the intruder stands
-            # its margin off its predicted track towards us (clipped at 0): below d_min
-            # exactly when the line collides, so outcome and separation tell one story.
-            m = seen.margin[:, 1:] if frac is not None else seen.margin
-            gap = np.sqrt(sep2) - m
-            flat = gap.reshape(B, -1).argmin(axis=1)
-            k_min, j_min = np.divmod(flat, k)
-            min_sep = np.maximum(gap[rows, k_min, j_min], 0.0)
-        t_closest = k_min * dt if frac is None else (k_min + frac[rows, k_min, j_min]) * dt
+        min_sep, closest, t_closest = _closest_approach(sep2, frac, seen, k_event, happened, dt)
         return Segment(
             end=end,
             min_sep=min_sep,
-            closest=seen.ids[j_min],
+            closest=closest,
             t_closest=t_closest,
             event=event,
             t_event=t_event,
             xy=xy,
             hs=hs,
         )
+
+
+def _closest_approach(
+    sep2: np.ndarray,
+    frac: np.ndarray | None,
+    seen: _Intruders,
+    k_event: np.ndarray,
+    happened: np.ndarray,
+    dt: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per branch: the minimum separation (net of the margins, if any), the id of the intruder
+    it is to, and its time, counting only up to the end of the sub-step of the first event.
+
+    ``sep2`` is (B, n+1, k) per instant when ``frac`` is None, else (B, n, k) per sub-step with
+    ``frac`` the closest point's fraction along it.
+    """
+    B, k = sep2.shape[0], seen.ids.size
+    rows = np.arange(B)
+    if happened.any():
+        # Separation counts up to the end of the event's sub-step, not beyond.
+        last = k_event + (1 if frac is None else 0)  # instants vs sub-steps
+        after = np.arange(sep2.shape[1])[None, :] > last[:, None]
+        sep2 = np.where(after[..., None], np.inf, sep2)
+    if seen.margin is None:
+        flat = sep2.reshape(B, -1).argmin(axis=1)
+        k_min, j_min = np.divmod(flat, k)
+        min_sep = np.sqrt(sep2[rows, k_min, j_min])
+    else:
+        # With margins the separation that counts is what is left if the intruder stands
+        # its margin off its predicted track towards us (clipped at 0): below d_min
+        # exactly when the line collides, so outcome and separation tell one story.
+        m = seen.margin[:, 1:] if frac is not None else seen.margin
+        gap = np.sqrt(sep2) - m
+        flat = gap.reshape(B, -1).argmin(axis=1)
+        k_min, j_min = np.divmod(flat, k)
+        min_sep = np.maximum(gap[rows, k_min, j_min], 0.0)
+    t_closest = k_min * dt if frac is None else (k_min + frac[rows, k_min, j_min]) * dt
+    return min_sep, seen.ids[j_min], t_closest
 
 
 def _closest_on_chords(

@@ -43,6 +43,7 @@ from uavxai.avoidance.model import (
     PSI,
     EncounterModel,
     G,
+    Segment,
     V,
     accel_command,
     bank_command,
@@ -261,28 +262,74 @@ class MVPPlanner:
         check_plan_inputs(own, intruders, goal)
         cfg = self.config
         track, speed, conflicts, _ = self.target(own, intruders, goal)
-        # Realise the MVP velocity: every action flown REALISE_S on the model (roll-rate
-        # limits included), then the track it would settle on rolling wings level; the
-        # action whose settled velocity comes closest wins (ties: hold bank, hold speed).
-        # A proportional bank law over 10 deg steps either stalls in its dead band (a 4 deg
-        # correction rounds to "hold") or overshoots; this realises small corrections too.
         goal_xyz = np.asarray(goal, dtype=float)
         state = ownship_state(own)
+        action, miss = self._realise(state, goal_xyz, track, speed)
+        seg, children = self._evidence(own, state, goal_xyz, intruders, action, miss)
+        pos, vel = intruder_arrays(intruders)
+        period = cfg.decision_period_s
+        nxt = self.model.fly(
+            state[None], np.array([action]), goal_xyz, period,
+            self.model.predict(pos, vel, period, index=False), cull=False, exact=True,
+        )  # fmt: skip
+        decision = Decision(
+            bank_cmd_rad=float(bank_command(own.bank, action, cfg)),
+            accel_mps2=float(accel_command(action, cfg)),
+            action=action,
+            children=children,
+            plan=seg.samples[action],
+            predicted_min_separation_m=float(nxt.min_sep[0]),
+            confidence=1.0,
+            planner=self.name,
+            d_min_m=cfg.d_min_m,
+            branch_min_separation_m=float(seg.min_sep[action]),
+        )
+        # MVP's own reason; the options' separations are evidence
+        decision.words = (self._reason(conflicts, intruders, track, speed), "")
+        decision.ms = 1000.0 * (time.perf_counter() - t0)
+        return decision
+
+    def _realise(
+        self, state: np.ndarray, goal_xyz: np.ndarray, track: float, speed: float
+    ) -> tuple[int, np.ndarray]:
+        """The action that best realises the MVP velocity, and every action's miss (m/s).
+
+        Every action flown REALISE_S on the model (roll-rate limits included), then the track
+        it would settle on rolling wings level; the action whose settled velocity comes closest
+        wins (ties: hold bank, hold speed). A proportional bank law over 10 deg steps either
+        stalls in its dead band (a 4 deg correction rounds to "hold") or overshoots; this
+        realises small corrections too.
+        """
         nobody = np.zeros((0, 3))
         after = self.model.fly(
             np.repeat(state[None], N_ACTIONS, axis=0), np.arange(N_ACTIONS), goal_xyz,
             REALISE_S, self.model.predict(nobody, nobody, REALISE_S, index=False),
         ).end  # fmt: skip
         v_end, phi = after[:, V], after[:, PHI]
-        roll_out_s = np.abs(phi) / math.radians(cfg.roll_rate_limit_deg_s)
+        roll_out_s = np.abs(phi) / math.radians(self.config.roll_rate_limit_deg_s)
         settled = after[:, PSI] + 0.5 * roll_out_s * G * np.tan(phi) / v_end
         v_settled = v_end[:, None] * np.stack([np.sin(settled), np.cos(settled)], axis=1)
         target_v = speed * np.array([math.sin(track), math.cos(track)])
         miss = np.linalg.norm(v_settled - target_v, axis=1)
         prefer = [4, 1, 7, 3, 5, 0, 2, 6, 8]  # hold first, then bank alone, then speed
         action = min(prefer, key=lambda a: (round(float(miss[a]), 9), prefer.index(a)))
+        return action, miss
 
-        # Evidence for the explanation: every action flown against the predicted traffic.
+    def _evidence(
+        self,
+        own: Ownship,
+        state: np.ndarray,
+        goal_xyz: np.ndarray,
+        intruders: Sequence[Intruder],
+        action: int,
+        miss: np.ndarray,
+    ) -> tuple[Segment, list[ChildStats]]:
+        """Evidence for the explanation: every action flown against the predicted traffic.
+
+        MVP does not search, so these separations only illustrate the options; ``q`` scores
+        how closely each realises the MVP velocity.
+        """
+        cfg = self.config
         hold = cfg.action_hold_s
         seg = self.model.fly(
             np.repeat(state[None], N_ACTIONS, axis=0),
@@ -295,7 +342,6 @@ class MVPPlanner:
         )
         ids = [i.id for i in intruders]
         children = []
-        period = cfg.decision_period_s
         for a in range(N_ACTIONS):
             known = bool(np.isfinite(seg.min_sep[a])) and int(seg.closest[a]) >= 0
             children.append(
@@ -311,32 +357,17 @@ class MVPPlanner:
                     outcome=OUTCOME_NAMES[int(seg.event[a])],
                 )
             )
-        pos, vel = intruder_arrays(intruders)
-        nxt = self.model.fly(
-            state[None], np.array([action]), goal_xyz, period,
-            self.model.predict(pos, vel, period, index=False), cull=False, exact=True,
-        )  # fmt: skip
+        return seg, children
+
+    def _reason(
+        self, conflicts: list[Conflict], intruders: Sequence[Intruder], track: float, speed: float
+    ) -> str:
+        """MVP's own one-line reason: the conflicts it resolves, or that there are none."""
         if conflicts:
             first = min(conflicts, key=lambda k: k.tlos)
-            why = (
+            return (
                 f"MVP resolves {len(conflicts)} conflict(s), first with "
-                f"{ids[first.index]} in {max(first.tlos, 0.0):.0f} s: "
+                f"{intruders[first.index].id} in {max(first.tlos, 0.0):.0f} s: "
                 f"track {math.degrees(track) % 360:.0f} deg at {speed:.1f} m/s"
             )
-        else:
-            why = f"MVP: no conflict within {self.lookahead_s:.0f} s, steering for the goal"
-        decision = Decision(
-            bank_cmd_rad=float(bank_command(own.bank, action, cfg)),
-            accel_mps2=float(accel_command(action, cfg)),
-            action=action,
-            children=children,
-            plan=seg.samples[action],
-            predicted_min_separation_m=float(nxt.min_sep[0]),
-            confidence=1.0,
-            planner=self.name,
-            d_min_m=cfg.d_min_m,
-            branch_min_separation_m=float(seg.min_sep[action]),
-        )
-        decision.words = (why, "")  # MVP's own reason; the options' separations are evidence
-        decision.ms = 1000.0 * (time.perf_counter() - t0)
-        return decision
+        return f"MVP: no conflict within {self.lookahead_s:.0f} s, steering for the goal"

@@ -283,134 +283,55 @@ def train(
     from trained networks. ``on_episode(row)`` sees every finished episode."""
     if algo not in ALGOS:
         raise UserError(f"--algo {algo}: the avoidance stage trains {', '.join(ALGOS)}.")
+    # Setup: seeded networks, optimiser and replay buffer, one env per slot.
     wall0 = time.perf_counter()
     torch.manual_seed(hp.seed)
     rng = np.random.default_rng(hp.seed)
-    heads = head_names(algo)
-    n_obs = obs_dim(hp.n_nearest)
-    q = {k: QNetwork(n_obs, hp.hidden) for k in heads}
-    if init is not None:
-        for k in heads:
-            q[k].load_state_dict(init[k].state_dict())
-    target = {k: QNetwork(n_obs, hp.hidden) for k in heads}
-    for k in heads:
-        target[k].load_state_dict(q[k].state_dict())
-    params = [p for k in heads for p in q[k].parameters()]
-    optimizer = torch.optim.Adam(params, lr=hp.learning_rate)
-
-    # Replay buffer: rewards kept in two parts; DQN learns their sum.
-    size = hp.buffer_size
-    buf_obs = np.zeros((size, n_obs), np.float32)
-    buf_next = np.zeros((size, n_obs), np.float32)
-    buf_act = np.zeros(size, np.int64)
-    buf_rew = np.zeros((size, 2), np.float32)
-    buf_discount = np.zeros(size, np.float32)  # gamma^k, 0 after a terminal state
-    stored = cursor = 0
-
-    def store(window: list[tuple], next_obs: np.ndarray, terminated: bool) -> None:
-        """One n-step transition from the oldest step of ``window`` to ``next_obs``."""
-        nonlocal stored, cursor
-        ret = np.zeros(2)
-        for k, (_, _, r) in enumerate(window):
-            ret += hp.gamma**k * np.asarray(r)
-        buf_obs[cursor], buf_act[cursor] = window[0][0], window[0][1]
-        buf_rew[cursor], buf_next[cursor] = ret, next_obs
-        buf_discount[cursor] = 0.0 if terminated else hp.gamma ** len(window)
-        cursor = (cursor + 1) % size
-        stored = min(stored + 1, size)
-
-    def act(obs: np.ndarray) -> np.ndarray:
-        with torch.no_grad():
-            x = torch.as_tensor(obs)
-            if algo == "dqn":
-                return q["q"](x).argmax(dim=1).numpy()
-            return safe_action(q["goal"](x), q["safety"](x)).numpy()
-
-    def gradient_step() -> float:
-        idx = rng.integers(0, stored, hp.batch_size)
-        batch = Batch(
-            obs=torch.as_tensor(buf_obs[idx]),
-            action=torch.as_tensor(buf_act[idx]),
-            reward=torch.as_tensor(buf_rew[idx]),
-            next_obs=torch.as_tensor(buf_next[idx]),
-            discount=torch.as_tensor(buf_discount[idx]),
-        )
-        loss = td_loss(algo, q, target, batch)
-        optimizer.zero_grad()
-        loss.backward()
-        torch.nn.utils.clip_grad_norm_(params, hp.max_grad_norm)
-        optimizer.step()
-        with torch.no_grad():
-            for k in heads:
-                for p_t, p in zip(target[k].parameters(), q[k].parameters(), strict=True):
-                    p_t.lerp_(p, hp.tau)
-        return loss.item()
-
+    learner = _QLearner.create(algo, hp, init)
+    buffer = _ReplayBuffer(hp.buffer_size, obs_dim(hp.n_nearest), hp.gamma)
     slots = [_Episodes(scenario, hp, i) for i in range(hp.n_envs)]
     obs = np.stack([s.reset() for s in slots])
     windows: list[list[tuple]] = [[] for _ in slots]  # the last n (obs, action, reward)
     returns = np.zeros((hp.n_envs, 2))
     episode_min_sep = np.full(hp.n_envs, math.inf)
-    result = TrainResult(nets=q)
-    best = (-math.inf, {k: copy.deepcopy(q[k].state_dict()) for k in heads})
+    result = TrainResult(nets=learner.q)
+    best = (-math.inf, learner.snapshot())
     config = PlannerConfig.from_scenario(scenario)
     recent: list[str] = []
     losses: list[float] = []
     transitions = 0
     explore_episodes = max(1, int(hp.exploration_fraction * hp.episodes))
     while (finished := len(result.curve)) < hp.episodes:
+        # Collect: epsilon-greedy actions for every slot from one batched forward pass.
         epsilon = hp.start_e + (hp.end_e - hp.start_e) * min(1.0, finished / explore_episodes)
-        greedy = act(obs)
+        greedy = learner.act(obs)
         explore = rng.random(hp.n_envs) < epsilon
         actions = np.where(explore, rng.integers(0, N_ACTIONS, hp.n_envs), greedy)
         for i, slot in enumerate(slots):
-            env = slot.env
-            before = slot.situation()
-            _, _, terminated, truncated, info = env.step(int(actions[i]))
-            nxt = slot.obs()
-            r = rewards(hp, env.outcome, before, slot.situation(), info["min_separation_m"])
-            window = windows[i]
-            window.append((obs[i].copy(), int(actions[i]), r))
-            if len(window) == hp.n_step:
-                store(window, nxt, terminated)
-                window.pop(0)
-            if terminated or truncated:  # flush the shorter returns of the last steps
-                while window:
-                    store(window, nxt, terminated)
-                    window.pop(0)
+            nxt, r, ended, min_sep = _collect_step(
+                slot, hp, obs[i], int(actions[i]), windows[i], buffer
+            )
             transitions += 1
             returns[i] += r
-            episode_min_sep[i] = min(episode_min_sep[i], info["min_separation_m"])
+            episode_min_sep[i] = min(episode_min_sep[i], min_sep)
+            # Update: one gradient step every train_frequency transitions once warmed up.
             if transitions >= hp.learning_starts and transitions % hp.train_frequency == 0:
-                losses.append(gradient_step())
-            if terminated or truncated:
-                recent = (recent + [env.outcome])[-hp.log_window :]
-                row = {
-                    "episode": len(result.curve),
-                    "intruders": slot.count,
-                    "outcome": env.outcome,
-                    "steps": env.steps,
-                    "return_goal": round(float(returns[i, 0]), 4),
-                    "return_safety": round(float(returns[i, 1]), 4),
-                    "min_separation_m": round(float(episode_min_sep[i]), 2),
-                    "epsilon": round(epsilon, 4),
-                    "td_loss": round(float(np.mean(losses[-200:])), 6) if losses else math.nan,
-                    "goal_rate": recent.count("goal") / len(recent),
-                    "collision_rate": recent.count("collision") / len(recent),
-                    "transitions": transitions,
-                    "val_goal_rate": math.nan,
-                    "val_collision_rate": math.nan,
-                }
+                losses.append(learner.gradient_step(buffer.sample(rng, hp.batch_size)))
+            if ended:
+                recent = (recent + [slot.env.outcome])[-hp.log_window :]
+                row = _episode_row(
+                    len(result.curve),
+                    slot,
+                    returns[i],
+                    episode_min_sep[i],
+                    epsilon,
+                    losses,
+                    recent,
+                    transitions,
+                )
                 result.curve.append(row)
-                done = len(result.curve)
-                if done % hp.validate_every == 0 or done == hp.episodes:
-                    val = {"episode": done, **validate(scenario, hp, act, config)}
-                    result.validation.append(val)
-                    row["val_goal_rate"] = val["goal_rate"]
-                    row["val_collision_rate"] = val["collision_rate"]
-                    if val["score"] > best[0]:
-                        best = (val["score"], {k: copy.deepcopy(q[k].state_dict()) for k in heads})
-                        result.best_episode = done
+                # Evaluate: validate now and then, keeping the best snapshot.
+                best = _evaluate(scenario, hp, learner, config, result, row, best)
                 if on_episode:
                     on_episode(row)
                 if len(result.curve) == hp.episodes:
@@ -421,10 +342,181 @@ def train(
             obs[i] = nxt
     result.td_losses = losses
     result.wall_s = time.perf_counter() - wall0
-    for k, net in q.items():
+    for k, net in learner.q.items():
         net.load_state_dict(best[1][k])
         net.eval()
     return result
+
+
+class _ReplayBuffer:
+    """n-step transitions in a ring; rewards kept in two parts (goal, safety), DQN learns
+    their sum."""
+
+    def __init__(self, size: int, n_obs: int, gamma: float) -> None:
+        self.size, self.gamma = size, gamma
+        self.obs = np.zeros((size, n_obs), np.float32)
+        self.next = np.zeros((size, n_obs), np.float32)
+        self.act = np.zeros(size, np.int64)
+        self.rew = np.zeros((size, 2), np.float32)
+        self.discount = np.zeros(size, np.float32)  # gamma^k, 0 after a terminal state
+        self.stored = self.cursor = 0
+
+    def store(self, window: list[tuple], next_obs: np.ndarray, terminated: bool) -> None:
+        """One n-step transition from the oldest step of ``window`` to ``next_obs``."""
+        ret = np.zeros(2)
+        for k, (_, _, r) in enumerate(window):
+            ret += self.gamma**k * np.asarray(r)
+        c = self.cursor
+        self.obs[c], self.act[c] = window[0][0], window[0][1]
+        self.rew[c], self.next[c] = ret, next_obs
+        self.discount[c] = 0.0 if terminated else self.gamma ** len(window)
+        self.cursor = (c + 1) % self.size
+        self.stored = min(self.stored + 1, self.size)
+
+    def sample(self, rng: np.random.Generator, batch_size: int) -> Batch:
+        """A uniform batch (with replacement) of the stored transitions."""
+        idx = rng.integers(0, self.stored, batch_size)
+        return Batch(
+            obs=torch.as_tensor(self.obs[idx]),
+            action=torch.as_tensor(self.act[idx]),
+            reward=torch.as_tensor(self.rew[idx]),
+            next_obs=torch.as_tensor(self.next[idx]),
+            discount=torch.as_tensor(self.discount[idx]),
+        )
+
+
+@dataclass
+class _QLearner:
+    """The algorithm's online and target Q-networks and their optimiser."""
+
+    algo: str
+    hp: Hyperparameters
+    q: dict[str, QNetwork]
+    target: dict[str, QNetwork]
+    params: list[torch.nn.Parameter]
+    optimizer: torch.optim.Optimizer
+
+    @classmethod
+    def create(cls, algo: str, hp: Hyperparameters, init: dict[str, QNetwork] | None) -> _QLearner:
+        """Fresh networks (or copies of ``init``); the targets start equal to them. The order
+        of construction fixes the draws from torch's seeded generator."""
+        heads = head_names(algo)
+        n_obs = obs_dim(hp.n_nearest)
+        q = {k: QNetwork(n_obs, hp.hidden) for k in heads}
+        if init is not None:
+            for k in heads:
+                q[k].load_state_dict(init[k].state_dict())
+        target = {k: QNetwork(n_obs, hp.hidden) for k in heads}
+        for k in heads:
+            target[k].load_state_dict(q[k].state_dict())
+        params = [p for k in heads for p in q[k].parameters()]
+        optimizer = torch.optim.Adam(params, lr=hp.learning_rate)
+        return cls(algo, hp, q, target, params, optimizer)
+
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        """Greedy actions for a batch of observations (Safe-DQN: its safe argmax)."""
+        with torch.no_grad():
+            x = torch.as_tensor(obs)
+            if self.algo == "dqn":
+                return self.q["q"](x).argmax(dim=1).numpy()
+            return safe_action(self.q["goal"](x), self.q["safety"](x)).numpy()
+
+    def gradient_step(self, batch: Batch) -> float:
+        """One clipped Adam step on the TD loss, then a soft (Polyak) target update."""
+        loss = td_loss(self.algo, self.q, self.target, batch)
+        self.optimizer.zero_grad()
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(self.params, self.hp.max_grad_norm)
+        self.optimizer.step()
+        with torch.no_grad():
+            for k, net in self.q.items():
+                for p_t, p in zip(self.target[k].parameters(), net.parameters(), strict=True):
+                    p_t.lerp_(p, self.hp.tau)
+        return loss.item()
+
+    def snapshot(self) -> dict[str, dict]:
+        """Deep copies of the online networks' weights, to restore the best one at the end."""
+        return {k: copy.deepcopy(net.state_dict()) for k, net in self.q.items()}
+
+
+def _collect_step(
+    slot: _Episodes,
+    hp: Hyperparameters,
+    obs: np.ndarray,
+    action: int,
+    window: list[tuple],
+    buffer: _ReplayBuffer,
+) -> tuple[np.ndarray, tuple[float, float], bool, float]:
+    """Fly ``action`` in ``slot``, store the n-step transitions it completes; return the next
+    observation, the (goal, safety) reward, whether the episode ended and the step's minimum
+    separation."""
+    env = slot.env
+    before = slot.situation()
+    _, _, terminated, truncated, info = env.step(action)
+    nxt = slot.obs()
+    r = rewards(hp, env.outcome, before, slot.situation(), info["min_separation_m"])
+    window.append((obs.copy(), action, r))
+    if len(window) == hp.n_step:
+        buffer.store(window, nxt, terminated)
+        window.pop(0)
+    if terminated or truncated:  # flush the shorter returns of the last steps
+        while window:
+            buffer.store(window, nxt, terminated)
+            window.pop(0)
+    return nxt, r, terminated or truncated, info["min_separation_m"]
+
+
+def _episode_row(
+    episode: int,
+    slot: _Episodes,
+    returns: np.ndarray,
+    min_sep: float,
+    epsilon: float,
+    losses: list[float],
+    recent: list[str],
+    transitions: int,
+) -> dict:
+    """The learning-curve row of the episode ``slot`` just finished (columns: CURVE_COLUMNS)."""
+    env = slot.env
+    return {
+        "episode": episode,
+        "intruders": slot.count,
+        "outcome": env.outcome,
+        "steps": env.steps,
+        "return_goal": round(float(returns[0]), 4),
+        "return_safety": round(float(returns[1]), 4),
+        "min_separation_m": round(float(min_sep), 2),
+        "epsilon": round(epsilon, 4),
+        "td_loss": round(float(np.mean(losses[-200:])), 6) if losses else math.nan,
+        "goal_rate": recent.count("goal") / len(recent),
+        "collision_rate": recent.count("collision") / len(recent),
+        "transitions": transitions,
+        "val_goal_rate": math.nan,
+        "val_collision_rate": math.nan,
+    }
+
+
+def _evaluate(
+    scenario: Scenario,
+    hp: Hyperparameters,
+    learner: _QLearner,
+    config: PlannerConfig,
+    result: TrainResult,
+    row: dict,
+    best: tuple[float, dict[str, dict]],
+) -> tuple[float, dict[str, dict]]:
+    """Every ``validate_every`` episodes (and after the last) validate the greedy policy,
+    record it in ``result`` and ``row``; return the best (score, snapshot) so far."""
+    done = len(result.curve)
+    if done % hp.validate_every == 0 or done == hp.episodes:
+        val = {"episode": done, **validate(scenario, hp, learner.act, config)}
+        result.validation.append(val)
+        row["val_goal_rate"] = val["goal_rate"]
+        row["val_collision_rate"] = val["collision_rate"]
+        if val["score"] > best[0]:
+            best = (val["score"], learner.snapshot())
+            result.best_episode = done
+    return best
 
 
 @dataclass
@@ -501,18 +593,7 @@ def train_command(
 
     if algo not in ALGOS:
         raise UserError(f"--algo {algo}: the avoidance stage trains {', '.join(ALGOS)}.")
-    hp = hp or Hyperparameters(seed=scenario.seed)
-    if episodes is not None:
-        if episodes < 1:
-            raise UserError(f"--episodes {episodes}: must be >= 1.")
-        hp = Hyperparameters(**{**asdict(hp), "episodes": int(episodes)})
-    init = None
-    if scenario.avoidance.checkpoint is not None:
-        init, info = load_checkpoint(scenario.avoidance.checkpoint, algo)
-        if info["n_nearest"] != hp.n_nearest or list(info["hidden"]) != list(hp.hidden):
-            hp = Hyperparameters(
-                **{**asdict(hp), "n_nearest": info["n_nearest"], "hidden": tuple(info["hidden"])}
-            )
+    hp, init = _command_setup(scenario, algo, episodes, hp)
     torch.set_num_threads(1)
     out.mkdir(parents=True, exist_ok=True)
     with progress_bar() as progress:
@@ -544,6 +625,41 @@ def train_command(
         "wall_s": round(result.wall_s, 1),
         "model": str(out / "model.pt"),
     }
+    _write_outputs(scenario, algo, hp, result, report, out)
+    return report
+
+
+def _command_setup(
+    scenario: Scenario, algo: str, episodes: int | None, hp: Hyperparameters | None
+) -> tuple[Hyperparameters, dict[str, QNetwork] | None]:
+    """The hyper-parameters to train with (``--episodes`` applied) and the warm-start networks
+    of ``avoidance.checkpoint``, if any. A warm start keeps its own network sizes, so they
+    override ``hp``'s."""
+    hp = hp or Hyperparameters(seed=scenario.seed)
+    if episodes is not None:
+        if episodes < 1:
+            raise UserError(f"--episodes {episodes}: must be >= 1.")
+        hp = Hyperparameters(**{**asdict(hp), "episodes": int(episodes)})
+    init = None
+    if scenario.avoidance.checkpoint is not None:
+        init, info = load_checkpoint(scenario.avoidance.checkpoint, algo)
+        if info["n_nearest"] != hp.n_nearest or list(info["hidden"]) != list(hp.hidden):
+            hp = Hyperparameters(
+                **{**asdict(hp), "n_nearest": info["n_nearest"], "hidden": tuple(info["hidden"])}
+            )
+    return hp, init
+
+
+def _write_outputs(
+    scenario: Scenario,
+    algo: str,
+    hp: Hyperparameters,
+    result: TrainResult,
+    report: dict,
+    out: Path,
+) -> None:
+    """``out/model.pt`` with ``out/model.json`` saying what it was trained on (the same meta
+    travels inside the checkpoint), ``out/learning_curve.csv`` and its plot."""
     meta = {
         "trained_on": {
             "scenario": scenario.name,
@@ -566,7 +682,6 @@ def train_command(
         w.writeheader()
         w.writerows(result.curve)
     plot_learning_curve(result.curve, out / "learning_curve.png", f"{algo} on {scenario.name}")
-    return report
 
 
 def plot_learning_curve(curve: list[dict], path: Path, title: str) -> None:

@@ -124,20 +124,17 @@ def _learned_search(
         net, info, _ = resolve_checkpoint(scenario, algo)
         return d3qn.rollout(net, d3qn.fading_free(env)), {"checkpoint": info["path"]}
     policy, label = universal_policy(scenario, algo)
-    free = d3qn.fading_free(env)
-    flight = universal.fly(policy, free)
-    position, levels, objective, rounds = universal.refine(
-        free.channel, free.space, free.power_levels, flight.position, flight.levels
-    )
+    result = universal.plan(policy, d3qn.fading_free(env))
+    flight, position, levels = result.flight, result.position, result.levels
     report = {
         "checkpoint": label,
         "d3qn_alone_objective": float(flight.objective),
         "d3qn_alone_point": [float(v) for v in flight.position],
         "flight_steps": len(flight.path) - 1,
-        "refine_rounds": int(rounds),
+        "refine_rounds": int(result.refine_rounds),
     }
     path = np.vstack([flight.path, position[None]])
-    return d3qn.Episode(objective, position, levels, path), report
+    return d3qn.Episode(result.objective, position, levels, path), report
 
 
 def _is_universal(path: Path) -> bool:
