@@ -74,3 +74,40 @@ def test_delivered_bits_recomputed_from_users_trajectory_and_service_files(tmp_p
     assert abs(bits - reported) <= 0.01 * reported
     assert 0.0 <= summary["mission"]["qos_user_seconds_share"] <= 1.0
     assert 0.0 < summary["mission"]["jain_fairness"] <= 1.0
+
+
+def test_walking_users_make_the_mission_replan_and_move_its_orbit() -> None:
+    """Users walk; every service.replan_s the service point is planned again for where they
+    are, and the orbit moves there (kinematic world, the shipped zero-shot D3QN)."""
+    from uavxai.avoidance.planners import make_planner
+    from uavxai.avoidance.types import PlannerConfig
+    from uavxai.comms.channel import Channel
+    from uavxai.scenario import default_scenario
+    from uavxai.service.stage import plan_service
+    from uavxai.sim.build import fly
+    from uavxai.sim.mission import mission_of
+    from uavxai.sim.observers import Service
+    from uavxai.sim.run import _replanner
+
+    sc = default_scenario(
+        "walk",
+        seed=3,
+        intruders={"count": 0},
+        comms={"access": "ofdma", "users": {"mobility": {"model": "random_waypoint",
+                                                         "speed_mps": [1.5, 2.0]}}},
+        service={"replan_s": 20},
+        mission={"service_s": 90, "return_home": False},
+    )  # fmt: skip
+    plan = plan_service(sc)
+    station = tuple(float(v) for v in plan.service_point)
+    service = Service(sc, Channel.from_scenario(sc, users=plan.users), plan.power_w, None,
+                      replan=_replanner(sc))  # fmt: skip
+    planner = make_planner("mcts_fast", PlannerConfig.from_scenario(sc))
+    r = fly(sc, planner, station, dynamics="kinematic", observers=[service],
+            mission=mission_of(sc, station))  # fmt: skip
+    points = r.summary["mission"]["service_points"]
+    assert r.outcome.value == "completed"
+    assert len(points) >= 4  # the first plan, then every 20 s on station
+    moved = {tuple(p[1:]) for p in points}
+    assert len(moved) >= 2  # the users walked far enough to move the point
+    assert r.summary["mission"]["delivered_bits"] > 0
