@@ -258,20 +258,10 @@ def _run_ray(scenario, tasks, order, common, address, workers, on_done) -> dict[
         ) from None
     started = False
     if not ray.is_initialized():
-        os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
-        try:
-            if address == "local":
-                ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False)
-            else:
-                ray.init(address=address, log_to_driver=False)
-        except (ConnectionError, ValueError, RuntimeError) as exc:
-            raise UserError(
-                f"--ray {address}: cannot connect to a Ray cluster ({exc}). Use `local` to "
-                "start one on this machine, `auto` for the cluster this machine is part of, or "
-                "ray://HOST:PORT for a Ray client server."
-            ) from None
+        _ray_connect(ray, address, workers)
         started = True
     try:
+        _check_workers(ray)
         remote = ray.remote(num_cpus=1)(_ray_task)
         scenario_ref = ray.put(scenario)
         pending = {remote.remote(scenario_ref, tasks[k], *common): k for k in order}
@@ -287,6 +277,75 @@ def _run_ray(scenario, tasks, order, common, address, workers, on_done) -> dict[
     finally:
         if started:
             ray.shutdown()
+
+
+def _ray_connect(ray, address: str, workers: int) -> None:
+    """Start a private Ray (``local``) or join a cluster, with errors a user can act on."""
+    import logging
+
+    os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
+    if address != "local" and workers > 1:
+        logging.getLogger(__name__).warning(
+            "--workers %d is ignored with --ray %s: the cluster's CPUs decide how many "
+            "episodes fly at once", workers, address)  # fmt: skip
+    try:
+        if address == "local":
+            ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False)
+        else:
+            ray.init(address=address, log_to_driver=False)
+    except (ConnectionError, ValueError, RuntimeError) as exc:
+        text = str(exc)
+        if "auth" in text.lower() or "token" in text.lower():
+            raise UserError(
+                f"--ray {address}: the cluster refused this driver's authentication ({text}). "
+                "Ray 2.60 turns token authentication on after its first local start: run with "
+                "RAY_AUTH_MODE=token and the cluster's token (the file Ray wrote under the "
+                "home folder of the machine that started the head, or RAY_AUTH_TOKEN), or "
+                "start the head with authentication off. See docs/cluster.md."
+            ) from None
+        raise UserError(
+            f"--ray {address}: cannot connect to a Ray cluster ({text}). Use `local` to "
+            "start one on this machine, `auto` for the cluster this machine is part of, or "
+            "ray://HOST:PORT for a Ray client server (pip install 'uavxai[ray]' brings the "
+            "client). See docs/cluster.md."
+        ) from None
+
+
+def _versions() -> dict[str, str]:
+    import jsbsim
+    import torch
+
+    from uavxai import __version__
+
+    return {"uavxai": __version__, "jsbsim": jsbsim.__version__, "torch": torch.__version__}
+
+
+def _remote_versions() -> dict[str, str]:
+    try:
+        return _versions()
+    except ModuleNotFoundError as exc:  # a worker without uavxai (or its dependencies)
+        return {"missing": str(exc.name)}
+
+
+def _check_workers(ray) -> None:
+    """The cluster's workers must have the same uavxai, jsbsim and torch as this driver, or
+    episodes would fail (or fly differently) there; say what is missing before flying."""
+    try:
+        theirs = ray.get(ray.remote(num_cpus=1)(_remote_versions).remote(), timeout=300)
+    except Exception as exc:  # noqa: BLE001 - a worker that cannot even unpickle the task
+        raise UserError(
+            f"the Ray cluster's workers cannot run uavxai's tasks ({type(exc).__name__}: "
+            f"{str(exc)[:200]}). Install uavxai (pip install uavxai[ray]) on every node, in "
+            "the same version as here; see docs/cluster.md."
+        ) from None
+    mine = _versions()
+    if "missing" in theirs or theirs != mine:
+        what = (f"lack the module {theirs['missing']}" if "missing" in theirs
+                else f"have {theirs}, this driver {mine}")  # fmt: skip
+        raise UserError(
+            f"the Ray cluster's workers {what}. Install the same uavxai, jsbsim and torch on "
+            "every node (pip install uavxai[ray]==VERSION); see docs/cluster.md."
+        )
 
 
 def _check(scenario, methods, intruders, episodes, dynamics, workers) -> None:

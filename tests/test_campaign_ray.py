@@ -1,0 +1,39 @@
+"""A real `ray start` head node and `uavxai evaluate --ray auto` against it (slow: Ray's start
+and stop take tens of seconds on two cores)."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+pytestmark = pytest.mark.slow
+
+
+def test_evaluate_on_a_started_ray_head(tmp_path: Path) -> None:
+    pytest.importorskip("ray")
+    ray_bin = shutil.which("ray") or str(Path(sys.executable).parent / "ray")
+    env = {**os.environ, "RAY_USAGE_STATS_ENABLED": "0", "HOME": str(tmp_path)}
+    start = subprocess.run(
+        [ray_bin, "start", "--head", "--num-cpus", "2", "--include-dashboard=false",
+         "--disable-usage-stats"],
+        env=env, capture_output=True, text=True, timeout=180,
+    )  # fmt: skip
+    assert start.returncode == 0, start.stderr[-2000:]
+    try:
+        scenario = tmp_path / "s.yaml"
+        scenario.write_text("name: ray\nownship: {goal: [1800, 1800, 120]}\n")
+        out = tmp_path / "ev"
+        run = subprocess.run(
+            [sys.executable, "-m", "uavxai", "evaluate", str(scenario), "--methods", "none",
+             "--intruders", "5", "--episodes", "4", "--ray", "auto", "--out", str(out)],
+            env=env, capture_output=True, text=True, timeout=600,
+        )  # fmt: skip
+        assert run.returncode == 0, run.stderr[-3000:]
+        assert len((out / "episodes.csv").read_text().splitlines()) == 5
+    finally:
+        subprocess.run([ray_bin, "stop", "--force"], env=env, capture_output=True, timeout=120)
