@@ -110,7 +110,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = _Parser(
         prog="uavxai",
         description="Interpretable, collision-safe UAV-assisted communication: D3QN service "
-        "point, MCTS collision avoidance, JSBSim co-simulation over MAVLink, rerun recordings.",
+        "point, MCTS collision avoidance through ADS-B surveillance, the mission flown in a "
+        "JSBSim co-simulation over MAVLink, rerun recordings. Scenario keys: docs/scenario.md.",
+        epilog="Exit codes: 0 success, 2 bad input, 1 internal error, 130 interrupted.",
     )
     p.add_argument("--version", action="version", version=f"uavxai {_version()}")
     sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
@@ -126,7 +128,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _add_run(sub: argparse._SubParsersAction) -> None:
     """`uavxai run`: the whole pipeline on a scenario, with its recording and link options."""
-    r = sub.add_parser("run", help="service point, then the flight to it among intruders (JSBSim)")
+    r = sub.add_parser(
+        "run",
+        help="the co-simulation in JSBSim over MAVLink: service point, then the mission "
+        "(transit, on station, home) or the transit-only episode",
+    )
     r.add_argument("scenario", metavar="SCENARIO.yaml")
     r.add_argument("--out", type=Path, help="output folder (default runs/<scenario name>)")
     r.add_argument("--seed", type=_seed, help="override the scenario's seed")
@@ -140,7 +146,11 @@ def _add_run(sub: argparse._SubParsersAction) -> None:
         metavar="FILE.rrd",
         help="write the recording here (default OUT/run.rrd)",
     )
-    g.add_argument("--spawn", action="store_true", help="open the rerun viewer live")
+    g.add_argument(
+        "--spawn",
+        action="store_true",
+        help="open the rerun viewer live (the recording file is written too)",
+    )
     r.add_argument(
         "--mavlink",
         type=_mavlink_url,
