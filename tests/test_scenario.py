@@ -36,9 +36,13 @@ def test_every_shipped_scenario_validates() -> None:
         assert load_scenario(f).name
 
 
-def test_demo_uses_the_defaults() -> None:
+def test_demo_is_the_defaults_with_walking_users_and_ofdma() -> None:
     demo = load_scenario(scenarios_dir() / "demo.yaml")
-    assert demo == default_scenario("demo")
+    assert demo == default_scenario(
+        "demo",
+        comms={"access": "ofdma", "users": {"mobility": {"model": "random_waypoint"}}},
+        service={"replan_s": 60},
+    )
 
 
 # (file content, words the message must contain)

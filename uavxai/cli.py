@@ -399,6 +399,9 @@ def print_report(title: str, report: dict[str, Any], path: Path, max_rows: int =
 
 def cmd_validate(args: argparse.Namespace) -> int:
     sc = _load(args)
+    from uavxai.service.stage import check_planner_fits
+
+    check_planner_fits(sc)
     print(
         f"{args.scenario}: valid scenario '{sc.name}' (seed {sc.seed}): {sc.comms.users.k} users, "
         f"{sc.intruders.n} intruders, service planner {sc.service.planner}, avoidance planner "
@@ -459,6 +462,9 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
 def cmd_run(args: argparse.Namespace) -> int:
     sc = _load(args)
+    from uavxai.service.stage import check_planner_fits
+
+    check_planner_fits(sc)
     out = prepare_out_dir(args.out or Path("runs") / sc.name, args.force)
     from uavxai.sim.run import run_command
 

@@ -21,6 +21,7 @@ hovers there). ``sinr_db``/``rate_bps`` are fading-free; ``ergodic_*`` average o
 
 from __future__ import annotations
 
+import json
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -146,6 +147,33 @@ def _is_universal(path: Path) -> bool:
 
 
 _POLICIES: dict[str, tuple[universal.NumpyPolicy, dict[str, Any]]] = {}
+
+
+def check_planner_fits(scenario: Scenario, planner: str | None = None) -> None:
+    """A UserError, before anything flies, when the learned service planner that would run
+    (``planner`` or the scenario's) has no shipped model for the scenario's K and power
+    levels (``uavxai validate`` and ``run`` ask this). Cheap: reads the JSON beside the
+    shipped model, not the model."""
+    name = planner or scenario.service.planner
+    if name not in ("d3qn", "dqn") or scenario.service.checkpoint is not None:
+        return
+    c = scenario.comms
+    meta = universal.shipped_path(name, c.power_levels).with_suffix(".json")
+    if not meta.is_file():
+        have = sorted(p.stem for p in service_checkpoints_dir().glob("universal_*.json"))
+        raise UserError(
+            f"service.planner {name} has no shipped model for comms.power_levels = "
+            f"{c.power_levels} (shipped: {', '.join(have) or 'none'}); use power_levels 6, "
+            "service.planner grid or random, or a model of your own (service.checkpoint). "
+            "See docs/scenario.md."
+        )
+    lo, hi = json.loads(meta.read_text())["k_range"]
+    if not lo <= c.users.k <= hi:
+        raise UserError(
+            f"comms.users: {c.users.k} users, but the shipped {name} model serves {lo} to "
+            f"{hi}; use service.planner grid or random, or train one (python -m "
+            f"uavxai.service.universal --algo {name}). See docs/scenario.md."
+        )
 
 
 def universal_policy(scenario: Scenario, algo: str) -> tuple[universal.NumpyPolicy, str]:

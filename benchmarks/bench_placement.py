@@ -1,0 +1,335 @@
+"""Placement benchmark of issue 13: the universal D3QN zero-shot against the exact optimum.
+
+Unseen random problems (``uavxai.service.layouts``, seeds disjoint from training) for every
+cell access {shared, ofdma} x environment {suburban, urban, dense_urban, highrise_urban} x
+K {5, 10, 20} x users {uniform, clustered}, fading-free. Two steps:
+
+    python benchmarks/bench_placement.py optima [--minutes 60]   # exact grid optima, cached
+    python benchmarks/bench_placement.py evaluate [--plot docs/service/placement.png]
+
+``optima`` solves the exact optimum (``grid``) of each problem and appends it to
+``docs/service/bench_placement_optima.jsonl`` (resumable; the K = 20 optimum takes 1.5-5 min,
+so layouts are solved in rounds: cheap cells first, then more layouts everywhere, until the
+time budget). ``evaluate`` runs on every cached problem:
+
+- ``d3qn``: the shipped universal D3QN flown greedily (no per-layout training), its best
+  visited point with its own power levels (``d3qn alone``), and what ``service.planner: d3qn``
+  returns (the same flight plus the documented lattice/power refinement, ``d3qn+refine``);
+- ``dqn``: the shipped DQN ablation, the same two numbers;
+- ``refine_only``: the refinement alone from the flight's start (region centre, 100 m, all
+  levels full), no network: what the network adds over the final polish;
+- ``random``: random lattice points and levels for the same wall time as ``d3qn+refine``;
+- ``grid``: the cached optimum and the time it took;
+
+and prints, per cell, the ratio to the optimum (mean, 5th percentile), the share of the
+naive-to-optimum gap closed ((x - naive) / (opt - naive), mean over layouts with a gap above
+0.1 % of the optimum) and the time per layout.
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from uavxai.comms.channel import ENVIRONMENTS
+from uavxai.comms.service_env import ServiceEnv, levels_to_power
+from uavxai.service import universal
+from uavxai.service.grid import solve_grid
+from uavxai.service.layouts import ACCESS, KINDS, draw_layout, problem_scenario
+
+BENCH_SEED = 13_000  # training uses default_rng([seed < 1000, episode]): disjoint
+KS = (5, 10, 20)
+CACHE = Path(__file__).resolve().parents[1] / "docs" / "service" / "bench_placement_optima.jsonl"
+# Rounds of (K, layouts per cell so far): each round tops every cell of that K up.
+ROUNDS = ((5, 5), (10, 1), (20, 1), (10, 2), (5, 15), (20, 2), (10, 5), (5, 50), (20, 5), (10, 50))
+
+
+def cells() -> list[tuple[str, str, int, str]]:
+    return list(itertools.product(ACCESS, ENVIRONMENTS, KS, KINDS))
+
+
+def problem(access: str, environment: str, k: int, kind: str, i: int) -> np.ndarray:
+    """The i-th unseen layout of a cell (users (K, 2)); the same for every run."""
+    cell = cells().index((access, environment, k, kind))
+    return draw_layout(np.random.default_rng([BENCH_SEED, cell, i]), k, kind)
+
+
+def load_cache(path: Path = CACHE) -> list[dict]:
+    if not path.is_file():
+        return []
+    rows, seen = [], set()
+    for line in path.read_text().splitlines():
+        if line.strip():
+            row = json.loads(line)
+            key = tuple(row[f] for f in (*CELL_FIELDS, "i"))
+            if key not in seen:  # two `optima` processes may both solve a problem
+                seen.add(key)
+                rows.append(row)
+    return rows
+
+
+def optima(
+    minutes: float, path: Path = CACHE, only_k: int | None = None, reverse: bool = False
+) -> None:
+    """Solve and cache the optima round by round; ``only_k``/``reverse`` let a second process
+    work on other problems than the first (both append whole lines)."""
+    done = {(r["access"], r["environment"], r["k"], r["kind"], r["i"]) for r in load_cache(path)}
+    deadline = time.monotonic() + 60.0 * minutes
+    for k_round, upto in ROUNDS:
+        if only_k is not None and k_round != only_k:
+            continue
+        for i in range(upto):
+            # access alternates fastest, then the user kind, then the environment
+            order = list(itertools.product(ENVIRONMENTS, KINDS, ACCESS))
+            order = order[::-1] if reverse else order
+            for environment, kind, access in order:
+                k = k_round
+                if (access, environment, k, kind, i) in done:
+                    continue
+                if k != k_round or (access, environment, k, kind, i) in done:
+                    continue
+                if time.monotonic() > deadline:
+                    print("time budget reached", flush=True)
+                    return
+                users = problem(access, environment, k, kind, i)
+                env = ServiceEnv.from_scenario(problem_scenario(users, access, environment))
+                t0 = time.perf_counter()
+                best = solve_grid(env.channel, env.space, env.power_levels)
+                row = {
+                    "access": access,
+                    "environment": environment,
+                    "k": k,
+                    "kind": kind,
+                    "i": i,
+                    "users": users.round(3).tolist(),
+                    "optimum": best.objective,
+                    "position": best.position.tolist(),
+                    "levels": best.levels.tolist(),
+                    "naive": env.naive_objective,
+                    "grid_s": round(time.perf_counter() - t0, 2),
+                }
+                with path.open("a") as f:
+                    f.write(json.dumps(row) + "\n")
+                print(access, environment, k, kind, i, f"{row['grid_s']} s", flush=True)
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    o = sub.add_parser("optima")
+    o.add_argument("--minutes", type=float, default=60.0)
+    o.add_argument("--only-k", type=int, default=None)
+    o.add_argument("--reverse", action="store_true")
+    e = sub.add_parser("evaluate")
+    e.add_argument("--plot", type=Path, default=None)
+    e.add_argument("--json", type=Path, default=None)
+    e.add_argument("--models", type=Path, default=None, help="dir with universal_*_l6.pt")
+    e.add_argument("--limit", type=int, default=None, help="only the first N cached problems")
+    c = sub.add_parser("curves", help="validation curves of the shipped models' training logs")
+    c.add_argument("--plot", type=Path, required=True)
+    args = parser.parse_args(argv)
+    torch.set_num_threads(1)
+    if args.command == "curves":
+        plot_curves(args.plot)
+        return
+    if args.command == "optima":
+        optima(args.minutes, CACHE, args.only_k, args.reverse)
+    else:
+        evaluate(args.plot, args.json, args.models, args.limit)
+
+
+METHODS = ("d3qn", "d3qn_alone", "dqn", "dqn_alone", "refine_only", "random", "naive")
+
+
+def random_for(env: ServiceEnv, seconds: float, rng: np.random.Generator) -> float:
+    """The best of random lattice points with random levels drawn for ``seconds``."""
+    axes = env.space.axes()
+    best, t0 = -np.inf, time.perf_counter()
+    while True:
+        pos = np.column_stack([rng.choice(axis, size=32) for axis in axes])
+        levels = rng.integers(0, env.power_levels, size=(32, env.channel.k))
+        power = levels_to_power(levels, env.channel.p_max_w, env.power_levels)
+        best = max(best, float(env.channel.evaluate(pos, power).objective.max()))
+        if time.perf_counter() - t0 >= seconds:
+            return best
+
+
+def run_problem(row: dict, policies: dict[str, universal.NumpyPolicy]) -> dict[str, float]:
+    users = np.asarray(row["users"])
+    env = ServiceEnv.from_scenario(problem_scenario(users, row["access"], row["environment"]))
+    out = {"optimum": row["optimum"], "naive": env.naive_objective, "grid_s": row["grid_s"]}
+    out["naive_obj"] = env.naive_objective
+    for algo, policy in policies.items():
+        t0 = time.perf_counter()
+        flight = universal.fly(policy, env)
+        t1 = time.perf_counter()
+        value = universal.plan(policy, env).objective  # flies again: time the whole planner
+        t2 = time.perf_counter()
+        out[f"{algo}_alone"], out[f"{algo}_alone_s"] = flight.objective, t1 - t0
+        out[algo], out[f"{algo}_s"] = value, t2 - t1
+    # What the refinement finds without any network: from the flight's start, all levels full.
+    t0 = time.perf_counter()
+    full = np.full(env.channel.k, env.power_levels - 1)
+    _, _, out["refine_only"], _ = universal.refine(
+        env.channel, env.space, env.power_levels, env.space.start, full
+    )
+    out["refine_only_s"] = time.perf_counter() - t0
+    rng = np.random.default_rng([row["k"], row["i"]])
+    out["random_s"] = out["d3qn_s"]
+    out["random"] = random_for(env, out["d3qn_s"], rng)
+    return out
+
+
+def summarise(rows: list[dict], results: list[dict]) -> dict[tuple, dict[str, float]]:
+    table: dict[tuple, dict[str, float]] = {}
+    for key in cells():
+        idx = [n for n, r in enumerate(rows) if tuple(r[f] for f in CELL_FIELDS) == key]
+        if not idx:
+            continue
+        res = [results[n] for n in idx]
+        opt = np.array([r["optimum"] for r in res])
+        naive = np.array([r["naive_obj"] for r in res])
+        gap = opt - naive
+        has_gap = gap > 1e-3 * opt
+        cell = {"n": len(res), "grid_s": float(np.mean([r["grid_s"] for r in res]))}
+        for m in METHODS:
+            x = np.array([r["naive_obj"] if m == "naive" else r[m] for r in res])
+            ratio = x / opt
+            cell[f"{m}_mean"] = float(ratio.mean())
+            cell[f"{m}_p5"] = float(np.percentile(ratio, 5))
+            cell[f"{m}_gap"] = (
+                float(np.mean((x[has_gap] - naive[has_gap]) / gap[has_gap]))
+                if has_gap.any()
+                else float("nan")
+            )
+            if m != "naive":
+                cell[f"{m}_ms"] = 1e3 * float(np.mean([r[f"{m}_s"] for r in res]))
+        table[key] = cell
+    return table
+
+
+CELL_FIELDS = ("access", "environment", "k", "kind")
+
+
+def evaluate(
+    plot: Path | None, out_json: Path | None, models: Path | None = None, limit: int | None = None
+) -> None:
+    rows = load_cache()[:limit]
+    policies = {}
+    for algo in ("d3qn", "dqn"):
+        path = models / f"universal_{algo}_l6.pt" if models else universal.shipped_path(algo)
+        net, _ = universal.load(path)
+        policies[algo] = universal.NumpyPolicy(net)
+    results = []
+    for n, row in enumerate(rows):
+        results.append(run_problem(row, policies))
+        if (n + 1) % 25 == 0:
+            print(f"{n + 1}/{len(rows)} problems", flush=True)
+    table = summarise(rows, results)
+    head = (
+        "| access | environment | K | users | n | d3qn mean / p5 / gap | d3qn alone mean / p5 "
+        "| dqn mean / p5 / gap | dqn alone mean / p5 | random (equal time) mean / p5 | naive "
+        "mean | d3qn ms | grid s |"
+    )
+    print(head)
+    print("|" + "---|" * 13)
+    for key, c in table.items():
+        print(
+            f"| {' | '.join(str(v) for v in key)} | {c['n']} "
+            f"| {c['d3qn_mean']:.4f} / {c['d3qn_p5']:.4f} / {100 * c['d3qn_gap']:.0f} % "
+            f"| {c['d3qn_alone_mean']:.4f} / {c['d3qn_alone_p5']:.4f} "
+            f"| {c['dqn_mean']:.4f} / {c['dqn_p5']:.4f} / {100 * c['dqn_gap']:.0f} % "
+            f"| {c['dqn_alone_mean']:.4f} / {c['dqn_alone_p5']:.4f} "
+            f"| {c['random_mean']:.4f} / {c['random_p5']:.4f} | {c['naive_mean']:.4f} "
+            f"| {c['d3qn_ms']:.0f} | {c['grid_s']:.1f} |"
+        )
+    print()
+    for m in METHODS:
+        means = [c[f"{m}_mean"] for c in table.values()]
+        p5s = [c[f"{m}_p5"] for c in table.values()]
+        gaps = [c[f"{m}_gap"] for k, c in table.items() if k[0] == "ofdma"]
+        ms = [c.get(f"{m}_ms", np.nan) for c in table.values()]
+        if m == "naive":
+            ms = [0.0]
+        print(
+            f"{m:11s} mean of cell means {np.mean(means):.4f}, worst cell mean {min(means):.4f},"
+            f" worst cell p5 {min(p5s):.4f}, ofdma gap closed mean {100 * np.nanmean(gaps):.0f} %"
+            f" worst {100 * np.nanmin(gaps):.0f} %, ms/layout mean {np.nanmean(ms):.0f} "
+            f"max {np.nanmax(ms):.0f}"
+        )
+    if out_json is not None:
+        out_json.write_text(
+            json.dumps([{**dict(zip(CELL_FIELDS, k, strict=True)), **c} for k, c in table.items()],
+                       indent=1)
+        )
+    if plot is not None:
+        _plot(plot, table)
+
+
+def plot_curves(path: Path) -> None:
+    """Greedy validation score (mean log2 of objective / reference over 24 fixed problems)
+    every 100 episodes, from ``docs/service/universal_{algo}_train_log.jsonl``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4), constrained_layout=True)
+    for algo, colour in (("d3qn", "tab:red"), ("dqn", "tab:blue")):
+        log = CACHE.parent / f"universal_{algo}_train_log.jsonl"
+        rows = [json.loads(line) for line in log.read_text().splitlines() if line.strip()]
+        ax.plot([r["episode"] for r in rows], [r["val_log2_over_reference"] for r in rows],
+                "o-", color=colour, label=algo.upper())
+    ax.set(xlabel="training episode (a new random problem each)",
+           ylabel="validation: mean log2(greedy best / reference)",
+           title="Universal D3QN / DQN: greedy flight alone on 24 fixed problems")
+    ax.grid(alpha=0.3)
+    ax.legend()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def _plot(path: Path, table: dict[tuple, dict[str, float]]) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    style = {
+        "d3qn": ("tab:red", "o", "d3qn (planner: flight + refine)"),
+        "d3qn_alone": ("tab:orange", "^", "D3QN alone (best visited point)"),
+        "dqn_alone": ("tab:blue", "v", "DQN alone"),
+        "random": ("tab:gray", "s", "random, equal time"),
+        "refine_only": ("tab:purple", "d", "refine alone from the start (no network)"),
+        "naive": ("tab:green", "x", "naive (centroid, 100 m, equal power)"),
+    }
+    fig, axes = plt.subplots(2, 1, figsize=(14, 8), constrained_layout=True)
+    for ax, access in zip(axes, ACCESS, strict=True):
+        keys = [k for k in table if k[0] == access]
+        x = np.arange(len(keys))
+        for j, (m, (colour, marker, label)) in enumerate(style.items()):
+            mean = np.array([table[k][f"{m}_mean"] for k in keys])
+            p5 = np.array([table[k][f"{m}_p5"] for k in keys])
+            off = (j - 2.5) * 0.1
+            ax.errorbar(x + off, mean, yerr=[mean - p5, 0 * mean], fmt=marker, color=colour,
+                        label=label, ms=5, capsize=2)
+        ax.axhline(0.99, color="k", ls="--", lw=0.8)
+        ax.axhline(0.97, color="k", ls=":", lw=0.8)
+        ax.set_xticks(x, [f"{k[1][:8]} K{k[2]} {k[3][:4]}" for k in keys], rotation=70, fontsize=7)
+        ax.set_ylabel("objective / exact optimum")
+        ax.set_ylim(max(0.0, ax.get_ylim()[0]), 1.01)
+        ax.set_title(f"{access}: mean (marker) and 5th percentile (whisker) per cell")
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8, loc="lower left")
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+if __name__ == "__main__":
+    main()
