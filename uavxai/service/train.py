@@ -65,71 +65,17 @@ def running_mean(values: np.ndarray, window: int) -> np.ndarray:
 
 def train_command(scenario: Scenario, algo: str, episodes: int | None, out: Path) -> dict[str, Any]:
     """Train ``algo`` on the scenario's layout; write model.pt and the learning curves."""
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
-
     torch.set_num_threads(1)
     episodes = episodes or DEFAULT_EPISODES
     env = ServiceEnv.from_scenario(scenario)
-    other = "dqn" if algo == "d3qn" else "d3qn"
     configs = {
         "d3qn": d3qn.D3QNConfig(episodes=episodes, seed=scenario.seed),
         "dqn": dqn.DQNConfig(episodes=episodes, seed=scenario.seed),
     }
-    columns = (
-        TextColumn("{task.description:<8}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TextColumn("{task.fields[status]}"),
-    )
-    runs: dict[str, dict[str, Any]] = {}
-    with Progress(*columns) as progress:
-        for name in (algo, other):
-            task = progress.add_task(name, total=episodes, status="")
-            result = d3qn.train(
-                env, configs[name], on_episode=_progress(progress, task, env.naive_objective)
-            )
-            runs[name] = {"curve": result.curve, "wall_s": result.wall_s, "result": result}
-        task = progress.add_task("random", total=episodes, status="")
-        runs["random"] = _random_curve(env, episodes, scenario.seed, progress, task)
-        task = progress.add_task("grid", total=1, status="exact optimum ...")
-        t0 = time.perf_counter()
-        grid = solve_grid(d3qn.fading_free(env).channel, env.space, env.power_levels)
-        progress.update(task, advance=1, status=f"{time.perf_counter() - t0:.1f} s")
-
-    # model.pt is the evaluated policy whose greedy flight found the best service point
-    # (the last one can be a little worse: learning goes on at epsilon = 0.1).
-    chosen: d3qn.TrainResult = runs[algo]["result"]
-    net = copy.deepcopy(chosen.net)
-    net.load_state_dict(chosen.best_state)
-    episode = 1 + int(np.argmax([row["greedy_objective"] for row in chosen.curve]))
-    d3qn.save_checkpoint(
-        out / "model.pt",
-        net,
-        algo,
-        configs[algo],
-        {
-            "scenario": scenario.name,
-            "seed": scenario.seed,
-            "access": scenario.comms.access,
-            "episode": episode,
-            "greedy_objective": chosen.best_greedy,
-        },
-    )
+    runs, grid = _train_all(env, algo, configs, episodes, scenario.seed)
+    chosen, episode = _save_best(out, runs[algo]["result"], algo, configs[algo], scenario)
     _write_csv(out / "learning_curve.csv", runs)
-    summary = {}
-    for name, run in runs.items():
-        greedy = np.array([row["greedy_objective"] for row in run["curve"]])
-        ret = np.array([row["return"] for row in run["curve"]])
-        converge, final = episodes_to_converge(greedy)
-        converge_ret, final_ret = episodes_to_converge(ret)
-        summary[name] = {
-            "final_objective": final,
-            "final_over_optimum": final / grid.objective,
-            "episodes_to_converge": converge,
-            "final_return_bps": final_ret,
-            "episodes_to_converge_return": converge_ret,
-            "wall_s": round(run["wall_s"], 2),
-        }
+    summary = {name: _run_summary(run, grid.objective) for name, run in runs.items()}
     _plot(out / "learning_curve.png", runs, grid.objective, env.naive_objective, scenario)
     mine = summary[algo]
     return {
@@ -152,6 +98,72 @@ def train_command(scenario: Scenario, algo: str, episodes: int | None, out: Path
         },
         "comparison": summary,
         "learning_curve": str(out / "learning_curve.png"),
+    }
+
+
+def _train_all(env, algo: str, configs: dict, episodes: int, seed: int):
+    """Train ``algo`` and the other learner, run random search and solve the exact grid, with
+    one progress bar each; returns (runs by name, the grid optimum)."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
+
+    other = "dqn" if algo == "d3qn" else "d3qn"
+    columns = (
+        TextColumn("{task.description:<8}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("{task.fields[status]}"),
+    )
+    runs: dict[str, dict[str, Any]] = {}
+    with Progress(*columns) as progress:
+        for name in (algo, other):
+            task = progress.add_task(name, total=episodes, status="")
+            result = d3qn.train(
+                env, configs[name], on_episode=_progress(progress, task, env.naive_objective)
+            )
+            runs[name] = {"curve": result.curve, "wall_s": result.wall_s, "result": result}
+        task = progress.add_task("random", total=episodes, status="")
+        runs["random"] = _random_curve(env, episodes, seed, progress, task)
+        task = progress.add_task("grid", total=1, status="exact optimum ...")
+        t0 = time.perf_counter()
+        grid = solve_grid(d3qn.fading_free(env).channel, env.space, env.power_levels)
+        progress.update(task, advance=1, status=f"{time.perf_counter() - t0:.1f} s")
+    return runs, grid
+
+
+def _save_best(out: Path, chosen, algo: str, config, scenario: Scenario):
+    """model.pt is the evaluated policy whose greedy flight found the best service point (the
+    last one can be a little worse: learning goes on at epsilon = 0.1)."""
+    net = copy.deepcopy(chosen.net)
+    net.load_state_dict(chosen.best_state)
+    episode = 1 + int(np.argmax([row["greedy_objective"] for row in chosen.curve]))
+    d3qn.save_checkpoint(
+        out / "model.pt",
+        net,
+        algo,
+        config,
+        {
+            "scenario": scenario.name,
+            "seed": scenario.seed,
+            "access": scenario.comms.access,
+            "episode": episode,
+            "greedy_objective": chosen.best_greedy,
+        },
+    )
+    return chosen, episode
+
+
+def _run_summary(run: dict[str, Any], optimum: float) -> dict[str, Any]:
+    greedy = np.array([row["greedy_objective"] for row in run["curve"]])
+    ret = np.array([row["return"] for row in run["curve"]])
+    converge, final = episodes_to_converge(greedy)
+    converge_ret, final_ret = episodes_to_converge(ret)
+    return {
+        "final_objective": final,
+        "final_over_optimum": final / optimum,
+        "episodes_to_converge": converge,
+        "final_return_bps": final_ret,
+        "episodes_to_converge_return": converge_ret,
+        "wall_s": round(run["wall_s"], 2),
     }
 
 
