@@ -52,3 +52,63 @@ class LoiterAutopilot:
 
     def _bank_from_guidance(self, bank_rad: float) -> None:
         raise NotImplementedError
+
+
+class ScheduledWorld(LoiterAutopilot):
+    """What both worlds share: a clock in integrator ticks, the intruders' pilots every
+    ``PILOT_PERIOD_S``, persistent traffic (``intruders.flow``) at the same instants, and the
+    ownship's loiter law every ``GUIDANCE_PERIOD_S``. A world provides ``_integrate(ticks)``,
+    ``_halted()``, ``_command_intruder(row, bank, speed)`` and ``_replace(entries)``."""
+
+    def _init_schedule(self, scenario: Scenario, seed: int, n_intruders: int) -> None:
+        from uavxai.dynamics.behaviours import PILOT_PERIOD_S
+        from uavxai.dynamics.flow import TrafficFlow, entry_clearance
+
+        self._steps = 0
+        self._pilot_period = max(1, round(PILOT_PERIOD_S / self.dt))
+        self._guidance_period = max(1, round(GUIDANCE_PERIOD_S / self.dt))
+        # newcomers are numbered after everyone drawn: a track, trail or row is one aircraft
+        self._flow = TrafficFlow.from_scenario(scenario, seed=seed, first_number=n_intruders + 1)
+        self._clearance = entry_clearance(scenario.world.x, scenario.world.y)
+
+    @property
+    def t(self) -> float:
+        return self._steps * self.dt
+
+    def advance(self, seconds: float) -> None:
+        self.step(round(seconds / self.dt))
+
+    def step(self, n: int = 1) -> None:
+        """Advance by ``n`` ticks, the pilots and the loiter law on their periods."""
+        left = int(n)
+        while left > 0 and not self._halted():
+            chunk = min(
+                left,
+                self._pilot_period - self._steps % self._pilot_period,
+                self._guidance_period - self._steps % self._guidance_period,
+            )
+            if not self._integrate(chunk):
+                return
+            self._steps += chunk
+            left -= chunk
+            self._cached = None
+            if self._steps % self._pilot_period == 0:
+                self._fly_pilots()
+            if self._orbit is not None and self._steps % self._guidance_period == 0:
+                self._fly_orbit()
+
+    def _fly_pilots(self) -> None:
+        """Every pilot second: leavers replaced by newcomers, then each pilot's commands."""
+        s = self.state()
+        if self._stopped(s) or s.n < 2:
+            return
+        if self._flow is not None:
+            entries = self._flow.replace(
+                s.pos[1:], keep_clear=s.pos[:1], min_distance_m=self._clearance
+            )
+            if entries:
+                self._replace(entries)
+                s = self.state()
+        for i, pilot in enumerate(self._pilots, start=1):
+            bank, speed = pilot.command(s.t, s.pos[i], s.vel[i], float(s.att[i, 2]))
+            self._command_intruder(i, bank, speed)

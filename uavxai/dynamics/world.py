@@ -16,11 +16,11 @@ import jsbsim
 import numpy as np
 
 from uavxai.dynamics.aircraft import FT, Aircraft, heading_from_deg
-from uavxai.dynamics.behaviours import PILOT_PERIOD_S, make_pilots, newcomer_pilot
+from uavxai.dynamics.behaviours import make_pilots, newcomer_pilot
 from uavxai.dynamics.environment import EnvironmentConfig
-from uavxai.dynamics.flow import Entry, TrafficFlow, entry_clearance
+from uavxai.dynamics.flow import Entry
 from uavxai.dynamics.geodesy import LocalFrame
-from uavxai.dynamics.loiter import GUIDANCE_PERIOD_S, LoiterAutopilot
+from uavxai.dynamics.loiter import ScheduledWorld
 from uavxai.dynamics.state import OWNSHIP_ID, TrafficState, intruder_id
 from uavxai.dynamics.traffic import draw_intruders
 from uavxai.errors import UserError
@@ -48,7 +48,7 @@ def jsbsim_seed(seed: int, index: int) -> int:
     return int(state[0] & 0x7FFFFFFF)
 
 
-class JSBSimWorld(LoiterAutopilot):
+class JSBSimWorld(ScheduledWorld):
     """Ownship (row 0) and intruders (rows 1..N) flown by JSBSim.
 
     ``intruders`` None draws them from the scenario with ``seed`` (default: the scenario's
@@ -71,13 +71,7 @@ class JSBSimWorld(LoiterAutopilot):
         self.intruders = list(intruders)
         self.ids = (OWNSHIP_ID, *(intruder_id(i + 1) for i in range(len(self.intruders))))
         self._pilots = make_pilots(scenario, self.intruders, self.seed)
-        self._flow = TrafficFlow.from_scenario(
-            scenario, seed=self.seed, first_number=len(self.intruders) + 1
-        )  # numbers never reused: a track, trail or row means one aircraft
-        self._clearance = entry_clearance(scenario.world.x, scenario.world.y)
-        self._guidance_period = max(1, round(GUIDANCE_PERIOD_S / self.dt))
-        self._pilot_period = max(1, round(PILOT_PERIOD_S / self.dt))
-        self._steps = 0
+        self._init_schedule(scenario, self.seed, len(self.intruders))
         self._cached: TrafficState | None = None
         self._failure: str | None = None
 
@@ -140,10 +134,6 @@ class JSBSimWorld(LoiterAutopilot):
 
     # ------------------------------------------------------------------------------ time
     @property
-    def t(self) -> float:
-        return self._steps * self.dt
-
-    @property
     def n(self) -> int:
         return len(self.aircraft)
 
@@ -152,51 +142,28 @@ class JSBSimWorld(LoiterAutopilot):
         """Whether each aircraft's start trim converged (ownship first)."""
         return [a.trimmed for a in self.aircraft]
 
-    def step(self, n: int = 1) -> None:
-        """Advance every aircraft by ``n`` integration steps, in lockstep. Does nothing once
-        the run has failed (see :meth:`failure`)."""
+    def _integrate(self, ticks: int) -> bool:
+        """Run every aircraft ``ticks`` integration steps in lockstep; False if JSBSim gave up."""
         runs = self._runs
-        left = int(n)
-        while left > 0 and self._failure is None:
-            chunk = min(
-                left,
-                self._pilot_period - self._steps % self._pilot_period,
-                self._guidance_period - self._steps % self._guidance_period,
-            )
-            try:
-                for _ in range(chunk):
-                    for run in runs:
-                        run()
-            except jsbsim.BaseError as exc:  # JSBSim gives up on a diverged state
-                self._failure = f"JSBSim stopped: {exc}"
-                log.warning("%s at t = %.2f s", self._failure, self.t)
-                return
-            self._steps += chunk
-            left -= chunk
-            self._cached = None
-            if self._steps % self._pilot_period == 0:
-                self._fly_pilots()
-            if self._orbit is not None and self._steps % self._guidance_period == 0:
-                self._fly_orbit()
+        try:
+            for _ in range(ticks):
+                for run in runs:
+                    run()
+        except jsbsim.BaseError as exc:  # JSBSim gives up on a diverged state
+            self._failure = f"JSBSim stopped: {exc}"
+            log.warning("%s at t = %.2f s", self._failure, self.t)
+            return False
+        return True
 
-    def advance(self, seconds: float) -> None:
-        self.step(round(seconds / self.dt))
+    def _halted(self) -> bool:
+        return self._failure is not None
 
-    def _fly_pilots(self) -> None:
+    def _stopped(self, state: TrafficState) -> bool:
         # The pilots see the state every second; the same read tells whether anyone diverged.
-        s = self.state()
-        if self._check(s):
-            return
-        if self._flow is not None and s.n > 1:
-            entries = self._flow.replace(
-                s.pos[1:], keep_clear=s.pos[:1], min_distance_m=self._clearance
-            )
-            if entries:
-                self._replace(entries)
-                s = self.state()
-        for i, pilot in enumerate(self._pilots, start=1):
-            bank, speed = pilot.command(s.t, s.pos[i], s.vel[i], float(s.att[i, 2]))
-            self.aircraft[i].command(bank_cmd_rad=bank, speed_target_mps=speed)
+        return self._check(state)
+
+    def _command_intruder(self, row: int, bank: float, speed: float) -> None:
+        self.aircraft[row].command(bank_cmd_rad=bank, speed_target_mps=speed)
 
     def _replace(self, entries: list[Entry]) -> None:
         """Intruders that left the area make way for newcomers entering at the edge."""

@@ -21,23 +21,8 @@ from uavxai.dynamics.state import TrafficState
 from uavxai.sim.clock import Clock
 from uavxai.sim.command import CommandPath, Dynamics
 from uavxai.sim.judge import Judge
+from uavxai.surveillance.tracker import truth_beliefs
 from uavxai.vocabulary import Outcome
-
-
-def truth_picture(state: TrafficState) -> list[Intruder]:
-    """Every intruder's exact position and velocity (``surveillance.model: truth``)."""
-    return [
-        Intruder(
-            id=state.ids[i],
-            x=float(state.pos[i, 0]),
-            y=float(state.pos[i, 1]),
-            h=float(state.pos[i, 2]),
-            vx=float(state.vel[i, 0]),
-            vy=float(state.vel[i, 1]),
-            vh=float(state.vel[i, 2]),
-        )
-        for i in range(1, state.n)
-    ]
 
 
 def ownship_view(state: TrafficState, bank_cmd: float) -> Ownship:
@@ -105,7 +90,7 @@ class Episode:
         goal: Sequence[float],
         max_steps: int,
         observers: Sequence[Observer] = (),
-        picture: Picture = truth_picture,
+        picture: Picture = truth_beliefs,
         label: dict | None = None,
         mission=None,
     ) -> None:

@@ -22,10 +22,10 @@ import numpy as np
 
 from uavxai.avoidance.model import PHI, PHI_CMD, PSI, STATE_DIM, EncounterModel, Track, V
 from uavxai.avoidance.types import PlannerConfig
-from uavxai.dynamics.behaviours import PILOT_PERIOD_S, make_pilots, newcomer_pilot
+from uavxai.dynamics.behaviours import make_pilots, newcomer_pilot
 from uavxai.dynamics.environment import EnvironmentConfig
-from uavxai.dynamics.flow import Entry, TrafficFlow, entry_clearance
-from uavxai.dynamics.loiter import GUIDANCE_PERIOD_S, LoiterAutopilot
+from uavxai.dynamics.flow import Entry
+from uavxai.dynamics.loiter import ScheduledWorld
 from uavxai.dynamics.state import OWNSHIP_ID, TrafficState, intruder_id
 from uavxai.dynamics.traffic import draw_intruders
 from uavxai.errors import UserError
@@ -35,7 +35,7 @@ from uavxai.vocabulary import HOLD
 _FAR = 1e12  # a goal nobody reaches: the model's goal only sets the height target here
 
 
-class KinematicWorld(LoiterAutopilot):
+class KinematicWorld(ScheduledWorld):
     """Ownship (row 0) and intruders (rows 1..N) on the encounter model; the interface of
     :class:`uavxai.dynamics.world.JSBSimWorld`."""
 
@@ -70,45 +70,24 @@ class KinematicWorld(LoiterAutopilot):
         self._speed_target: float | None = None
         self._alt_target = float(start.h)
         self._pilots = make_pilots(scenario, self.intruders, self.seed)
-        self._flow = TrafficFlow.from_scenario(
-            scenario, seed=self.seed, first_number=len(self.intruders) + 1
-        )  # numbers never reused: a track, trail or row means one aircraft
-        self._clearance = entry_clearance(scenario.world.x, scenario.world.y)
-        self._pilot_period = max(1, round(PILOT_PERIOD_S / self.dt))
-        self._guidance_period = max(1, round(GUIDANCE_PERIOD_S / self.dt))
-        self._steps = 0
+        self._init_schedule(scenario, self.seed, len(self.intruders))
         self._cached: TrafficState | None = None
         self._fly_pilots()
 
     # ------------------------------------------------------------------------------ time
     @property
-    def t(self) -> float:
-        return self._steps * self.dt
-
-    @property
     def n(self) -> int:
         return len(self.ids)
 
-    def step(self, n: int = 1) -> None:
-        """Advance by ``n`` ticks; pilots decide on their period, as in the JSBSim world."""
-        left = int(n)
-        while left > 0:
-            chunk = min(
-                left,
-                self._pilot_period - self._steps % self._pilot_period,
-                self._guidance_period - self._steps % self._guidance_period,
-            )
-            self._fly(chunk * self.dt)
-            self._steps += chunk
-            left -= chunk
-            self._cached = None
-            if self._steps % self._pilot_period == 0:
-                self._fly_pilots()
-            if self._orbit is not None and self._steps % self._guidance_period == 0:
-                self._fly_orbit()
+    def _integrate(self, ticks: int) -> bool:
+        self._fly(ticks * self.dt)
+        return True
 
-    def advance(self, seconds: float) -> None:
-        self.step(round(seconds / self.dt))
+    def _halted(self) -> bool:
+        return False  # the kinematic model never diverges
+
+    def _stopped(self, state: TrafficState) -> bool:
+        return False
 
     def _model(self, accel: float) -> EncounterModel:
         key = abs(float(accel))
@@ -140,21 +119,9 @@ class KinematicWorld(LoiterAutopilot):
             )
             self._traffic[:, :2] += self._wind[:2] * duration
 
-    def _fly_pilots(self) -> None:
-        if not self._pilots:
-            return
-        s = self.state()
-        if self._flow is not None:
-            entries = self._flow.replace(
-                s.pos[1:], keep_clear=s.pos[:1], min_distance_m=self._clearance
-            )
-            if entries:
-                self._replace(entries)
-                s = self.state()
-        for i, pilot in enumerate(self._pilots):
-            bank, speed = pilot.command(s.t, s.pos[i + 1], s.vel[i + 1], float(s.att[i + 1, 2]))
-            self._traffic[i, PHI_CMD] = bank
-            self._traffic[i, V] = speed  # the pilot's speed target, held
+    def _command_intruder(self, row: int, bank: float, speed: float) -> None:
+        self._traffic[row - 1, PHI_CMD] = bank
+        self._traffic[row - 1, V] = speed  # the pilot's speed target, held
 
     def _replace(self, entries: list[Entry]) -> None:
         """As the JSBSim world: a newcomer at the edge for every intruder that left."""
