@@ -249,7 +249,7 @@ surveillance: {model: truth, rate_hz: 2, nacp: 9, nacv: 1, latency_s: 0.2, dropo
 mission: {service_s: 0, return_home: false}
 comms: {users: {mobility: {model: random_waypoint, speed_mps: [1, 2], pause_s: 10}}}
 service: {platform: hover, replan_s: 60}
-avoidance: {actions: vertical}
+avoidance: {actions: paper}
 intruders: {flow: none}
 """
     path = tmp_path / "windy.yaml"
@@ -354,3 +354,8 @@ def test_shipped_scenarios_by_name(
         assert name in err
     (tmp_path / "demo").mkdir()  # a folder of that name is not taken for the shipped file
     assert main(["validate", "demo"]) == 2
+
+
+def test_the_reserved_vertical_action_set_is_refused_not_ignored() -> None:
+    with pytest.raises(ScenarioError, match="vertical action set"):
+        default_scenario("v", avoidance={"actions": "vertical"})

@@ -334,6 +334,16 @@ class Avoidance(_Model):
     def _speed(cls, v: tuple[float, float]) -> tuple[float, float]:
         return _ordered(v, "avoidance.speed_mps")
 
+    @field_validator("actions")
+    @classmethod
+    def _actions(cls, v: str) -> str:
+        if v == "vertical":  # the name is reserved (SPEC); refusing beats silently ignoring
+            raise ValueError(
+                "the vertical action set (climb and descend) is not available in this version; "
+                "use paper (the nine bank x acceleration actions)"
+            )
+        return v
+
     @field_validator("checkpoint")
     @classmethod
     def _ckpt(cls, v: str | None) -> str | None:
