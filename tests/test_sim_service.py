@@ -41,11 +41,16 @@ def _rates(uav, users, power, sc) -> np.ndarray:
     return sc["bandwidth_hz"] * np.log2(1 + gain * power / (interference + noise))
 
 
-def test_delivered_bits_recomputed_from_users_trajectory_and_service_files(tmp_path: Path):
+def test_delivered_bits_recomputed_from_users_trajectory_and_service_files(
+    tmp_path: Path, capfd
+) -> None:
     path = tmp_path / "m.yaml"
     path.write_text(yaml.safe_dump(MISSION))
     out = tmp_path / "run"
     assert main(["run", str(path), "--out", str(out)]) == 0
+    printed = " ".join(capfd.readouterr().err.split())
+    for words in ("completed", "delivered", "Mbit", "QoS met", "lost to avoidance", "energy"):
+        assert words in printed, words
     summary = json.loads((out / "summary.json").read_text())
     assert summary["outcome"] == "completed"
     sc = {"environment": "urban", "carrier_ghz": 2.0, "noise_dbm": -100.0, "bandwidth_hz": 1e6}

@@ -267,6 +267,8 @@ def report(summary: dict, out: Path, rerun_file: Path | None, spawn: bool) -> No
             f"Mbit/s {where}; decision p50 {e['decision_ms']['p50'] or 0:.1f} ms; "
             f"{e['sim_realtime_factor'] or 0:.1f}x real time"
         )
+        if e.get("mission", {}).get("delivered_bits") is not None:
+            console.print(_mission_line(e["mission"]))
     console.print(f"outputs in {out}/ (summary.json, trajectory.csv, decisions.jsonl)")
     rrd = rerun_file or out / "run.rrd"  # written with or without --spawn
     if len(eps) > 1 and rerun_file is None:
@@ -277,3 +279,17 @@ def report(summary: dict, out: Path, rerun_file: Path | None, spawn: bool) -> No
         console.print(f"recording: {rrd}  — open it with:  {viewer_cmd} {rrd}")
     first = out if len(eps) == 1 else out / "episode-000"
     console.print(f"explain a decision:  uavxai explain {first} --decision 0")
+
+
+def _mission_line(m: dict) -> str:
+    """The mission's service, energy and battery in one line."""
+    energy, soc = m.get("energy_wh"), m.get("battery_soc_end")
+    qos = 100 * m["qos_user_seconds_share"]
+    return (
+        f"  mission: {m['on_station_s']:.0f} s on station ({m['avoiding_s']:.0f} s avoiding), "
+        f"{len(m['service_points'])} service point(s); delivered "
+        f"{m['delivered_bits'] / 1e6:.0f} Mbit, QoS met {qos:.0f} % of user-seconds, Jain "
+        f"{m['jain_fairness']:.2f}, lost to avoidance {m['avoidance_lost_bits'] / 1e6:.1f} "
+        f"Mbit; energy {'-' if energy is None else f'{energy:.1f} Wh'}, battery at the end "
+        f"{'-' if soc is None else f'{100 * soc:.0f} %'}"
+    )
