@@ -97,6 +97,15 @@ class ScheduledWorld(LoiterAutopilot):
             if self._orbit is not None and self._steps % self._guidance_period == 0:
                 self._fly_orbit()
 
+    @staticmethod
+    def _finite_commands(**given: float | None) -> None:
+        """A UserError for a non-finite autopilot input (None: left as it is)."""
+        from uavxai.errors import UserError
+
+        for key, value in given.items():
+            if value is not None and not math.isfinite(value):
+                raise UserError(f"command_ownship: {key} must be a finite number, got {value}")
+
     def _fly_pilots(self) -> None:
         """Every pilot second: leavers replaced by newcomers, then each pilot's commands."""
         s = self.state()

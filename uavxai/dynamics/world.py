@@ -215,9 +215,7 @@ class JSBSimWorld(ScheduledWorld):
             "speed_target_mps": speed_target_mps,
             "alt_target_m": alt_target_m,
         }
-        for key, value in given.items():
-            if value is not None and not math.isfinite(value):
-                raise UserError(f"command_ownship: {key} must be a finite number, got {value}")
+        self._finite_commands(**given)
         if bank_cmd_rad is not None:
             self._orbit = None  # a bank command takes the aircraft off its loiter orbit
         self.aircraft[0].command(**given)

@@ -28,7 +28,6 @@ from uavxai.dynamics.flow import Entry
 from uavxai.dynamics.loiter import ScheduledWorld
 from uavxai.dynamics.state import OWNSHIP_ID, TrafficState, intruder_id
 from uavxai.dynamics.traffic import draw_intruders
-from uavxai.errors import UserError
 from uavxai.scenario import IntruderSpec, Scenario
 from uavxai.vocabulary import HOLD
 
@@ -158,14 +157,12 @@ class KinematicWorld(ScheduledWorld):
     ) -> None:
         """As the JSBSim world: the bank command is clamped to the bank limit, the speed
         target to the speed range; an acceleration command cancels a speed target."""
-        for key, value in (
-            ("bank_cmd_rad", bank_cmd_rad),
-            ("accel_cmd_mps2", accel_cmd_mps2),
-            ("speed_target_mps", speed_target_mps),
-            ("alt_target_m", alt_target_m),
-        ):
-            if value is not None and not math.isfinite(value):
-                raise UserError(f"command_ownship: {key} must be a finite number, got {value}")
+        self._finite_commands(
+            bank_cmd_rad=bank_cmd_rad,
+            accel_cmd_mps2=accel_cmd_mps2,
+            speed_target_mps=speed_target_mps,
+            alt_target_m=alt_target_m,
+        )
         if bank_cmd_rad is not None:
             self._orbit = None  # a bank command takes the aircraft off its loiter orbit
             self._bank_from_guidance(bank_cmd_rad)
