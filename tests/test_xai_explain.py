@@ -111,7 +111,36 @@ def test_equal_values_are_not_called_lower():
         assert "as good (Q 1.000 both)" in d.counterfactual
         if d.action != 4:
             not_hold += 1
-            assert "holding bank and speed is as good (Q 1.000), this one had more simulations" in (
-                d.explanation
-            )
+            assert "holding bank and speed is as good (Q 1.000), " in d.explanation
+            chosen = next(c for c in d.children if c.action == d.action)
+            hold = next(c for c in d.children if c.action == 4)
+            said_more = "this one had more simulations" in d.explanation
+            assert said_more == (chosen.visits > hold.visits)  # true to the tree
     assert not_hold  # the tie-break picked something other than holding at least once
+
+
+def _child(action: int, visits: int, q: float):
+    from uavxai.avoidance.types import ChildStats
+
+    return ChildStats(action, 0.0, 0.0, visits, q, 300.0, None, None, "")
+
+
+def test_a_visit_tie_is_not_called_more_simulations():
+    from uavxai.avoidance.types import Decision
+
+    chosen, hold = _child(0, 20, 0.80001), _child(4, 20, 0.80000)
+    d = Decision(0.0, 1.0, 0, [chosen, hold], planner="mcts")
+    assert "more simulations" not in d.explanation
+    assert "as many simulations (20 each)" in d.explanation
+    d = Decision(0.0, 1.0, 0, [_child(0, 25, 0.8), _child(4, 20, 0.8)], planner="mcts")
+    assert "more simulations (25 against 20)" in d.explanation
+
+
+def test_the_plan_label_is_the_branch_minimum_and_its_intruder():
+    from uavxai.avoidance.types import ChildStats, Decision
+    from uavxai.recording.recorder import _plan_label
+
+    kids = [ChildStats(a, 0.0, 0.0, 10, 0.5, 80.0 + a, a % 2, 5.0, "") for a in range(9)]
+    d = Decision(0.0, 0.0, 3, kids, predicted_min_separation_m=400.0, planner="mcts")
+    # the one-period prediction (400 m) is not what the drawn branch keeps (83 m from row 1)
+    assert _plan_label(d, ["intruder-7", "intruder-9"]) == "plan: 83 m from intruder-9"

@@ -354,8 +354,10 @@ def _line_style(color: tuple[int, ...], radius) -> rr.LineStrips3D:
 
 
 def _plan_label(decision: Decision, intruder_ids: list[str]) -> str:
-    """Short, as it floats in the scene: the predicted separation and from whom."""
-    sep = decision.predicted_min_separation_m
+    """Short, as it floats in the scene: the smallest separation predicted along the drawn
+    plan (the chosen action's best line) and the intruder it is from, both from that line."""
+    chosen = next((c for c in decision.children if c.action == decision.action), None)
+    sep = chosen.predicted_min_separation_m if chosen is not None else math.inf
     if not math.isfinite(sep):
         return "plan"
     closest = _closest_on_plan(decision, intruder_ids)

@@ -94,11 +94,21 @@ def _reference(hold: ChildStats, chosen: ChildStats, decision: Decision) -> str:
     if _tied(hold, chosen):  # e.g. near the goal, where every line reaches it
         if decision.planner == "exhaustive":
             return f"{held} is as good (Q {chosen.q:.3f}), the tie goes to action order"
-        return (
-            f"{held} is as good (Q {chosen.q:.3f}), this one had more simulations "
-            f"({chosen.visits} against {hold.visits})"
-        )
+        return f"{held} is as good (Q {chosen.q:.3f}), {_why_this_one(chosen, hold)}"
     return f"{held} scores lower (Q {hold.q:.3f} against {chosen.q:.3f}{_risk(hold)})"
+
+
+def _why_this_one(chosen: ChildStats, other: ChildStats) -> str:
+    """What decided between two options of equal printed Q, as the search decides: the more
+    simulated one, then the higher Q, then action order. Never claims "more simulations" on a
+    tie of visits."""
+    if chosen.visits > other.visits:
+        return f"this one had more simulations ({chosen.visits} against {other.visits})"
+    if chosen.visits == other.visits:
+        if chosen.q > other.q:
+            return f"as many simulations ({chosen.visits} each): a higher Q beyond 3 decimals"
+        return f"as many simulations ({chosen.visits} each) and Q: the first in action order"
+    return f"though it had fewer simulations ({chosen.visits} against {other.visits})"
 
 
 def _tied(a: ChildStats, b: ChildStats) -> bool:
