@@ -144,3 +144,13 @@ def test_the_plan_label_is_the_branch_minimum_and_its_intruder():
     d = Decision(0.0, 0.0, 3, kids, predicted_min_separation_m=400.0, planner="mcts")
     # the one-period prediction (400 m) is not what the drawn branch keeps (83 m from row 1)
     assert _plan_label(d, ["intruder-7", "intruder-9"]) == "plan: 83 m from intruder-9"
+
+
+def test_a_rejected_option_with_the_higher_q_is_not_called_lower():
+    from uavxai.avoidance.types import Decision
+
+    d = Decision(0.0, 1.0, 0, [_child(0, 30, 0.70), _child(4, 10, 0.75)], planner="mcts")
+    assert "scores lower" not in d.explanation
+    assert "has the higher Q (0.750 against 0.700) but fewer simulations (10 against 30)" in (
+        d.explanation
+    )

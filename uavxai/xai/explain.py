@@ -95,6 +95,11 @@ def _reference(hold: ChildStats, chosen: ChildStats, decision: Decision) -> str:
         if decision.planner == "exhaustive":
             return f"{held} is as good (Q {chosen.q:.3f}), the tie goes to action order"
         return f"{held} is as good (Q {chosen.q:.3f}), {_why_this_one(chosen, hold)}"
+    if hold.q > chosen.q:  # chosen for its simulations, not its value: say so, not "lower"
+        return (
+            f"{held} has the higher Q ({hold.q:.3f} against {chosen.q:.3f}{_risk(hold)}) but "
+            f"fewer simulations ({hold.visits} against {chosen.visits})"
+        )
     return f"{held} scores lower (Q {hold.q:.3f} against {chosen.q:.3f}{_risk(hold)})"
 
 
