@@ -179,3 +179,34 @@ def test_environment_config_for_both_dynamics():
     assert EnvironmentConfig.from_scenario(object()) == EnvironmentConfig()
     with pytest.raises(UserError, match="environment.turbulence"):
         EnvironmentConfig(turbulence="gusty")
+
+
+@pytest.mark.parametrize("bank_deg", [0.0, 20.0])
+def test_planner_model_predicts_the_jsbsim_flight_in_wind(bank_deg):
+    """The planner's encounter model flies airspeed and heading through the wind it knows, so
+    its 10 s prediction lands where JSBSim flew (a 10 m/s cross wind would put a model without
+    it about 100 m off)."""
+    from uavxai.avoidance.model import EncounterModel, Track, ownship_state
+    from uavxai.avoidance.types import Ownship, PlannerConfig
+    from uavxai.vocabulary import HOLD
+
+    wn, we = wind_ne_from(10.0, 270.0)  # from the west, across a northbound aircraft
+    bank = math.radians(bank_deg)
+    r = flown(0.0, (wn, we), seconds=45.0, banks=[(15.0, bank)])
+    lat, lon, h_ft, *_ = r[299]  # t = 30 s: settled in its turn
+    x, y, h = FRAME.to_local(lat, lon, h_ft / FT)
+    end_lat, end_lon, end_h_ft = r[399][:3]  # t = 40 s
+    x1, y1, _ = FRAME.to_local(end_lat, end_lon, end_h_ft / FT)
+    phi, psi, va = r[299][6], r[299][8], r[299][9] * FT
+    own = ownship_state(Ownship(x, y, h, va, psi, bank=bank, phi=phi))
+    errors = []
+    for wind in ((we, wn), (0.0, 0.0)):
+        model = EncounterModel(PlannerConfig(wind_mps=wind, x_bounds=(-1e5, 1e5),
+                                             y_bounds=(-1e5, 1e5)))
+        empty = Track.of(np.zeros((model.substeps(10.0) + 1, 0, 3)))
+        seg = model.fly(own[None], np.array([HOLD]), np.array([1e9, 1e9, h]), 10.0, empty,
+                        cull=False)
+        errors.append(math.dist(seg.end[0][:2], (x1, y1)))
+    with_wind, without = errors
+    assert with_wind < 8.0, errors
+    assert without > 80.0, errors  # the check can tell a model that ignores the wind

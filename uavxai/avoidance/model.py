@@ -8,7 +8,10 @@ Ownship (vectorised over a batch of states): the action changes the bank *comman
 roll-rate limit; the turn is coordinated, ``psi_dot = g tan(phi) / V``; the speed changes at
 the commanded acceleration within the speed limits; the altitude moves towards the goal's
 altitude (the target the JSBSim autopilot holds) at a bounded climb rate. Everything is in
-closed form over a grid of sub-steps, so a segment costs a fixed number of numpy calls.
+closed form over a grid of sub-steps, so a segment costs a fixed number of numpy calls. The
+speed and heading are the air's (airspeed, heading: what the aircraft's own instruments give);
+the steady wind the planner knows (``PlannerConfig.wind_mps``) carries the air mass, and so
+every flown path, over the ground, where the intruders' tracks and the goal are.
 
 Intruders come as a :class:`Track`: their positions at the segment's sub-step instants,
 predicted at constant velocity or, with their estimated turn rate, on a constant-rate turn
@@ -323,7 +326,7 @@ class Children:
     memoised body motion; :meth:`state` places one child in plain Python and
     :func:`place_children` places many at once."""
 
-    origin: complex  # the parent's x + iy
+    origin: complex  # where the air mass carries the parent's x + iy by the segment's end
     rot: complex  # e^{-i psi}: body frame to world
     h_end: float
     psi: float
@@ -394,6 +397,8 @@ class EncounterModel:
         self._roll = math.radians(config.roll_rate_limit_deg_s)
         self._memo: dict[tuple[float, float, float, float], _BodyMotion] = {}
         self._substeps: dict[float, int] = {}
+        self._wind = complex(*config.wind_mps)  # ground drift of the air mass, x + iy m/s
+        self._drifts: dict[tuple[float, int], np.ndarray] = {}
         # What a segment with nothing in reach reports, shared and read-only.
         self._quiet = (
             _frozen(np.full(N_ACTIONS, np.inf)),
@@ -437,8 +442,16 @@ class EncounterModel:
 
     def reach(self, speed: float, duration: float) -> float:
         """The farthest (3-D) an ownship at ``speed`` can get from its start in ``duration``."""
-        v_top = max(self.config.speed_mps[1], speed)
+        v_top = max(self.config.speed_mps[1], speed) + abs(self._wind)
         return math.hypot(v_top, self.config.climb_rate_mps) * duration
+
+    def drift(self, duration: float, n: int) -> np.ndarray:
+        """(n+1,) complex: how far the wind carries an aircraft by each sub-step instant."""
+        key = (float(duration), n)
+        d = self._drifts.get(key)
+        if d is None:
+            d = self._drifts[key] = _frozen(self._wind * (duration / n) * np.arange(n + 1))
+        return d
 
     def leaf_value(self, positions: np.ndarray, goal: np.ndarray) -> np.ndarray:
         """Paper eq 13 for non-terminal states: 1 - d(o, g) / d_max."""
@@ -535,14 +548,16 @@ class EncounterModel:
         rot = complex(math.cos(psi), -math.sin(psi))
         climb = cfg.climb_rate_mps * duration
         h_end = h + min(max(goal[2] - h, -climb), climb)
-        placed = Children(origin, rot, h_end, psi, body)
+        drift = self.drift(duration, n)
+        placed = Children(origin + drift[-1], rot, h_end, psi, body)
 
-        c = origin + body.ball * rot
-        box = (c.real, c.imag, 0.5 * (h + h_end), body.ball_r, 0.5 * abs(h_end - h))
+        half = 0.5 * drift[-1]  # the paths' circle, carried by the wind: centre + half, r + |half|
+        c = origin + body.ball * rot + half
+        box = (c.real, c.imag, 0.5 * (h + h_end), body.ball_r + abs(half), 0.5 * abs(h_end - h))
         near = track.near(box[:3], math.hypot(box[3], box[4]) + cfg.d_min_m)
         if not near.size and not self._near_goal(box, goal) and not self._near_wall(box):
             return placed, Segment(None, *self._quiet, xy=None, hs=None)  # no sample needed
-        xy = origin + body.z * rot
+        xy = origin + body.z * rot + drift
         if h_end == h:
             hs = np.full((1, n + 1), h)
         else:
@@ -555,15 +570,15 @@ class EncounterModel:
         self, states: np.ndarray, bank_cmd: np.ndarray, duration: float
     ) -> tuple[np.ndarray, np.ndarray]:
         """Fly ``states`` (B, 7) for ``duration`` with the bank commanded straight to
-        ``bank_cmd`` (B,) (clamped to the limit), speed and altitude held: how the other
-        aircraft fly. Returns the (n+1, B, 3) positions at the sub-step instants (a Track's
-        layout) and the (B, 7) end states. No event checks."""
+        ``bank_cmd`` (B,) (clamped to the limit), speed and altitude held, in the wind: how
+        the other aircraft fly. Returns the (n+1, B, 3) positions at the sub-step instants
+        (a Track's layout) and the (B, 7) end states. No event checks."""
         n = self.substeps(duration)
         hold = np.full(len(states), 4)  # hold bank, hold speed: the command is bank_cmd itself
         body = self._body(states[:, V], states[:, PHI], bank_cmd, hold, duration, n)
         xy = (states[:, X, None] + 1j * states[:, Y, None]) + body.z * np.exp(
             -1j * states[:, PSI, None]
-        )
+        ) + self.drift(duration, n)
         end = self._end(xy[:, -1], states[:, H], states[:, PSI], body)
         pos = np.stack([xy.real.T, xy.imag.T, np.broadcast_to(states[:, H], xy.T.shape)], axis=-1)
         return pos, end
@@ -573,7 +588,7 @@ class EncounterModel:
         states = np.asarray(states, dtype=float)
         body = self._body(states[:, V], states[:, PHI], states[:, PHI_CMD], actions, duration, n)
         p = states[:, X, None] + 1j * states[:, Y, None]
-        xy = p + body.z * np.exp(-1j * states[:, PSI, None])
+        xy = p + body.z * np.exp(-1j * states[:, PSI, None]) + self.drift(duration, n)
         h0 = states[:, H, None]
         hs = h0 + np.clip(goal[2] - h0, *self._climb_window(duration, n))
         end = self._end(xy[:, -1], hs[:, -1], states[:, PSI], body)
@@ -594,8 +609,8 @@ class EncounterModel:
         return n
 
     def _own_step(self, body: _BodyMotion, dt: float) -> float:
-        """Longest 3-D straight piece of the ownship's sampled path."""
-        return math.hypot(body.step_max, self.config.climb_rate_mps * dt)
+        """Longest 3-D straight piece of the ownship's sampled path (over the ground)."""
+        return math.hypot(body.step_max + abs(self._wind) * dt, self.config.climb_rate_mps * dt)
 
     def _climb_window(self, duration: float, n: int) -> tuple[np.ndarray, np.ndarray]:
         climb = self.config.climb_rate_mps * (duration / n) * np.arange(n + 1)

@@ -14,12 +14,12 @@ from typing import TYPE_CHECKING, Protocol, runtime_checkable
 import numpy as np
 
 from uavxai.errors import UserError
-from uavxai.vocabulary import ACCEL_SIGNS, BANK_SIGNS, N_ACTIONS, action_name
+from uavxai.vocabulary import ACCEL_SIGNS, ACTION_SETS, ACTIONS, BANK_SIGNS, N_ACTIONS, action_name
 
 if TYPE_CHECKING:
     from uavxai.scenario import Scenario
 
-# The 9 actions and their names live in uavxai.vocabulary (one table for every layer).
+# The actions and their names live in uavxai.vocabulary (one table for every layer).
 BANK_CHOICES = BANK_SIGNS  # left, hold, right: one bank_step_deg change of the bank command
 ACCEL_CHOICES = ACCEL_SIGNS  # speed up, hold, slow down: times accel_mps2
 
@@ -95,6 +95,10 @@ class PlannerConfig:
     # when every line meets someone, the search still prefers the one that meets them later,
     # which re-planning can still turn into a miss. 0: every collision is worth 0 (the paper).
     late_collision_value: float = 0.05
+    # The steady wind the planner knows (east, north), m/s, that carries the air mass: the
+    # model flies airspeed and heading through it, so its paths are over the ground, where
+    # the intruders' tracks are (scenario `environment.wind`).
+    wind_mps: tuple[float, float] = (0.0, 0.0)
 
     def __post_init__(self) -> None:
         if self.intruder_model not in INTRUDER_MODELS:
@@ -142,6 +146,8 @@ class PlannerConfig:
     @classmethod
     def from_scenario(cls, scenario: Scenario, **overrides: object) -> PlannerConfig:
         """The planner settings of a scenario: its `avoidance` section, world bounds and seed."""
+        from uavxai.dynamics.environment import EnvironmentConfig  # jsbsim only when asked
+
         a, w = scenario.avoidance, scenario.world
         fields = {
             "x_bounds": tuple(w.x),
@@ -159,10 +165,27 @@ class PlannerConfig:
             "depth": a.mcts.depth,
             "c": a.mcts.c,
             "action_hold_s": a.mcts.action_hold_s,
+            "actions": a.actions,
             "seed": scenario.seed,
+            "wind_mps": EnvironmentConfig.from_scenario(scenario).wind_enu[:2],
         }
         fields.update(overrides)
         return cls(**fields)  # type: ignore[arg-type]
+
+    @property
+    def n_actions(self) -> int:
+        """How many actions the set offers: the first ``n_actions`` of the table."""
+        return ACTION_SETS[self.actions]
+
+    def height_target(self, action: int, goal_h: float) -> float:
+        """The height the autopilot is given with ``action``: the leg's (the goal's) for the
+        paper's nine; a climb (descent) aims at the ceiling (floor) less the margin, so the
+        autopilot climbs at its rate limit until it levels off there."""
+        climb = ACTIONS[action].climb
+        if climb == 0:
+            return goal_h
+        lo, hi = self.h_bounds
+        return hi - self.vertical_margin_m if climb > 0 else lo + self.vertical_margin_m
 
     @property
     def bank_limit_rad(self) -> float:

@@ -63,7 +63,8 @@ class KinematicWorld(ScheduledWorld):
             dtype=float,
         ).reshape(len(self.intruders), STATE_DIM)
         self._vh = 0.0
-        # The air mass moves everyone over the ground; turbulence is JSBSim-only.
+        # Ground velocity = air velocity + wind (the model's paths drift with it already);
+        # turbulence is JSBSim-only.
         self._wind = np.asarray(EnvironmentConfig.from_scenario(scenario).wind_enu, dtype=float)
         self._accel = 0.0
         self._speed_target: float | None = None
@@ -109,14 +110,12 @@ class KinematicWorld(ScheduledWorld):
         h0 = float(self._own[2])
         goal = np.array([_FAR, _FAR, self._alt_target])
         seg = model.fly(self._own[None], np.array([action]), goal, duration, empty, cull=False)
-        self._own = seg.end[0].copy()
-        self._own[:2] += self._wind[:2] * duration
+        self._own = seg.end[0].copy()  # the model flies in the wind (config.wind_mps)
         self._vh = (float(self._own[2]) - h0) / duration
         if len(self._traffic):
             _, self._traffic = model.fly_commanded(
                 self._traffic, self._traffic[:, PHI_CMD], duration
             )
-            self._traffic[:, :2] += self._wind[:2] * duration
 
     def _command_intruder(self, row: int, bank: float, speed: float) -> None:
         self._traffic[row - 1, PHI_CMD] = bank
