@@ -112,7 +112,6 @@ class Episode:
         self.sample_metrics: dict = {}  # per-sample values observers share (rates, users)
         self._overridden = False
         self.nmac = False  # any near mid-air collision (the judge's cylinder) so far
-        self.nmac = False  # any near mid-air collision (the judge's cylinder) so far
         self.wall0 = time.perf_counter()
 
     # ---------------------------------------------------------------------------- phases
