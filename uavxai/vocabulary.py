@@ -7,7 +7,17 @@ thing in a search tree, a sentence, a recording and a results table.
 Actions (the paper's 9): index ``3 * bank_index + accel_index`` with bank (left, hold,
 right) and acceleration (up, hold, down). A bank action moves the *bank command* one
 ``bank_step_deg`` step (hold keeps the current command, which may be a turn); an
-acceleration action commands ``accel_mps2`` along the track.
+acceleration action commands ``accel_mps2`` along the track. These fly the height the
+autopilot holds for the leg (the goal's).
+
+Beyond the paper, two vertical actions follow them (indices 9 and 10): climb and descend at
+the autopilot's climb-rate limit, holding the bank command and the speed. An *action set* is
+a prefix of the table (:data:`ACTION_SETS`): ``paper`` the first 9, ``vertical`` all 11. Two
+actions rather than the 27 products of bank x acceleration x vertical: a tree search's cost
+grows with its branching, and at a fixed simulation budget 27 children would leave each
+root action a third of the simulations it has with 9 (a depth-4 exhaustive tree would grow
+from 7,381 to 551,881 nodes); 11 costs about a fifth more. Combined manoeuvres stay
+reachable along a line: climb, then bank.
 """
 
 from __future__ import annotations
@@ -25,6 +35,8 @@ class Action:
     name: str  # "bank left, speed up"
     phrase: str  # how an explanation names the option: "left and faster", "holding bank and speed"
     verb: str  # what the aircraft did: "banked left and sped up"
+    # +1 climb, -1 descend at the climb-rate limit; 0 fly the leg's height (the paper's nine)
+    climb: int = 0
 
 
 _BANK = (
@@ -57,15 +69,24 @@ def _table() -> tuple[Action, ...]:
                     verb=b_verb + a_verb,
                 )
             )
+    for climb, short, name, phrase, verb in _VERTICAL:
+        out.append(Action(len(out), 0, 0, short, name, phrase, verb, climb))
     return tuple(out)
 
 
+_VERTICAL = (
+    (+1, "climb", "climb, hold bank and speed", "climbing", "climbed"),
+    (-1, "descend", "descend, hold bank and speed", "descending", "descended"),
+)
 ACTIONS: tuple[Action, ...] = _table()
-N_ACTIONS = len(ACTIONS)
+# Action sets: how many of the table's first actions each offers (`avoidance.actions`).
+ACTION_SETS = {"paper": 9, "vertical": len(ACTIONS)}
+N_ACTIONS = ACTION_SETS["paper"]  # the paper's nine: the learned planners' output size
 HOLD = 4  # hold the bank command, hold speed: the reference every other option is compared to
-BANK_SIGNS = tuple(a.bank for a in ACTIONS[::3])  # (-1, 0, +1) by bank index
+BANK_SIGNS = tuple(a.bank for a in ACTIONS[:N_ACTIONS:3])  # (-1, 0, +1) by bank index
 ACCEL_SIGNS = tuple(a.accel for a in ACTIONS[:3])  # (+1, 0, -1) by accel index
 assert ACTIONS[HOLD].bank == 0 and ACTIONS[HOLD].accel == 0
+assert all(a.climb == 0 for a in ACTIONS[:N_ACTIONS])
 
 
 def action_name(a: int) -> str:
@@ -76,7 +97,13 @@ def action_name(a: int) -> str:
 # Planner names: the scenario schema validates against these; the registries
 # (uavxai.avoidance.planners, uavxai.service.stage) provide one factory for each and check at
 # import that they cover exactly these names, so a name is written once.
-AVOIDANCE_PLANNERS = ("mcts", "mcts_fast", "exhaustive", "mvp", "dqn", "safe_dqn", "none")
+AVOIDANCE_PLANNERS = (
+    "mcts", "mcts_fast", "exhaustive", "mcts_vertical", "mvp", "dqn", "safe_dqn", "none",
+)  # fmt: skip
+# The planners that fly the vertical action set: the tree searches (mcts_vertical always
+# does) and `none`, which flies straight to the goal whatever the set. mvp resolves in the
+# horizontal plane and dqn / safe_dqn were trained on the paper's nine: they refuse it.
+VERTICAL_PLANNERS = ("mcts", "mcts_fast", "exhaustive", "mcts_vertical", "none")
 SERVICE_PLANNERS = ("d3qn", "dqn", "random", "grid")
 
 

@@ -20,7 +20,7 @@ import numpy as np
 
 from uavxai.avoidance.mcts import TreeBuilder, TreePlanner
 from uavxai.avoidance.model import GOAL, EncounterModel, Track
-from uavxai.avoidance.types import N_ACTIONS, PlannerConfig, SearchTree
+from uavxai.avoidance.types import PlannerConfig, SearchTree
 
 GOAL_DELAY = 1e-4  # value of reaching the goal one tree level later (a tie-break)
 
@@ -42,7 +42,7 @@ def exhaustive_search(
         for node in frontier:
             if not builder.is_leaf[node]:
                 first = builder.expand(node)
-                nxt.extend(range(first, first + N_ACTIONS))
+                nxt.extend(range(first, first + builder.k))
         frontier = nxt
     value = np.array(builder.value)
     tree = builder.finish()
@@ -58,7 +58,7 @@ def exhaustive_search(
     reached = tree.terminal == GOAL
     value[reached] -= delay * (tree.depth[reached] - 1)
     assert tree.first_child is not None
-    blocks = np.arange(N_ACTIONS)
+    blocks = np.arange(builder.k)
     for d in range(len(tracks) - 1, -1, -1):  # best value below, bottom up
         inner = np.flatnonzero((tree.depth == d) & (tree.first_child >= 0))
         value[inner] = value[tree.first_child[inner, None] + blocks].max(axis=1)

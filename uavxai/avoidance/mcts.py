@@ -12,7 +12,8 @@ never visited first, ties broken at random. ``Q`` is min-max normalised over the
 before it enters the score (as in mctx): the leaf values ``1 - d/d_max`` of neighbouring actions
 differ by about 1 %, and against the paper's exploration term raw values would leave the
 visits uniform, the choice arbitrary and the confidence meaningless. A node met for the
-first time is expanded: its 9 children are computed at once, vectorised, and kept (child
+first time is expanded: its children (one per action of the set: the paper's 9, or 11 with
+climb and descend) are computed at once, vectorised, and kept (child
 states are deterministic, so every later simulation reuses them). The value at the end of
 the walk is 1 for the goal, 0 for a collision or leaving the map, 0.1 for a time-out and
 ``1 - d(o, g) / d_max`` otherwise (eqs 13/14); it is backed up along the walk. Beyond the
@@ -49,7 +50,6 @@ from uavxai.avoidance.model import (
     place_children,
 )
 from uavxai.avoidance.types import (
-    N_ACTIONS,
     ChildStats,
     Decision,
     Goal,
@@ -61,7 +61,6 @@ from uavxai.avoidance.types import (
 )
 
 _VALUE_OF = np.array(TERMINAL_VALUE)
-_OPEN = [math.nan] * N_ACTIONS  # open nodes: scored when a walk first ends there, or never
 
 
 def search(
@@ -81,7 +80,8 @@ def search(
     ``tracks[d]`` holds the intruders during tree level ``d``, i.e. over
     ``[d * hold_s, (d + 1) * hold_s]`` from now; the search depth is ``len(tracks)``.
     ``time_left_s`` is when the episode times out: nodes reached later are time-outs.
-    Node 0 is the root; the children of a node are 9 consecutive nodes in action order.
+    Node 0 is the root; the children of a node are K consecutive nodes in action order (K the
+    action set's size, ``model.actions``).
     """
     depth_limit = len(tracks)
     builder = TreeBuilder(model, root, goal, tracks, hold_s, time_left_s)
@@ -94,7 +94,8 @@ def search(
     draws = rng.random(simulations * depth_limit).tolist()  # tie-breaks, one per step
     draw = 0
     path = [0] * (depth_limit + 1)
-    actions = range(N_ACTIONS)
+    k_actions = builder.k
+    actions = range(k_actions)
     all_actions = list(actions)
     for _ in range(simulations):
         node, length = 0, 1
@@ -106,11 +107,11 @@ def search(
             if n == 0:  # a fresh node: every child unvisited
                 best = all_actions
             else:
-                kids = visits[first : first + N_ACTIONS]
+                kids = visits[first : first + k_actions]
                 if 0 in kids:  # children never visited come first
                     best = [j for j in actions if kids[j] == 0]
                 else:
-                    sums = value_sum[first : first + N_ACTIONS]
+                    sums = value_sum[first : first + k_actions]
                     q = [sums[j] / kids[j] for j in actions]
                     lo, hi = min(q), max(q)
                     # Q normalised over the siblings (as mctx does): leaf values
@@ -283,7 +284,7 @@ def decision_from_tree(
     samples = _remeasure(model, tree, [n for line in lines.values() for n in line], goal, tracks)
     shares = collision_shares(tree) if sampled else None
     children = [
-        _child_stats(tree, a, line, own, cfg, ids, None if shares is None else shares[a])
+        _child_stats(tree, a, line, own, model, goal, ids, None if shares is None else shares[a])
         for a, line in lines.items()
     ]
 
@@ -314,6 +315,7 @@ def decision_from_tree(
     decision = Decision(
         bank_cmd_rad=float(bank_command(own.bank, action, cfg)),
         accel_mps2=float(accel_command(action, cfg)),
+        alt_target_m=height_command(model, action, own, goal),
         action=action,
         children=children,
         tree=tree,
@@ -327,17 +329,28 @@ def decision_from_tree(
     return decision
 
 
+def height_command(
+    model: EncounterModel, action: int, own: Ownship, goal: np.ndarray
+) -> float | None:
+    """The height target ``action`` gives the autopilot with the vertical set (None with the
+    paper's nine: the leg's height, unchanged)."""
+    if not model.vertical:
+        return None
+    return float(model.config.height_target(action, float(goal[2]), own.h))
+
+
 def collision_shares(tree: SearchTree) -> np.ndarray:
-    """(9,) share of each root action's visits that ended in a collision."""
+    """(K,) share of each root action's visits that ended in a collision."""
     hit = np.flatnonzero((tree.terminal == COLLISION) & (tree.visits > 0))
     top = hit.copy()
     for _ in range(int(tree.depth.max(initial=0))):  # climb to the depth-1 ancestor
         top = np.where(tree.depth[top] > 1, tree.parent[top], top)
-    collided = np.bincount(tree.action[top], weights=tree.visits[hit], minlength=N_ACTIONS)
+    k = tree.branching
+    collided = np.bincount(tree.action[top], weights=tree.visits[hit], minlength=k)
     kids = tree.children_of(0)
-    visits = np.zeros(N_ACTIONS)
+    visits = np.zeros(k)
     visits[tree.action[kids]] = tree.visits[kids]
-    return np.divide(collided, visits, out=np.zeros(N_ACTIONS), where=visits > 0)
+    return np.divide(collided, visits, out=np.zeros(k), where=visits > 0)
 
 
 def _remeasure(
@@ -370,10 +383,12 @@ def _child_stats(
     action: int,
     line: list[int],
     own: Ownship,
-    cfg: PlannerConfig,
+    model: EncounterModel,
+    goal: np.ndarray,
     ids: list,
     collision_share: float | None,
 ) -> ChildStats:
+    cfg = model.config
     assert tree.t_closest is not None
     seps = tree.min_sep[line]
     k = int(np.argmin(seps))
@@ -383,6 +398,7 @@ def _child_stats(
         action=action,
         bank_cmd_rad=float(bank_command(own.bank, action, cfg)),
         accel_mps2=float(accel_command(action, cfg)),
+        alt_target_m=height_command(model, action, own, goal),
         visits=int(tree.visits[line[0]]),
         q=float(tree.q[line[0]]),
         predicted_min_separation_m=float(seps[k]),
@@ -396,10 +412,11 @@ def _child_stats(
 class TreeBuilder:
     """A growing search tree over the encounter model (MCTS grows it, exhaustive fills it).
 
-    Node 0 is the root; :meth:`expand` appends a node's 9 children as one block, so the
-    children of a node are ``first_child[node] + action``. What the simulation loop touches
-    one element at a time lives in Python lists, per node (cheap to index from Python);
-    everything else is kept per block of 9 and assembled by :meth:`finish`. ``value`` holds
+    Node 0 is the root; :meth:`expand` appends a node's K children (one per action of the
+    set) as one block, so the children of a node are ``first_child[node] + action``. What the
+    simulation loop touches one element at a time lives in Python lists, per node (cheap to
+    index from Python); everything else is kept per block of K and assembled by
+    :meth:`finish`. ``value`` holds
     what a walk ending at the node scores: its terminal value, or eq 13 for an open node at
     the depth limit, filled in by :meth:`leaf_value` when first needed (nan until then, and
     for open nodes above the limit, where no walk ends).
@@ -410,13 +427,18 @@ class TreeBuilder:
         self.goal = tuple(np.asarray(goal, dtype=float).tolist())  # floats: cheap to index
         self.hold_s, self.time_left_s = hold_s, time_left_s
         self.depth_limit = len(tracks)
+        self.k = k = int(model.actions.size)
+        # Constant runs of K to extend the per-node lists with.
+        self._open = [math.nan] * k  # open nodes: scored when a walk first ends there, or never
+        self._zero, self._zero_f, self._no_child = [0] * k, [0.0] * k, [-1] * k
+        self._true, self._false = [True] * k, [False] * k
         # per node
         self.visits = [0]
         self.value_sum = [0.0]
         self.first_child = [-1]
         self.is_leaf = [False]
         self.value = [math.nan]
-        # per block of 9 children (block 0 is the root alone)
+        # per block of K children (block 0 is the root alone)
         self.block_parent = [-1]
         self.block_depth = [0]
         self.codes = [np.array([NONE], dtype=np.int8)]
@@ -427,8 +449,9 @@ class TreeBuilder:
         self.t_closest = [np.array([math.nan])]
 
     def expand(self, node: int) -> int:
-        """Compute the 9 children of ``node``; returns the index of the first."""
-        block, row = ((node + 8) // 9, (node - 1) % 9) if node else (0, 0)
+        """Compute the K children of ``node``; returns the index of the first."""
+        k = self.k
+        block, row = ((node + k - 1) // k, (node - 1) % k) if node else (0, 0)
         d = self.block_depth[block]
         state = self.placed[block - 1].state(row) if node else self.root
         placed, seg = self.model.expand(state, self.goal, self.hold_s, self.tracks[d])
@@ -441,19 +464,19 @@ class TreeBuilder:
         # Terminal children are scored now; open ones at the depth limit when a walk first
         # ends there (see leaf_value); open ones above it are never scored.
         if at_limit:
-            self.value.extend(self._terminal_values(code, seg, d) if ended else _OPEN)
-            self.is_leaf.extend(_TRUE)
+            self.value.extend(self._terminal_values(code, seg, d) if ended else self._open)
+            self.is_leaf.extend(self._true)
         elif ended:
             self.value.extend(self._terminal_values(code, seg, d))
             self.is_leaf.extend([k != NONE for k in codes])
         else:
-            self.value.extend(_OPEN)
-            self.is_leaf.extend(_FALSE)
+            self.value.extend(self._open)
+            self.is_leaf.extend(self._false)
         first = len(self.visits)
         self.first_child[node] = first
-        self.visits.extend(_ZERO)
-        self.value_sum.extend(_ZERO_F)
-        self.first_child.extend(_NO_CHILD)
+        self.visits.extend(self._zero)
+        self.value_sum.extend(self._zero_f)
+        self.first_child.extend(self._no_child)
         self.block_parent.append(node)
         self.block_depth.append(d + 1)
         self.codes.append(code)
@@ -464,7 +487,7 @@ class TreeBuilder:
         return first
 
     def _terminal_values(self, code: np.ndarray, seg, d: int) -> list[float]:
-        """The values of the 9 children with terminal ``code`` (eq 14), a collision worth
+        """The values of the K children with terminal ``code`` (eq 14), a collision worth
         ``late_collision_value`` times how late in the horizon it comes."""
         values = _VALUE_OF[code]
         late = self.model.config.late_collision_value
@@ -476,18 +499,19 @@ class TreeBuilder:
 
     def leaf_value(self, node: int) -> float:
         """Eq 13 at an open node: 1 - d(o, g) / d_max."""
-        xyz = self.placed[(node - 1) // 9].position((node - 1) % 9)
+        xyz = self.placed[(node - 1) // self.k].position((node - 1) % self.k)
         return 1.0 - math.dist(xyz, self.goal) / self.model.config.d_max
 
     def finish(self) -> SearchTree:
         blocks = len(self.block_parent) - 1
         states = np.concatenate([np.array([self.root]), place_children(self.placed)])
-        depth = np.concatenate([[0], np.repeat(self.block_depth[1:], N_ACTIONS)]).astype(int)
+        k = self.k
+        depth = np.concatenate([[0], np.repeat(self.block_depth[1:], k)]).astype(int)
         # Segment times count from the parent; the tree's from the decision.
         t_closest = np.concatenate(self.t_closest) + np.maximum(depth - 1, 0) * self.hold_s
         return SearchTree(
-            parent=np.concatenate([[-1], np.repeat(self.block_parent[1:], N_ACTIONS)]).astype(int),
-            action=np.concatenate([[-1], np.tile(np.arange(N_ACTIONS), blocks)]).astype(int),
+            parent=np.concatenate([[-1], np.repeat(self.block_parent[1:], k)]).astype(int),
+            action=np.concatenate([[-1], np.tile(np.arange(k), blocks)]).astype(int),
             depth=depth,
             visits=np.array(self.visits),
             value_sum=np.array(self.value_sum),
@@ -498,9 +522,5 @@ class TreeBuilder:
             t_closest=t_closest,
             state=states,
             first_child=np.array(self.first_child),
+            branching=k,
         )
-
-
-# Constant runs of 9 to extend the per-node lists with.
-_ZERO, _ZERO_F, _NO_CHILD = [0] * N_ACTIONS, [0.0] * N_ACTIONS, [-1] * N_ACTIONS
-_TRUE, _FALSE = [True] * N_ACTIONS, [False] * N_ACTIONS

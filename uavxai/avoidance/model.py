@@ -6,12 +6,14 @@ search, its exhaustive reference and the campaign's "ground truth" agree on phys
 Ownship (vectorised over a batch of states): the action changes the bank *command* by one
 ``bank_step`` (clamped to the bank limit); the actual bank follows it at the autopilot's
 roll-rate limit; the turn is coordinated, ``psi_dot = g tan(phi) / V``; the speed changes at
-the commanded acceleration within the speed limits; the altitude moves towards the goal's
-altitude (the target the JSBSim autopilot holds) at a bounded climb rate. Everything is in
-closed form over a grid of sub-steps, so a segment costs a fixed number of numpy calls. The
-speed and heading are the air's (airspeed, heading: what the aircraft's own instruments give);
-the steady wind the planner knows (``PlannerConfig.wind_mps``) carries the air mass, and so
-every flown path, over the ground, where the intruders' tracks and the goal are.
+the commanded acceleration within the speed limits; the altitude moves towards the action's
+height target (:meth:`PlannerConfig.height_target`: the goal's altitude for the paper's nine,
+the ceiling or floor less a margin for the vertical set's climb and descend; what the JSBSim
+autopilot is given) at the bounded climb rate. Everything is in closed form over a grid of
+sub-steps, so a segment costs a fixed number of numpy calls. The speed and heading are the
+air's (airspeed, heading: what the aircraft's own instruments give); the steady wind the
+planner knows (``PlannerConfig.wind_mps``) carries the air mass, and so every flown path, over
+the ground, where the intruders' tracks and the goal are.
 
 Intruders come as a :class:`Track`: their positions at the segment's sub-step instants,
 predicted at constant velocity or, with their estimated turn rate, on a constant-rate turn
@@ -35,8 +37,8 @@ arc), so separation is known at *every* instant:
 
 Speed (a tree search calls this hundreds of times per decision): the ownship's motion
 relative to its start, in its body frame, depends only on (speed, bank, bank command) and the
-action, so :meth:`EncounterModel.expand` memoises it together with a circle bounding all nine
-paths; intruders (found through a grid, see :class:`Track`), goal and walls out of that
+action, so :meth:`EncounterModel.expand` memoises it together with a circle bounding all the
+set's paths; intruders (found through a grid, see :class:`Track`), goal and walls out of that
 circle's reach are skipped, and the children's end states are only placed (:class:`Children`)
 when the search goes on from one, or all at once when it is done (a search continues from
 about one child in nine). Horizontal positions are complex numbers ``x + iy`` so that a
@@ -51,7 +53,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from uavxai.avoidance.types import ACCEL_CHOICES, BANK_CHOICES, N_ACTIONS, Ownship, PlannerConfig
+from uavxai.avoidance.types import Ownship, PlannerConfig
+from uavxai.vocabulary import ACTIONS
 
 G = 9.80665  # m/s^2
 
@@ -65,9 +68,11 @@ OUTCOME_NAMES = ("", "goal", "collision", "out_of_bounds", "timeout")
 # Paper eqs 13/14: goal 1, collision 0, time-out 0.1; leaving the map counts as a failure (0).
 TERMINAL_VALUE = (math.nan, 1.0, 0.0, 0.0, 0.1)
 
-ALL_ACTIONS = np.arange(N_ACTIONS)
-_BANK_SIGN = np.repeat(np.array(BANK_CHOICES, dtype=float), 3)  # by action index
-_ACCEL_SIGN = np.tile(np.array(ACCEL_CHOICES, dtype=float), 3)
+# By action index, over the whole table (the vertical set's climb and descend included).
+_BANK_SIGN = np.array([a.bank for a in ACTIONS], dtype=float)
+_ACCEL_SIGN = np.array([a.accel for a in ACTIONS], dtype=float)
+_CLIMB_SIGN = np.array([a.climb for a in ACTIONS], dtype=int)
+_FIRST_OF_CLIMB = {a.climb: a.index for a in reversed(ACTIONS)}  # an action of each kind
 _EVENT_CODES = np.array([COLLISION, OUT_OF_BOUNDS, GOAL], dtype=np.int8)
 
 
@@ -322,13 +327,13 @@ class _BodyMotion:
 
 @dataclass(slots=True)
 class Children:
-    """Where the 9 children of one state end, kept as the parent's placement of the
-    memoised body motion; :meth:`state` places one child in plain Python and
+    """Where the children of one state (one per action of the set) end, kept as the parent's
+    placement of the memoised body motion; :meth:`state` places one child in plain Python and
     :func:`place_children` places many at once."""
 
     origin: complex  # where the air mass carries the parent's x + iy by the segment's end
     rot: complex  # e^{-i psi}: body frame to world
-    h_end: float
+    h_end: tuple[float, ...]  # per action (the vertical set's climb and descend differ)
     psi: float
     body: _BodyMotion
 
@@ -336,18 +341,20 @@ class Children:
         """The child's state row (as a list)."""
         z_end, dpsi, v_end, phi_end, phi_cmd = self.body.rows[action]
         p = self.origin + z_end * self.rot
-        return [p.real, p.imag, self.h_end, v_end, (self.psi + dpsi) % _TAU, phi_end, phi_cmd]
+        h = self.h_end[action]
+        return [p.real, p.imag, h, v_end, (self.psi + dpsi) % _TAU, phi_end, phi_cmd]
 
     def position(self, action: int) -> tuple[float, float, float]:
         p = self.origin + self.body.rows[action][0] * self.rot
-        return p.real, p.imag, self.h_end
+        return p.real, p.imag, self.h_end[action]
 
 
 _TAU = 2.0 * math.pi
 
 
 def place_children(blocks: Sequence[Children]) -> np.ndarray:
-    """(9 * len(blocks), 7) end states of every child of ``blocks``, in order, vectorised."""
+    """(K * len(blocks), 7) end states of every child of ``blocks`` (K per block), in order,
+    vectorised."""
     if not blocks:
         return np.zeros((0, STATE_DIM))
     origin = np.array([b.origin for b in blocks])
@@ -359,7 +366,7 @@ def place_children(blocks: Sequence[Children]) -> np.ndarray:
     end = np.stack([b.template for b in body])
     end[:, :, X] = xy.real
     end[:, :, Y] = xy.imag
-    end[:, :, H] = h_end[:, None]
+    end[:, :, H] = h_end
     end[:, :, PSI] = np.mod(psi[:, None] + np.stack([b.dpsi for b in body]), _TAU)
     return end.reshape(-1, STATE_DIM)
 
@@ -399,13 +406,17 @@ class EncounterModel:
         self._substeps: dict[float, int] = {}
         self._wind = complex(*config.wind_mps)  # ground drift of the air mass, x + iy m/s
         self._drifts: dict[tuple[float, int], np.ndarray] = {}
+        k = config.n_actions
+        self.actions = np.arange(k)  # the action set: the first k of the table
+        self._climbs = _CLIMB_SIGN[:k].tolist()
+        self.vertical = any(self._climbs)
         # What a segment with nothing in reach reports, shared and read-only.
         self._quiet = (
-            _frozen(np.full(N_ACTIONS, np.inf)),
-            _frozen(np.full(N_ACTIONS, -1)),
-            _frozen(np.zeros(N_ACTIONS)),
-            _frozen(np.zeros(N_ACTIONS, dtype=np.int8)),
-            _frozen(np.full(N_ACTIONS, np.nan)),
+            _frozen(np.full(k, np.inf)),
+            _frozen(np.full(k, -1)),
+            _frozen(np.zeros(k)),
+            _frozen(np.zeros(k, dtype=np.int8)),
+            _frozen(np.full(k, np.nan)),
         )
 
     # ------------------------------------------------------------------------------- helpers
@@ -516,7 +527,8 @@ class EncounterModel:
     def fly_all_actions(
         self, state: np.ndarray, goal: Sequence[float], duration: float, track: Track
     ) -> Segment:
-        """The 9 children of one state, in action order: ``fly`` with every action, memoised.
+        """The children of one state, one per action of the set, in action order: ``fly``
+        with every action, memoised.
 
         When nothing (intruder, goal, wall) is within reach, the sub-step positions are not
         computed: ``xy``, ``hs`` and ``samples`` are then None.
@@ -542,24 +554,33 @@ class EncounterModel:
         if body is None:
             if len(self._memo) > 50_000:
                 self._memo.clear()
-            v_, phi_, cmd_ = (np.full(N_ACTIONS, k) for k in key[:3])
-            body = self._memo[key] = self._body(v_, phi_, cmd_, ALL_ACTIONS, duration, n)
+            v_, phi_, cmd_ = (np.full(self.actions.size, k) for k in key[:3])
+            body = self._memo[key] = self._body(v_, phi_, cmd_, self.actions, duration, n)
         origin = complex(x, y)
         rot = complex(math.cos(psi), -math.sin(psi))
         climb = cfg.climb_rate_mps * duration
-        h_end = h + min(max(goal[2] - h, -climb), climb)
+        if self.vertical:  # climb and descend have their own height targets
+            target = {c: self._target(c, goal[2], h) for c in (0, 1, -1)}
+            h_of = {c: h + min(max(t - h, -climb), climb) for c, t in target.items()}
+            h_ends = tuple(h_of[c] for c in self._climbs)
+        else:
+            h_ends = (h + min(max(goal[2] - h, -climb), climb),) * self.actions.size
         drift = self.drift(duration, n)
-        placed = Children(origin + drift[-1], rot, h_end, psi, body)
+        placed = Children(origin + drift[-1], rot, h_ends, psi, body)
 
         half = 0.5 * drift[-1]  # the paths' circle, carried by the wind: centre + half, r + |half|
         c = origin + body.ball * rot + half
-        box = (c.real, c.imag, 0.5 * (h + h_end), body.ball_r + abs(half), 0.5 * abs(h_end - h))
+        h_lo, h_hi = min(h, *h_ends), max(h, *h_ends)
+        box = (c.real, c.imag, 0.5 * (h_lo + h_hi), body.ball_r + abs(half), 0.5 * (h_hi - h_lo))
         near = track.near(box[:3], math.hypot(box[3], box[4]) + cfg.d_min_m)
         if not near.size and not self._near_goal(box, goal) and not self._near_wall(box):
             return placed, Segment(None, *self._quiet, xy=None, hs=None)  # no sample needed
         xy = origin + body.z * rot + drift
-        if h_end == h:
+        if h_lo == h_hi:
             hs = np.full((1, n + 1), h)
+        elif self.vertical:
+            targets = np.array([target[c] for c in self._climbs])[:, None]
+            hs = h + np.clip(targets - h, *self._climb_window(duration, n))
         else:
             hs = h + np.clip(goal[2] - h, *self._climb_window(duration, n))[None]
         own_step = self._own_step(body, duration / n)
@@ -590,7 +611,10 @@ class EncounterModel:
         p = states[:, X, None] + 1j * states[:, Y, None]
         xy = p + body.z * np.exp(-1j * states[:, PSI, None]) + self.drift(duration, n)
         h0 = states[:, H, None]
-        hs = h0 + np.clip(goal[2] - h0, *self._climb_window(duration, n))
+        target = goal[2]
+        if self.vertical:
+            target = self.height_targets(actions, goal[2], states[:, H])[:, None]
+        hs = h0 + np.clip(target - h0, *self._climb_window(duration, n))
         end = self._end(xy[:, -1], hs[:, -1], states[:, PSI], body)
         # The cylinder: centred on the samples' box, radius to the farthest, half-height.
         lo = np.array([xy.real.min(), xy.imag.min(), hs.min()])
@@ -599,6 +623,18 @@ class EncounterModel:
         r_xy = float(np.abs(xy - complex(cx, cy)).max())
         box: _Cylinder = (cx, cy, ch, r_xy, 0.5 * float(hi[2] - lo[2]))
         return body, xy, hs, end, box
+
+    def _target(self, climb: int, goal_h: float, h: float) -> float:
+        """The height target of an action that climbs (+1), descends (-1) or flies the
+        leg's height (0): :meth:`PlannerConfig.height_target`."""
+        return self.config.height_target(_FIRST_OF_CLIMB[climb], goal_h, h)
+
+    def height_targets(self, actions, goal_h: float, h: np.ndarray) -> np.ndarray:
+        """(B,) the height target of each row's action from heights ``h`` (B,)."""
+        up = np.maximum(self._target(1, goal_h, -math.inf), h)
+        down = np.minimum(self._target(-1, goal_h, math.inf), h)
+        climb = _CLIMB_SIGN[np.asarray(actions)]
+        return np.where(climb > 0, up, np.where(climb < 0, down, goal_h))
 
     def _check(self, duration: float, track: Track) -> int:
         n = self.substeps(duration)

@@ -19,7 +19,7 @@ from uavxai.avoidance.mcts import MCTSPlanner
 from uavxai.avoidance.mvp import MVPPlanner
 from uavxai.avoidance.types import Planner, PlannerConfig
 from uavxai.errors import UserError
-from uavxai.vocabulary import AVOIDANCE_PLANNERS
+from uavxai.vocabulary import AVOIDANCE_PLANNERS, VERTICAL_PLANNERS
 
 # The paper's Tree-fast: few simulations, a shallow tree, short holds.
 TREE_FAST = {"simulations": 40, "depth": 2, "action_hold_s": 2.0}
@@ -49,6 +49,13 @@ def fast_config(config: PlannerConfig) -> PlannerConfig:
 register("mcts")(lambda config, checkpoint: MCTSPlanner(config))
 register("mcts_fast")(lambda config, checkpoint: MCTSPlanner(fast_config(config), name="mcts_fast"))
 register("exhaustive")(lambda config, checkpoint: ExhaustivePlanner(config))
+# MCTS over the vertical action set whatever `avoidance.actions` says: compared beside `mcts`
+# in one campaign (`--methods mcts,mcts_vertical`).
+register("mcts_vertical")(
+    lambda config, checkpoint: MCTSPlanner(
+        dataclasses.replace(config, actions="vertical"), name="mcts_vertical"
+    )
+)
 register("mvp")(lambda config, checkpoint: MVPPlanner(config))
 
 
@@ -84,7 +91,20 @@ def make_planner(
         raise UserError(
             f"unknown avoidance planner '{name}'; choose one of {', '.join(PLANNERS)}."
         )
-    return factory(config or PlannerConfig(), checkpoint)
+    config = config or PlannerConfig()
+    check_action_set(name, config.actions)
+    return factory(config, checkpoint)
+
+
+def check_action_set(planner: str, actions: str) -> None:
+    """A UserError if ``planner`` cannot fly the action set ``actions``."""
+    if actions != "paper" and planner not in VERTICAL_PLANNERS:
+        raise UserError(
+            f"avoidance.actions: {actions} is flown by {', '.join(VERTICAL_PLANNERS)}; "
+            f"planner '{planner}' flies only the paper set (mvp resolves in the horizontal "
+            "plane, dqn and safe_dqn were trained on the nine). Use avoidance.actions: paper "
+            "with it."
+        )
 
 # The registry provides every planner the vocabulary names, and nothing else.
 assert tuple(sorted(PLANNERS)) == tuple(sorted(AVOIDANCE_PLANNERS)), sorted(PLANNERS)

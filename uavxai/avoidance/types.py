@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import numpy as np
@@ -99,8 +99,14 @@ class PlannerConfig:
     # model flies airspeed and heading through it, so its paths are over the ground, where
     # the intruders' tracks are (scenario `environment.wind`).
     wind_mps: tuple[float, float] = (0.0, 0.0)
+    # The action set (uavxai.vocabulary.ACTION_SETS): "paper" the nine, "vertical" adds climb
+    # and descend at climb_rate_mps. A climb (descent) gives the autopilot a height target
+    # this far below the flight area's ceiling (above its floor), where it levels off.
+    actions: str = "paper"
+    vertical_margin_m: float = 20.0
 
     def __post_init__(self) -> None:
+        self._check_actions()
         if self.intruder_model not in INTRUDER_MODELS:
             raise UserError(
                 f"PlannerConfig.intruder_model must be one of {', '.join(INTRUDER_MODELS)}, "
@@ -143,6 +149,19 @@ class PlannerConfig:
         if self.accel_mps2 < 0 or self.c < 0:
             raise UserError("PlannerConfig.accel_mps2 and PlannerConfig.c must be >= 0.")
 
+    def _check_actions(self) -> None:
+        if self.actions not in ACTION_SETS:
+            raise UserError(
+                f"PlannerConfig.actions must be one of {', '.join(ACTION_SETS)}, "
+                f"got {self.actions!r}."
+            )
+        lo, hi = self.h_bounds
+        if not 0 <= self.vertical_margin_m < 0.5 * (hi - lo):
+            raise UserError(
+                "PlannerConfig.vertical_margin_m must be >= 0 and below half the height band "
+                f"{self.h_bounds}, got {self.vertical_margin_m}."
+            )
+
     @classmethod
     def from_scenario(cls, scenario: Scenario, **overrides: object) -> PlannerConfig:
         """The planner settings of a scenario: its `avoidance` section, world bounds and seed."""
@@ -177,15 +196,18 @@ class PlannerConfig:
         """How many actions the set offers: the first ``n_actions`` of the table."""
         return ACTION_SETS[self.actions]
 
-    def height_target(self, action: int, goal_h: float) -> float:
-        """The height the autopilot is given with ``action``: the leg's (the goal's) for the
-        paper's nine; a climb (descent) aims at the ceiling (floor) less the margin, so the
-        autopilot climbs at its rate limit until it levels off there."""
+    def height_target(self, action: int, goal_h: float, h: float) -> float:
+        """The height the autopilot is given with ``action`` at height ``h``: the leg's (the
+        goal's) for the paper's nine; a climb (descent) aims at the ceiling (floor) less
+        ``vertical_margin_m``, so the autopilot climbs at its rate limit until it levels off
+        there (above that band a climb holds the height, as a descent below it)."""
         climb = ACTIONS[action].climb
-        if climb == 0:
-            return goal_h
         lo, hi = self.h_bounds
-        return hi - self.vertical_margin_m if climb > 0 else lo + self.vertical_margin_m
+        if climb > 0:
+            return max(hi - self.vertical_margin_m, h)
+        if climb < 0:
+            return min(lo + self.vertical_margin_m, h)
+        return goal_h
 
     @property
     def bank_limit_rad(self) -> float:
@@ -205,10 +227,29 @@ class PlannerConfig:
 
 
 @dataclass(frozen=True)
-class ChildStats:
-    """What the search learnt about one root action."""
+class Meeting:
+    """Where a line conflicts: the first intruder it comes inside the separation it needs
+    from (``d_min`` plus the margin that intruder's possible manoeuvres and track error add,
+    see :func:`uavxai.avoidance.model.intruder_margin`)."""
 
-    action: int  # 0..8
+    intruder: int | str
+    time_s: float  # from the decision to the start of the sub-step where it comes inside, s
+    miss_m: float  # the closest the line comes to that intruder's predicted track, m
+    needed_m: float  # the separation it needed there, m
+
+
+@dataclass(frozen=True)
+class ChildStats:
+    """What the search learnt about one root action.
+
+    The separations are predictions: the ownship flying the line (the action, then the
+    search's most visited continuation), every intruder flying on as predicted (its tracked
+    velocity, or its turn with ``intruder_model`` ct/reachable), without margins; a line
+    that collides is measured to the end of its last level (its predicted miss), one that
+    reaches the goal or leaves the area up to there.
+    """
+
+    action: int  # index into uavxai.vocabulary.ACTIONS (0..8 the paper's, 9..10 vertical)
     bank_cmd_rad: float  # the bank command this action leads to
     accel_mps2: float
     visits: int
@@ -218,6 +259,16 @@ class ChildStats:
     time_to_closest_s: float | None = None  # from the decision, s
     outcome: str = ""  # how that line ends: goal, collision, out_of_bounds, timeout or "" (open)
     collision_share: float | None = None  # MCTS: share of this action's simulations that collided
+    alt_target_m: float | None = None  # the height target it gives (None: the paper set's)
+    meets: Meeting | None = None  # the line's first conflict (None: it has none)
+    # the action whose manoeuvre this one flies once its commands are clamped (a bank step
+    # beyond the bank limit, a speed change beyond the speed limit); None: itself
+    effect: int | None = None
+
+    @property
+    def flies(self) -> int:
+        """The action this one really flies (itself unless clamped into another)."""
+        return self.action if self.effect is None else self.effect
 
 
 @dataclass
@@ -236,8 +287,10 @@ class SearchTree:
     t_closest: np.ndarray | None = None  # (M,) s from the decision to that closest approach
     state: np.ndarray | None = None  # (M, 7) encounter-model state (x, y, h, V, psi, phi, cmd)
     # (M,) index of a node's first child when children are stored as consecutive blocks of
-    # N_ACTIONS (as the search builds them), -1 without children; None: look them up by parent
+    # ``branching`` (as the search builds them), -1 without children; None: look them up by
+    # parent
     first_child: np.ndarray | None = None
+    branching: int = N_ACTIONS  # children per expanded node: the action set's size
 
     @property
     def q(self) -> np.ndarray:
@@ -250,7 +303,9 @@ class SearchTree:
     def children_of(self, node: int) -> np.ndarray:
         if self.first_child is not None:
             first = int(self.first_child[node])
-            return np.arange(first, first + N_ACTIONS) if first >= 0 else np.zeros(0, dtype=int)
+            if first < 0:
+                return np.zeros(0, dtype=int)
+            return np.arange(first, first + self.branching)
         return np.flatnonzero(self.parent == node)
 
     def best_child(self, node: int) -> int | None:
@@ -302,12 +357,13 @@ class SearchTree:
 class Decision:
     """One decision of a planner (SPEC §7), with what it is based on.
 
-    ``predicted_min_separation_m`` is the "trust" figure: the smallest 3-D separation the
-    planner predicts over the *next decision period* only (the chosen action held for
-    ``decision_period_s``, every intruder on its predicted track (constant velocity, or its
-    turn with ``intruder_model`` ct/reachable; no margin added), closest approach solved
-    exactly), i.e. over exactly what the dynamics fly before the next decision.
-    ``branch_min_separation_m`` covers the chosen branch's whole planned line instead.
+    ``predicted_min_separation_m`` is the smallest 3-D separation the planner predicts over
+    the *next decision period* only (the chosen action held for ``decision_period_s``, every
+    intruder on its predicted track (constant velocity, or its turn with ``intruder_model``
+    ct/reachable; no margin added), closest approach solved exactly).
+    ``branch_min_separation_m`` is what the explanation quotes and the trust figure checks:
+    the same prediction over the chosen branch's whole planned line, which reaches
+    ``branch_horizon_s`` ahead (see :class:`ChildStats`).
     """
 
     bank_cmd_rad: float
@@ -320,11 +376,16 @@ class Decision:
     confidence: float = 0.0  # share of root visits that went to the chosen action
     ms: float = 0.0  # planner wall time
     branch_min_separation_m: float = math.inf  # along the chosen line, depth x action_hold_s
+    branch_horizon_s: float = 0.0  # how far ahead the chosen line reaches, s
     planner: str = ""  # which planner decided (mcts, exhaustive, none, ...)
     d_min_m: float = 50.0  # the collision distance the planner worked with
     # (explanation, counterfactual) in words. Planners return evidence and leave this None;
     # the words are made on first use by the narrator uavxai.xai registers (set_narrator).
     words: tuple[str, str] | None = None
+    # The vertical command: the height target the autopilot is given with this action (the
+    # vertical action set; a climb aims at the ceiling and climbs at the rate limit). None:
+    # unchanged, the leg's height (the paper's nine).
+    alt_target_m: float | None = None
 
     @property
     def explanation(self) -> str:
@@ -350,6 +411,7 @@ class Decision:
                 "accel_mps2": self.accel_mps2,
                 "index": int(self.action),
                 "name": action_name(self.action),
+                "alt_target_m": self.alt_target_m,
             },
             "children": [
                 {
@@ -358,6 +420,7 @@ class Decision:
                         "bank_cmd_rad": c.bank_cmd_rad,
                         "accel_mps2": c.accel_mps2,
                         "name": action_name(c.action),
+                        "alt_target_m": c.alt_target_m,
                     },
                     "visits": int(c.visits),
                     "q": float(c.q),
@@ -366,6 +429,8 @@ class Decision:
                     "time_to_closest_s": c.time_to_closest_s,
                     "outcome": c.outcome,
                     "collision_share": c.collision_share,
+                    "meets": None if c.meets is None else asdict(c.meets),
+                    "flies": action_name(c.flies),
                 }
                 for c in self.children
             ],
@@ -374,6 +439,7 @@ class Decision:
             "confidence": self.confidence,
             "predicted_min_separation_m": _finite(self.predicted_min_separation_m),
             "branch_min_separation_m": _finite(self.branch_min_separation_m),
+            "branch_horizon_s": self.branch_horizon_s,
             "d_min_m": self.d_min_m,
             "ms": self.ms,
         }
@@ -412,7 +478,8 @@ def check_plan_inputs(own: Ownship, intruders: Sequence[Intruder], goal: Goal) -
 class Planner(Protocol):
     """What every avoidance planner offers (MCTS, the baselines, the learned ones).
 
-    ``plan`` sees the world as it is now and returns one of the 9 actions as a Decision.
+    ``plan`` sees the world as it is now and returns one of its action set's actions (the
+    paper's 9, or with ``config.actions == "vertical"`` 11) as a Decision.
     ``step`` is how many decisions the episode has already taken, so that a planner can see a
     time-out (``max_steps``) coming; library users who do not count may leave it at 0.
     ``reset`` re-seeds whatever randomness the planner uses: same seed, same decisions.
