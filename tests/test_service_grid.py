@@ -11,7 +11,7 @@ from uavxai.comms.channel import Channel
 from uavxai.comms.service_env import SearchSpace, levels_to_power
 from uavxai.errors import UserError
 from uavxai.scenario import default_scenario
-from uavxai.service.grid import optimal_levels, optimal_objective, solve_grid
+from uavxai.service.grid import _batched, optimal_levels, optimal_objective, solve_grid
 
 
 def brute_force(channel: Channel, gain: np.ndarray, L: int) -> float:
@@ -84,3 +84,53 @@ def test_grid_refuses_sizes_it_cannot_solve_in_time():
     sc = default_scenario(comms={"users": {"count": 40}, "power_levels": 8})
     with pytest.raises(UserError, match="takes up to K = 1[0-9] users"):
         solve_grid(Channel.from_scenario(sc), SearchSpace.from_scenario(sc), 8)
+
+
+@pytest.mark.parametrize("access", ["shared", "ofdma"])
+def test_capped_power_dp_brackets_the_optimum(access):
+    # The capped DP the branch-and-bound prunes with: an upper bound, and exact below the cap.
+    k, L = 5, 4
+    sc = default_scenario(
+        seed=7, comms={"users": {"count": k}, "access": access, "power_levels": L,
+                       "qos_rate_bps": 2e5}
+    )
+    ch = Channel.from_scenario(sc)
+    rng = np.random.default_rng(3)
+    positions = np.column_stack(
+        [rng.uniform(750, 1250, 8), rng.uniform(750, 1250, 8), rng.uniform(50, 300, 8)]
+    )
+    gains = ch.mean_gain(positions)
+    levels = np.array(list(itertools.product(range(L), repeat=k)))
+    rates = ch.rate(gains[:, None, :], levels_to_power(levels, ch.p_max_w, L)[None])
+    failures = (rates < ch.qos_rate_bps).sum(-1)  # (positions, allocations)
+    objective = rates.sum(-1) / 2.0**failures
+    for cap in range(k + 1):
+        upper, lower = _batched(ch, gains, L, cap)
+        below = np.where(failures < cap, objective, -np.inf).max(axis=1)
+        assert np.all(upper >= objective.max(axis=1) * (1 - 1e-12))
+        np.testing.assert_allclose(lower, below, rtol=1e-12)
+
+
+@pytest.mark.parametrize(("access", "k"), [("shared", 4), ("ofdma", 4), ("shared", 6)])
+def test_hinted_branch_and_bound_is_still_the_lattice_optimum(access, k):
+    # A hint only seeds the incumbent: good, bad or none, the answer is the exhaustive maximum.
+    sc = default_scenario(
+        seed=11,
+        comms={
+            "users": {"count": k, "region": {"x": [800, 1200], "y": [850, 1150]}},
+            "access": access,
+            "power_levels": 4,
+            "environment": "highrise_urban",
+        },
+        service={"step_m": 40},
+    )
+    ch, space = Channel.from_scenario(sc), SearchSpace.from_scenario(sc)
+    xs, ys, hs = space.axes()
+    mesh = np.stack(np.meshgrid(xs, ys, hs, indexing="ij"), axis=-1).reshape(-1, 3)
+    values = optimal_objective(ch, ch.mean_gain(mesh), 4)
+    best, worst = mesh[values.argmax()], mesh[values.argmin()]
+    for hint in (None, best, worst, best + 13.0):
+        result = solve_grid(ch, space, 4, hint=hint)
+        assert result.objective == pytest.approx(values.max(), rel=1e-12)
+        achieved = ch.evaluate(result.position, result.power_w).objective
+        assert float(achieved) == pytest.approx(values.max(), rel=1e-12)

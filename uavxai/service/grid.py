@@ -32,6 +32,7 @@ from uavxai.errors import UserError
 DP_BYTES_PER_CALL = 4_000_000  # positions per vectorised DP call: a few MB, stays in cache
 MAX_DP_COST = 20.0  # relative to K = 10, L = 6 (5 ms a position, 5-20 s a grid); beyond: hours
 INITIAL_BOX = 8  # lattice points per side of the first boxes
+S_BLOCK = 5  # level totals per DP block (one level range: few sums wasted, few calls)
 
 
 def level_rates(
@@ -58,57 +59,100 @@ def level_rates(
 
 
 def _knapsack(
-    rates: np.ndarray, fails: np.ndarray, keep_choices: bool = False
-) -> tuple[np.ndarray, tuple[int, int] | None, list[np.ndarray]]:
+    rates: np.ndarray, fails: np.ndarray, keep_choices: bool = False, cap: int | None = None
+) -> tuple[np.ndarray, np.ndarray, tuple[int, int] | None, list[np.ndarray]]:
     """Exact DP over users: the best objective per position ``(N,)``; with ``keep_choices``
-    (N = 1) also the best ``(S index, lambda)`` and the per-user choice tables to backtrack."""
+    (N = 1) also the best ``(S index, lambda)`` and the per-user choice tables to backtrack.
+
+    ``cap`` (< K) merges every allocation with ``cap`` or more users below QoS into one state
+    scored as if exactly ``cap`` failed: the first array returned is then an upper bound (a
+    larger lambda only divides by more), the second the exact best over allocations with
+    fewer than ``cap`` failures (an objective some allocation achieves); uncapped both are
+    the exact optimum. The DP's work is proportional to the number of lambda states.
+    """
     N, nS, K, L = rates.shape
-    s_max = K * (L - 1)
+    cap = K if cap is None else min(cap, K)
+    if keep_choices and cap < K:
+        raise ValueError("the allocation is only recovered from the uncapped DP")
+    final = np.empty((N, nS, cap + 1))  # best sum rate per (S, lambda state)
+    choices: list[np.ndarray] = []
+    # Totals S in blocks: a block only needs the level sums that can still end inside it.
+    size = nS if keep_choices else S_BLOCK
+    for first in range(0, nS, size):
+        last = min(first + size, nS)
+        final[:, first:last], choices = _knapsack_block(
+            rates[:, first:last], fails[:, first:last], first + 1, cap, keep_choices
+        )
+    objective = final / 2.0 ** np.arange(cap + 1)
+    exact = objective[..., : cap if cap < K else cap + 1].reshape(N, -1)
+    objective = objective.reshape(N, -1)
+    flat = objective.argmax(axis=1)
+    best = objective[np.arange(N), flat]
+    where = divmod(int(flat[0]), cap + 1) if keep_choices else None
+    return best, exact.max(axis=1, initial=-np.inf), where, choices
+
+
+def _knapsack_block(
+    rates: np.ndarray, fails: np.ndarray, s_first: int, cap: int, keep_choices: bool
+) -> tuple[np.ndarray, list[np.ndarray]]:
+    """The DP for totals ``S = s_first .. s_first + nB - 1``: best sum rate ``(N, nB, cap+1)``."""
+    N, nB, K, L = rates.shape
+    s_last = s_first + nB - 1
+    width = min(s_last, K * (L - 1)) + 1
     # value[n, S, s, lam]: the best sum rate of the users so far, with levels adding up to s
-    # and lam of them below QoS, knowing that all K users will add up to S.
-    value = np.full((N, nS, s_max + 1, K + 1), -np.inf)
+    # and lam of them below QoS (lam = cap: cap or more), knowing all K users add up to S.
+    value = np.full((N, nB, width, cap + 1), -np.inf)
     value[:, :, 0, 0] = 0.0
     choices: list[np.ndarray] = []
     for j in range(K):
-        reach = j * (L - 1)  # after j users: level sum <= reach, failures <= j
-        src = value[:, :, : reach + 1, : j + 1]
-        cand = np.empty_like(src)
+        # Sums below lo cannot reach s_first with the K - j users left; above hi are unused.
+        lo, hi = max(0, s_first - (K - j) * (L - 1)), min(j * (L - 1), s_last)
+        lams = min(j, cap) + 1  # after j users, lam < lams
         new = np.full_like(value, -np.inf)
         choice = np.zeros(value.shape, dtype=np.int8) if keep_choices else None
         for level in range(L):
+            n = min(hi + level, width - 1) - (lo + level) + 1
+            if n <= 0:
+                continue
+            src = value[:, :, lo : lo + n, :lams]
             rate, fail = rates[:, :, j, level], fails[:, :, j, level]
-            # A user that meets QoS keeps lam, one that misses it moves to lam + 1.
-            for lam_shift, bias in (
-                (0, np.where(fail, -np.inf, rate)),
-                (1, np.where(fail, rate, -np.inf)),
-            ):
-                np.add(src, bias[:, :, None, None], out=cand)
-                dst = new[:, :, level : level + reach + 1, lam_shift : lam_shift + j + 1]
+            biases = (np.where(fail, -np.inf, rate), np.where(fail, rate, -np.inf))
+            # A user that meets QoS keeps lam, one that misses it moves to lam + 1 (capped).
+            for shift, bias in enumerate(biases):
+                cand = src + bias[:, :, None, None]
+                block = new[:, :, lo + level : lo + level + n]
+                moved = min(lams, cap + 1 - shift)  # source lams that land on lam + shift
+                dst = block[..., shift : shift + moved]
                 if choice is not None:
-                    view = choice[:, :, level : level + reach + 1, lam_shift : lam_shift + j + 1]
-                    view[cand > dst] = level
-                np.maximum(dst, cand, out=dst)
+                    view = choice[:, :, lo + level : lo + level + n, shift : shift + moved]
+                    view[cand[..., :moved] > dst] = level
+                np.maximum(dst, cand[..., :moved], out=dst)
+                if moved < lams:  # lam = cap fails again: stays in the merged state
+                    np.maximum(block[..., cap:], cand[..., cap:], out=block[..., cap:])
         value = new
         if choice is not None:
             choices.append(choice)
-    final = value[:, np.arange(nS), np.arange(1, nS + 1), :]  # (N, nS, K + 1)
-    objective = (final / 2.0 ** np.arange(K + 1)).reshape(N, -1)
-    flat = objective.argmax(axis=1)
-    best = objective[np.arange(N), flat]
-    where = divmod(int(flat[0]), K + 1) if keep_choices else None
-    return best, where, choices
+    return value[:, np.arange(nB), np.arange(s_first, s_last + 1), :], choices
+
+
+def _batched(
+    channel: Channel, gain: np.ndarray, power_levels: int, cap: int | None
+) -> tuple[np.ndarray, np.ndarray]:
+    """``_knapsack`` over rows of ``gain (N, K)`` in batches of a few MB."""
+    gain = np.atleast_2d(gain)
+    s_max = channel.k * (power_levels - 1)
+    lams = channel.k + 1 if cap is None else min(cap, channel.k) + 1
+    batch = max(1, DP_BYTES_PER_CALL // (8 * s_max * (s_max + 1) * lams))
+    upper, lower = np.empty(len(gain)), np.empty(len(gain))
+    for i in range(0, len(gain), batch):
+        rates, fails = level_rates(channel, gain[i : i + batch], power_levels)
+        upper[i : i + batch], lower[i : i + batch] = _knapsack(rates, fails, cap=cap)[:2]
+    return upper, lower
 
 
 def optimal_objective(channel: Channel, gain: np.ndarray, power_levels: int) -> np.ndarray:
     """The best objective over all discrete power levels for each row of ``gain (N, K)``."""
-    gain = np.atleast_2d(gain)
-    s_max = channel.k * (power_levels - 1)
-    batch = max(1, DP_BYTES_PER_CALL // (8 * s_max * (s_max + 1) * (channel.k + 1)))
-    out = np.empty(len(gain))
-    for i in range(0, len(gain), batch):
-        rates, fails = level_rates(channel, gain[i : i + batch], power_levels)
-        out[i : i + batch] = _knapsack(rates, fails)[0]
-    return out
+    return _batched(channel, gain, power_levels, None)[0]
 
 
 def dp_cost(k: int, power_levels: int) -> float:
@@ -121,7 +165,7 @@ def optimal_levels(
 ) -> tuple[np.ndarray, float]:
     """The optimal integer levels ``(K,)`` for one position's gains ``(K,)`` and the objective."""
     rates, fails = level_rates(channel, np.asarray(gain, float)[None, :], power_levels)
-    best, (s_index, lam), choices = _knapsack(rates, fails, keep_choices=True)
+    best, _, (s_index, lam), choices = _knapsack(rates, fails, keep_choices=True)
     levels = np.zeros(channel.k, dtype=np.int64)
     s = s_index + 1
     for j in reversed(range(channel.k)):
@@ -142,8 +186,14 @@ class GridResult:
     evaluations: int  # DP solves (boxes and single positions)
 
 
-def solve_grid(channel: Channel, space: SearchSpace, power_levels: int) -> GridResult:
-    """The exact optimum of position (on the lattice) and power levels, fading-free."""
+def solve_grid(
+    channel: Channel, space: SearchSpace, power_levels: int, hint: np.ndarray | None = None
+) -> GridResult:
+    """The exact optimum of position (on the lattice) and power levels, fading-free.
+
+    ``hint`` (a position, e.g. a planner's answer) only seeds the incumbent: the lattice point
+    nearest to it is evaluated exactly, so a good hint prunes more but never changes the result.
+    """
     cost = dp_cost(channel.k, power_levels)
     if cost > MAX_DP_COST:
         k_max = max(k for k in range(1, 65) if dp_cost(k, power_levels) <= MAX_DP_COST)
@@ -154,58 +204,88 @@ def solve_grid(channel: Channel, space: SearchSpace, power_levels: int) -> GridR
             f"{power_levels} the grid planner takes up to K = {k_max} users. Use planner "
             "random or d3qn (after `uavxai train`) instead."
         )
-    xs, ys, hs = space.axes()
-    mesh = np.stack(np.meshgrid(xs, ys, hs, indexing="ij"), axis=-1)  # (nx, ny, nh, 3)
+    axes = space.axes()
+    mesh = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)  # (nx, ny, nh, 3)
     gains = channel.mean_gain(mesh)  # (nx, ny, nh, K)
     shape = gains.shape[:3]
-
-    def bound(box: tuple[slice, slice, slice]) -> np.ndarray:
-        return gains[box].max(axis=(0, 1, 2))
-
-    def size(box: tuple[slice, slice, slice]) -> int:
-        return int(np.prod([s.stop - s.start for s in box]))
-
     boxes = [
         tuple(slice(a, min(a + INITIAL_BOX, n)) for a, n in zip(corner, shape, strict=True))
         for corner in itertools.product(*(range(0, n, INITIAL_BOX) for n in shape))
     ]
-    # A first incumbent: the centre of every initial box, evaluated exactly.
-    centres = np.array([[(s.start + s.stop - 1) // 2 for s in box] for box in boxes])
-    values = optimal_objective(channel, gains[tuple(centres.T)], power_levels)
-    best_i = int(values.argmax())
-    best_value, best_index = float(values[best_i]), tuple(int(v) for v in centres[best_i])
-    evaluations = len(boxes)
-
-    frontier = boxes
-    while frontier:
-        bounds = optimal_objective(channel, np.array([bound(b) for b in frontier]), power_levels)
-        evaluations += len(frontier)
-        children: list[tuple[slice, slice, slice]] = []
-        order = np.argsort(-bounds, kind="stable")
-        for i in order:
-            box, value = frontier[i], float(bounds[i])
-            if size(box) == 1:  # a single position: its bound is its exact value
-                if value > best_value:
-                    best_value, best_index = value, tuple(s.start for s in box)
-                continue
-            if value <= best_value:
-                continue
-            children.extend(_split(box))
-        frontier = children
-        # Boxes left behind by an improved incumbent are pruned on their next bound.
-    position = mesh[best_index]
+    if hint is None:  # a first incumbent: the centre of every initial box, evaluated exactly
+        seeds = np.array([[(s.start + s.stop - 1) // 2 for s in box] for box in boxes])
+    else:
+        seeds = np.array([[int(np.abs(ax - v).argmin()) for ax, v in zip(axes, hint, strict=True)]])
+    values = optimal_objective(channel, gains[tuple(seeds.T)], power_levels)
+    best_index = tuple(int(v) for v in seeds[int(values.argmax())])
+    best_levels, best_value = optimal_levels(channel, gains[best_index], power_levels)
+    best_index, evaluations = _branch_and_bound(
+        channel, gains, power_levels, boxes, (best_value, best_index), _failures(
+            channel, gains[best_index], best_levels, power_levels)
+    )
     levels, objective = optimal_levels(channel, gains[best_index], power_levels)
     return GridResult(
-        position=position.copy(),
+        position=mesh[best_index].copy(),
         levels=levels,
         power_w=levels_to_power(levels, channel.p_max_w, power_levels),
         objective=objective,
         lattice_points=int(np.prod(shape)),
-        evaluations=evaluations,
+        evaluations=evaluations + len(seeds),
     )
 
 
-def _split(box: tuple[slice, slice, slice]) -> list[tuple[slice, slice, slice]]:
+def _failures(channel: Channel, gain: np.ndarray, levels: np.ndarray, power_levels: int) -> int:
+    rate = channel.rate(gain, levels_to_power(levels, channel.p_max_w, power_levels))
+    return int((rate < channel.qos_rate_bps).sum())
+
+
+Box = tuple[slice, slice, slice]
+
+
+def _branch_and_bound(
+    channel: Channel,
+    gains: np.ndarray,
+    power_levels: int,
+    boxes: list[Box],
+    incumbent: tuple[float, tuple[int, ...]],
+    failures: int,
+) -> tuple[tuple[int, ...], int]:
+    """The lattice index of the optimum and the number of DP solves.
+
+    Bounds come from the DP capped at ``cap`` users below QoS (an upper bound, see
+    ``_knapsack``), with ``cap`` so large that an allocation with that many failures cannot
+    beat the incumbent anywhere: no allocation's sum rate exceeds the best sum rate at the
+    lattice's per-user peak gains (the DP with cap 0). A single position whose capped bound
+    beats the incumbent through the merged state is solved again uncapped, to stay exact.
+    """
+    best_value, best_index = incumbent
+    peak = _batched(channel, gains.max(axis=(0, 1, 2)), power_levels, 0)[0][0]
+    spare = np.log2(max(peak / max(best_value, 1e-300), 1.0))  # halvings the peak can afford
+    cap = int(np.clip(np.ceil(spare), failures + 1, channel.k))
+    evaluations, frontier = 1, boxes
+    while frontier:
+        peaks = np.array([gains[b].max(axis=(0, 1, 2)) for b in frontier])
+        upper, lower = _batched(channel, peaks, power_levels, cap)
+        evaluations += len(frontier)
+        children: list[Box] = []
+        for i in np.argsort(-upper, kind="stable"):
+            box, value = frontier[i], float(upper[i])
+            if value <= best_value:
+                continue
+            if all(s.stop - s.start == 1 for s in box):  # a single position
+                if lower[i] < value:  # the bound came from the merged state: solve exactly
+                    value = float(optimal_objective(channel, peaks[i], power_levels)[0])
+                    evaluations += 1
+                if value > best_value:
+                    best_value, best_index = value, tuple(s.start for s in box)
+                continue
+            children.extend(_split(box))
+        frontier = children
+        # Boxes left behind by an improved incumbent are pruned on their next bound.
+    return best_index, evaluations
+
+
+def _split(box: Box) -> list[Box]:
     halves = []
     for s in box:
         if s.stop - s.start > 1:
