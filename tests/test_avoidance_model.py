@@ -169,7 +169,7 @@ def test_memo_does_not_change_results():
     warm_model = EncounterModel(cfg)
     for v in (12.0, 19.37, 25.0):
         warm_model.fly_all_actions(
-            state * [1, 1, 1, 0, 1, 1, 1] + [0, 0, 0, v, 0, 0, 0], goal, 4.0, track
+            state * [1, 1, 1, 0, 1, 1, 1, 1] + [0, 0, 0, v, 0, 0, 0, 0], goal, 4.0, track
         )
     warm = warm_model.fly_all_actions(state, goal, 4.0, track)
     np.testing.assert_array_equal(cold.end, warm.end)

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pytest
 
+from uavxai.avoidance.types import PlannerConfig
 from uavxai.cli import main
 from uavxai.errors import ScenarioError
 from uavxai.paths import scenarios_dir
@@ -356,6 +357,12 @@ def test_shipped_scenarios_by_name(
     assert main(["validate", "demo"]) == 2
 
 
-def test_the_reserved_vertical_action_set_is_refused_not_ignored() -> None:
-    with pytest.raises(ScenarioError, match="vertical action set"):
-        default_scenario("v", avoidance={"actions": "vertical"})
+def test_the_vertical_action_set_validates_for_tree_planners_and_is_refused_by_the_others() -> None:
+    for planner in ("mcts", "mcts_fast", "exhaustive", "none"):
+        s = default_scenario("v", avoidance={"actions": "vertical", "planner": planner})
+        assert PlannerConfig.from_scenario(s).n_actions == 11
+    for planner in ("mvp", "dqn", "safe_dqn"):
+        with pytest.raises(ScenarioError, match=rf"actions: vertical is flown by mcts.*{planner}"):
+            default_scenario("v", avoidance={"actions": "vertical", "planner": planner})
+    with pytest.raises(ScenarioError, match="paper.*vertical"):
+        default_scenario("v", avoidance={"actions": "diagonal"})

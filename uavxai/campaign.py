@@ -453,6 +453,7 @@ PLOTS = (
 _STYLE = {
     "mcts": ("tab:blue", "o"),
     "mcts_fast": ("tab:orange", "s"),
+    "mcts_vertical": ("tab:cyan", "*"),
     "exhaustive": ("tab:green", "^"),
     "dqn": ("tab:purple", "v"),
     "safe_dqn": ("tab:brown", "P"),

@@ -33,7 +33,12 @@ from pydantic import (
 
 from uavxai.errors import ScenarioError, UserError
 from uavxai.paths import aircraft_dir, resolve_scenario
-from uavxai.vocabulary import AVOIDANCE_PLANNERS, SERVICE_PLANNERS
+from uavxai.vocabulary import (
+    ACTION_SETS,
+    AVOIDANCE_PLANNERS,
+    SERVICE_PLANNERS,
+    VERTICAL_PLANNERS,
+)
 
 REFERENCE = "docs/scenario.md"
 # Distances are bounded so that no arithmetic downstream overflows or loses every digit of a
@@ -326,23 +331,13 @@ class Avoidance(_Model):
     accel_mps2: Annotated[float, Field(ge=0, le=10)] = 1.0
     speed_mps: tuple[PositiveFloat, PositiveFloat] = (12.0, 30.0)
     mcts: MCTSConfig = MCTSConfig()
-    actions: Literal["paper", "vertical"] = "paper"
+    actions: Literal[tuple(ACTION_SETS)] = "paper"  # type: ignore[valid-type]
     nmac: NMAC = NMAC()
 
     @field_validator("speed_mps")
     @classmethod
     def _speed(cls, v: tuple[float, float]) -> tuple[float, float]:
         return _ordered(v, "avoidance.speed_mps")
-
-    @field_validator("actions")
-    @classmethod
-    def _actions(cls, v: str) -> str:
-        if v == "vertical":  # the name is reserved (SPEC); refusing beats silently ignoring
-            raise ValueError(
-                "the vertical action set (climb and descend) is not available in this version; "
-                "use paper (the nine bank x acceleration actions)"
-            )
-        return v
 
     @field_validator("checkpoint")
     @classmethod
@@ -355,6 +350,11 @@ class Avoidance(_Model):
             raise ValueError(
                 f"bank_step_deg ({self.bank_step_deg}) must not exceed bank_limit_deg "
                 f"({self.bank_limit_deg})"
+            )
+        if self.actions != "paper" and self.planner not in VERTICAL_PLANNERS:
+            raise ValueError(
+                f"actions: {self.actions} is flown by {', '.join(VERTICAL_PLANNERS)}; planner "
+                f"{self.planner} flies the paper set only (actions: paper)"
             )
         return self
 

@@ -10,14 +10,21 @@ right) and acceleration (up, hold, down). A bank action moves the *bank command*
 acceleration action commands ``accel_mps2`` along the track. These fly the height the
 autopilot holds for the leg (the goal's).
 
-Beyond the paper, two vertical actions follow them (indices 9 and 10): climb and descend at
-the autopilot's climb-rate limit, holding the bank command and the speed. An *action set* is
-a prefix of the table (:data:`ACTION_SETS`): ``paper`` the first 9, ``vertical`` all 11. Two
-actions rather than the 27 products of bank x acceleration x vertical: a tree search's cost
-grows with its branching, and at a fixed simulation budget 27 children would leave each
-root action a third of the simulations it has with 9 (a depth-4 exhaustive tree would grow
-from 7,381 to 551,881 nodes); 11 costs about a fifth more. Combined manoeuvres stay
-reachable along a line: climb, then bank.
+Beyond the paper, two vertical actions follow them (indices 9 and 10), holding the bank
+command and the speed: climb and descend step a *vertical command* one place along
+(descend, the leg's height, climb), as bank actions step the bank command, and the nine keep
+it, as hold keeps a turn. Climbing, the autopilot's height target is the flight area's
+ceiling less a margin and it climbs at its climb-rate limit until it levels off there
+(descending likewise to the floor); at the leg's height it flies the goal's height, as the
+paper's nine always do. One climb therefore starts a climb that lasts while the search adds
+bank and speed actions, and one descend from a climb returns to the leg's height. An
+*action set* is a prefix of the table (:data:`ACTION_SETS`): ``paper`` the first 9,
+``vertical`` all 11. Two actions rather than the 27 products of bank x acceleration x
+vertical: a tree search's cost grows with its branching, and at a fixed simulation budget 27
+children would leave each root action a third of the simulations it has with 9 (a depth-4
+exhaustive tree would grow from 7,381 to 551,881 nodes); 11 cost about a fifth more, and
+because the vertical command persists, a climb combined with any bank or speed change is
+one climb followed by that action.
 """
 
 from __future__ import annotations
@@ -35,7 +42,7 @@ class Action:
     name: str  # "bank left, speed up"
     phrase: str  # how an explanation names the option: "left and faster", "holding bank and speed"
     verb: str  # what the aircraft did: "banked left and sped up"
-    # +1 climb, -1 descend at the climb-rate limit; 0 fly the leg's height (the paper's nine)
+    # +1 climb, -1 descend: the step it gives the vertical command; 0 keeps it (the nine)
     climb: int = 0
 
 

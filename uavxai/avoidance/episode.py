@@ -148,7 +148,7 @@ class EncounterEnv(gym.Env):
         specs = list(self._source(self.np_random) if callable(self._source) else self._source)
         self.own = start_state(self.start)
         self.traffic = np.array(
-            [[s.x, s.y, s.h, s.speed_mps, math.radians(s.heading_deg), 0.0, 0.0] for s in specs],
+            [[s.x, s.y, s.h, s.speed_mps, math.radians(s.heading_deg), 0, 0, 0] for s in specs],
             dtype=float,
         ).reshape(len(specs), STATE_DIM)
         self.pilots = self._make_pilots(specs, seed)
@@ -189,8 +189,10 @@ class EncounterEnv(gym.Env):
     # ------------------------------------------------------------------------- the state
     @property
     def ownship(self) -> Ownship:
-        x, y, h, v, psi, phi, cmd = self.own.tolist()
-        return Ownship(x=x, y=y, h=h, speed=v, heading=psi, bank=cmd, phi=phi)
+        x, y, h, v, psi, phi, cmd, vertical = self.own.tolist()
+        return Ownship(
+            x=x, y=y, h=h, speed=v, heading=psi, bank=cmd, phi=phi, vertical=int(vertical)
+        )
 
     @property
     def intruders(self) -> list[Intruder]:

@@ -48,6 +48,7 @@ from uavxai.avoidance.model import (
     intruder_margin,
     ownship_state,
     place_children,
+    vertical_command,
 )
 from uavxai.avoidance.types import (
     ChildStats,
@@ -336,7 +337,8 @@ def height_command(
     paper's nine: the leg's height, unchanged)."""
     if not model.vertical:
         return None
-    return float(model.config.height_target(action, float(goal[2]), own.h))
+    vertical = int(vertical_command(own.vertical, action))
+    return float(model.config.height_target(vertical, float(goal[2])))
 
 
 def collision_shares(tree: SearchTree) -> np.ndarray:

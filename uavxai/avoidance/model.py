@@ -58,9 +58,10 @@ from uavxai.vocabulary import ACTIONS
 
 G = 9.80665  # m/s^2
 
-# Columns of a state row.
-X, Y, H, V, PSI, PHI, PHI_CMD = range(7)
-STATE_DIM = 7
+# Columns of a state row. VCMD: the vertical command of the vertical action set (+1 climb,
+# 0 the leg's height, -1 descend), which persists like the bank command (0 with the paper's).
+X, Y, H, V, PSI, PHI, PHI_CMD, VCMD = range(8)
+STATE_DIM = 8
 
 # Terminal codes (SearchTree.terminal uses the same numbers).
 NONE, GOAL, COLLISION, OUT_OF_BOUNDS, TIMEOUT = 0, 1, 2, 3, 4
@@ -72,14 +73,14 @@ TERMINAL_VALUE = (math.nan, 1.0, 0.0, 0.0, 0.1)
 _BANK_SIGN = np.array([a.bank for a in ACTIONS], dtype=float)
 _ACCEL_SIGN = np.array([a.accel for a in ACTIONS], dtype=float)
 _CLIMB_SIGN = np.array([a.climb for a in ACTIONS], dtype=int)
-_FIRST_OF_CLIMB = {a.climb: a.index for a in reversed(ACTIONS)}  # an action of each kind
 _EVENT_CODES = np.array([COLLISION, OUT_OF_BOUNDS, GOAL], dtype=np.int8)
 
 
 def ownship_state(own: Ownship) -> np.ndarray:
     """One state row from the planner-API ownship."""
     phi = own.bank if own.phi is None else own.phi
-    return np.array([own.x, own.y, own.h, own.speed, own.heading, phi, own.bank], dtype=float)
+    row = [own.x, own.y, own.h, own.speed, own.heading, phi, own.bank, own.vertical]
+    return np.array(row, dtype=float)
 
 
 def bank_command(current_cmd, action, cfg: PlannerConfig):
@@ -90,6 +91,13 @@ def bank_command(current_cmd, action, cfg: PlannerConfig):
 
 def accel_command(action, cfg: PlannerConfig):
     return _ACCEL_SIGN[action] * cfg.accel_mps2
+
+
+def vertical_command(current, action):
+    """The vertical command after ``action``: climb and descend step it one place along
+    (descend, the leg's height, climb), the paper's nine keep it, as bank actions step the
+    bank command and hold keeps it."""
+    return np.clip(current + _CLIMB_SIGN[action], -1, 1)
 
 
 # ---------------------------------------------------------------------------------- intruders
@@ -333,16 +341,17 @@ class Children:
 
     origin: complex  # where the air mass carries the parent's x + iy by the segment's end
     rot: complex  # e^{-i psi}: body frame to world
-    h_end: tuple[float, ...]  # per action (the vertical set's climb and descend differ)
+    h_end: tuple[float, ...]  # per action (with the vertical set, per vertical command)
     psi: float
     body: _BodyMotion
+    vcmd: tuple[int, ...]  # per action: the vertical command it leaves
 
     def state(self, action: int) -> list[float]:
         """The child's state row (as a list)."""
         z_end, dpsi, v_end, phi_end, phi_cmd = self.body.rows[action]
         p = self.origin + z_end * self.rot
-        h = self.h_end[action]
-        return [p.real, p.imag, h, v_end, (self.psi + dpsi) % _TAU, phi_end, phi_cmd]
+        psi = (self.psi + dpsi) % _TAU
+        return [p.real, p.imag, self.h_end[action], v_end, psi, phi_end, phi_cmd, self.vcmd[action]]
 
     def position(self, action: int) -> tuple[float, float, float]:
         p = self.origin + self.body.rows[action][0] * self.rot
@@ -367,6 +376,7 @@ def place_children(blocks: Sequence[Children]) -> np.ndarray:
     end[:, :, X] = xy.real
     end[:, :, Y] = xy.imag
     end[:, :, H] = h_end
+    end[:, :, VCMD] = np.array([b.vcmd for b in blocks])
     end[:, :, PSI] = np.mod(psi[:, None] + np.stack([b.dpsi for b in body]), _TAU)
     return end.reshape(-1, STATE_DIM)
 
@@ -410,6 +420,7 @@ class EncounterModel:
         self.actions = np.arange(k)  # the action set: the first k of the table
         self._climbs = _CLIMB_SIGN[:k].tolist()
         self.vertical = any(self._climbs)
+        self._level = (0,) * k  # the vertical commands of the paper's children
         # What a segment with nothing in reach reports, shared and read-only.
         self._quiet = (
             _frozen(np.full(k, np.inf)),
@@ -545,7 +556,7 @@ class EncounterModel:
         search goes on from few of the children it scores."""
         cfg = self.config
         n = self._check(duration, track)
-        x, y, h, v, psi, phi, cmd = state
+        x, y, h, v, psi, phi, cmd = state[:7]
         # Keys are rounded far below any physical effect so that states reached along
         # different float paths (20 + 4 - 4) share an entry; the motion is computed from the
         # key itself, so the answer never depends on what the memo already holds.
@@ -559,14 +570,17 @@ class EncounterModel:
         origin = complex(x, y)
         rot = complex(math.cos(psi), -math.sin(psi))
         climb = cfg.climb_rate_mps * duration
-        if self.vertical:  # climb and descend have their own height targets
-            target = {c: self._target(c, goal[2], h) for c in (0, 1, -1)}
-            h_of = {c: h + min(max(t - h, -climb), climb) for c, t in target.items()}
-            h_ends = tuple(h_of[c] for c in self._climbs)
+        vcmd = self._level
+        if self.vertical:  # each vertical command has its height target
+            vc = int(state[VCMD]) if len(state) > VCMD else 0
+            vcmd = tuple(min(max(vc + c, -1), 1) for c in self._climbs)
+            target = {m: cfg.height_target(m, goal[2]) for m in set(vcmd)}
+            h_of = {m: h + min(max(t - h, -climb), climb) for m, t in target.items()}
+            h_ends = tuple(h_of[m] for m in vcmd)
         else:
             h_ends = (h + min(max(goal[2] - h, -climb), climb),) * self.actions.size
         drift = self.drift(duration, n)
-        placed = Children(origin + drift[-1], rot, h_ends, psi, body)
+        placed = Children(origin + drift[-1], rot, h_ends, psi, body, vcmd)
 
         half = 0.5 * drift[-1]  # the paths' circle, carried by the wind: centre + half, r + |half|
         c = origin + body.ball * rot + half
@@ -579,7 +593,7 @@ class EncounterModel:
         if h_lo == h_hi:
             hs = np.full((1, n + 1), h)
         elif self.vertical:
-            targets = np.array([target[c] for c in self._climbs])[:, None]
+            targets = np.array([target[m] for m in vcmd])[:, None]
             hs = h + np.clip(targets - h, *self._climb_window(duration, n))
         else:
             hs = h + np.clip(goal[2] - h, *self._climb_window(duration, n))[None]
@@ -611,11 +625,14 @@ class EncounterModel:
         p = states[:, X, None] + 1j * states[:, Y, None]
         xy = p + body.z * np.exp(-1j * states[:, PSI, None]) + self.drift(duration, n)
         h0 = states[:, H, None]
-        target = goal[2]
+        target, vcmd = goal[2], 0
         if self.vertical:
-            target = self.height_targets(actions, goal[2], states[:, H])[:, None]
+            vc = states[:, VCMD] if states.shape[1] > VCMD else 0
+            vcmd = vertical_command(vc, actions)
+            target = self.height_targets(vcmd, goal[2])[:, None]
         hs = h0 + np.clip(target - h0, *self._climb_window(duration, n))
         end = self._end(xy[:, -1], hs[:, -1], states[:, PSI], body)
+        end[:, VCMD] = vcmd
         # The cylinder: centred on the samples' box, radius to the farthest, half-height.
         lo = np.array([xy.real.min(), xy.imag.min(), hs.min()])
         hi = np.array([xy.real.max(), xy.imag.max(), hs.max()])
@@ -624,17 +641,11 @@ class EncounterModel:
         box: _Cylinder = (cx, cy, ch, r_xy, 0.5 * float(hi[2] - lo[2]))
         return body, xy, hs, end, box
 
-    def _target(self, climb: int, goal_h: float, h: float) -> float:
-        """The height target of an action that climbs (+1), descends (-1) or flies the
-        leg's height (0): :meth:`PlannerConfig.height_target`."""
-        return self.config.height_target(_FIRST_OF_CLIMB[climb], goal_h, h)
-
-    def height_targets(self, actions, goal_h: float, h: np.ndarray) -> np.ndarray:
-        """(B,) the height target of each row's action from heights ``h`` (B,)."""
-        up = np.maximum(self._target(1, goal_h, -math.inf), h)
-        down = np.minimum(self._target(-1, goal_h, math.inf), h)
-        climb = _CLIMB_SIGN[np.asarray(actions)]
-        return np.where(climb > 0, up, np.where(climb < 0, down, goal_h))
+    def height_targets(self, vcmd: np.ndarray, goal_h: float) -> np.ndarray:
+        """(B,) the height targets of vertical commands ``vcmd`` (B,):
+        :meth:`PlannerConfig.height_target`, vectorised."""
+        up, down = (self.config.height_target(m, goal_h) for m in (1, -1))
+        return np.where(vcmd > 0, up, np.where(vcmd < 0, down, goal_h))
 
     def _check(self, duration: float, track: Track) -> int:
         n = self.substeps(duration)

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Protocol, runtime_checkable
 import numpy as np
 
 from uavxai.errors import UserError
-from uavxai.vocabulary import ACCEL_SIGNS, ACTION_SETS, ACTIONS, BANK_SIGNS, N_ACTIONS, action_name
+from uavxai.vocabulary import ACCEL_SIGNS, ACTION_SETS, BANK_SIGNS, N_ACTIONS, action_name
 
 if TYPE_CHECKING:
     from uavxai.scenario import Scenario
@@ -33,6 +33,9 @@ class Ownship:
     heading: float  # rad, clockwise from north
     bank: float = 0.0  # rad, right wing down positive (the current bank command)
     phi: float | None = None  # rad, the actual bank angle; None: settled at the command
+    # The current vertical command (vertical action set): +1 climbing, -1 descending, 0 at
+    # the leg's height (PlannerConfig.vertical_of reads it off the autopilot's height target)
+    vertical: int = 0
 
 
 @dataclass(frozen=True)
@@ -100,8 +103,9 @@ class PlannerConfig:
     # the intruders' tracks are (scenario `environment.wind`).
     wind_mps: tuple[float, float] = (0.0, 0.0)
     # The action set (uavxai.vocabulary.ACTION_SETS): "paper" the nine, "vertical" adds climb
-    # and descend at climb_rate_mps. A climb (descent) gives the autopilot a height target
-    # this far below the flight area's ceiling (above its floor), where it levels off.
+    # and descend, which step a persistent vertical command; climbing (descending) the
+    # autopilot's height target is this far below the flight area's ceiling (above its
+    # floor), where it levels off, reached at climb_rate_mps.
     actions: str = "paper"
     vertical_margin_m: float = 20.0
 
@@ -196,18 +200,27 @@ class PlannerConfig:
         """How many actions the set offers: the first ``n_actions`` of the table."""
         return ACTION_SETS[self.actions]
 
-    def height_target(self, action: int, goal_h: float, h: float) -> float:
-        """The height the autopilot is given with ``action`` at height ``h``: the leg's (the
-        goal's) for the paper's nine; a climb (descent) aims at the ceiling (floor) less
-        ``vertical_margin_m``, so the autopilot climbs at its rate limit until it levels off
-        there (above that band a climb holds the height, as a descent below it)."""
-        climb = ACTIONS[action].climb
+    def height_target(self, vertical: int, goal_h: float) -> float:
+        """The height the autopilot is given under the vertical command ``vertical``: the
+        leg's (the goal's) at 0; climbing (+1) the ceiling less ``vertical_margin_m``,
+        descending (-1) the floor plus it, so that the autopilot climbs or sinks at its rate
+        limit until it levels off there."""
         lo, hi = self.h_bounds
-        if climb > 0:
-            return max(hi - self.vertical_margin_m, h)
-        if climb < 0:
-            return min(lo + self.vertical_margin_m, h)
+        if vertical > 0:
+            return hi - self.vertical_margin_m
+        if vertical < 0:
+            return lo + self.vertical_margin_m
         return goal_h
+
+    def vertical_of(self, alt_target_m: float | None) -> int:
+        """The vertical command an autopilot height target stands for (the inverse of
+        :meth:`height_target`; 0 for any other height, and always with the paper set)."""
+        if self.actions == "paper" or alt_target_m is None:
+            return 0
+        for vertical in (1, -1):  # within the float32 the command travels as
+            if abs(alt_target_m - self.height_target(vertical, math.nan)) < 1e-3:
+                return vertical
+        return 0
 
     @property
     def bank_limit_rad(self) -> float:

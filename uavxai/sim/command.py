@@ -6,6 +6,13 @@ publishes telemetry and ADS-B every sample — an external peer on the link is o
 way. :class:`DirectPath` (campaigns): the setpoints go straight to the autopilot, carried at
 the precision MAVLink carries them (float32 fields, the bank as a quaternion's roll), so that
 the same seed flies the same to the millimetre through either path.
+
+A decision of the vertical action set also carries a height target (``alt_target_m``: the
+ceiling band for a climb, the floor band for a descent, the leg's height otherwise). It goes
+the way every height command goes, MAV_CMD_DO_CHANGE_ALTITUDE (a float32 ``param1``, height
+above home), with every decision: SET_ATTITUDE_TARGET has no height and the acceleration's
+SET_POSITION_TARGET_LOCAL_NED is in the body frame, where a position is relative to the
+aircraft, not the height the autopilot holds.
 """
 
 from __future__ import annotations
@@ -107,6 +114,8 @@ class DirectPath:
         bank, accel = wire_values(decision.bank_cmd_rad, decision.accel_mps2)
         self._world.command_ownship(bank_cmd_rad=bank, accel_cmd_mps2=accel)
         self.commands += 2
+        if decision.alt_target_m is not None:  # the vertical set's height command
+            self.altitude(decision.alt_target_m, t)
 
     def on_sample(self, state: TrafficState) -> None:
         pass
@@ -147,6 +156,8 @@ class MavlinkPath:
 
     def send(self, decision: Decision, t: float) -> None:
         self.bridge.feed(self._encoder.encode(decision.bank_cmd_rad, decision.accel_mps2, t))
+        if decision.alt_target_m is not None:  # the vertical set's height command
+            self.altitude(decision.alt_target_m, t)
 
     def orbit(self, x, y, h, radius_m, clockwise, speed_mps, t) -> None:
         lat_e7, lon_e7, _, _ = orbit_centre_on_wire(self.bridge.frame, x, y)

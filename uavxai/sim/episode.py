@@ -25,8 +25,9 @@ from uavxai.surveillance.tracker import truth_beliefs
 from uavxai.vocabulary import Outcome
 
 
-def ownship_view(state: TrafficState, bank_cmd: float) -> Ownship:
-    """The ownship as the planner sees it: its own navigation state and bank command."""
+def ownship_view(state: TrafficState, bank_cmd: float, vertical: int = 0) -> Ownship:
+    """The ownship as the planner sees it: its own navigation state, bank command and
+    vertical command (the vertical action set's)."""
     return Ownship(
         x=float(state.pos[0, 0]),
         y=float(state.pos[0, 1]),
@@ -35,6 +36,7 @@ def ownship_view(state: TrafficState, bank_cmd: float) -> Ownship:
         heading=float(state.att[0, 2]),
         bank=float(bank_cmd),
         phi=float(state.att[0, 0]),
+        vertical=int(vertical),
     )
 
 
@@ -118,7 +120,9 @@ class Episode:
     def decide(self) -> DecisionEvent:
         """Plan from what the ownship knows now and send the command."""
         state = self.state
-        own = ownship_view(state, self.world.ownship_command()["bank_cmd_rad"])
+        cmd = self.world.ownship_command()
+        vertical = self.planner.config.vertical_of(cmd.get("alt_target_m"))
+        own = ownship_view(state, cmd["bank_cmd_rad"], vertical)
         intruders = self.picture(state)
         m = self.mission
         goal = m.goal if m is not None else self.goal

@@ -55,11 +55,11 @@ class KinematicWorld(ScheduledWorld):
         self._models: dict[float, EncounterModel] = {}
         start = scenario.ownship.start
         self._own = np.array(
-            [start.x, start.y, start.h, start.speed_mps, math.radians(start.heading_deg), 0, 0],
+            [start.x, start.y, start.h, start.speed_mps, math.radians(start.heading_deg), 0, 0, 0],
             dtype=float,
         )
         self._traffic = np.array(
-            [[s.x, s.y, s.h, s.speed_mps, math.radians(s.heading_deg), 0, 0] for s in intruders],
+            [[s.x, s.y, s.h, s.speed_mps, math.radians(s.heading_deg), 0, 0, 0] for s in intruders],
             dtype=float,
         ).reshape(len(self.intruders), STATE_DIM)
         self._vh = 0.0
@@ -126,7 +126,7 @@ class KinematicWorld(ScheduledWorld):
         ids = list(self.ids)
         for e in entries:
             spec = e.to_spec(self.scenario.intruders.behaviour)
-            self._traffic[e.replaces] = (e.x, e.y, e.h, e.speed_mps, e.heading_rad, 0.0, 0.0)
+            self._traffic[e.replaces] = (e.x, e.y, e.h, e.speed_mps, e.heading_rad, 0, 0, 0)
             self._pilots[e.replaces] = newcomer_pilot(self.scenario, spec, self.seed, e.number)
             ids[e.replaces + 1] = e.id
         self.ids = tuple(ids)
