@@ -736,7 +736,7 @@ def _run_head_on(tmp_path: Path, name: str, forge: bool) -> dict:
     scenario = yaml.safe_load((Path(__file__).parents[1] / "scenarios/head_on.yaml").read_text())
     scenario["bridge"] = {"signing_key_hex": KEY.hex(), "mavlink": f"udpin:127.0.0.1:{port}"}
     scenario["log"] = {"rerun": False}
-    scenario["service"] = {"planner": "grid"}
+    scenario["service"] = {"planner": "grid", "platform": "hover"}  # the fast exact grid
     path = tmp_path / f"{name}.yaml"
     path.write_text(yaml.safe_dump(scenario))
     stop = threading.Event()

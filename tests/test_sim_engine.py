@@ -24,7 +24,7 @@ EQ = {
     "seed": 3,
     "intruders": {"count": 8},
     "comms": {"fading": "none"},
-    "service": {"planner": "grid", "steps": 10},
+    "service": {"planner": "grid", "steps": 10, "platform": "hover"},  # the fast exact grid
     "avoidance": {"max_steps": 80},
     "mission": {"service_s": 0},  # the paper's transit episode, as campaigns fly it
     "log": {"rerun": False},

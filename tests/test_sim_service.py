@@ -21,7 +21,8 @@ MISSION = {
     "intruders": {"count": 3, "flow": "none"},
     "comms": {"fading": "none", "access": "shared", "environment": "urban",
               "users": {"mobility": {"model": "random_waypoint"}}},
-    "service": {"planner": "grid", "steps": 10},
+    # grid's exact hover optimum: fast, and every re-plan of the walking users runs it again
+    "service": {"planner": "grid", "steps": 10, "platform": "hover"},
     "mission": {"service_s": 40, "return_home": False},
     "log": {"rerun": False},
 }  # fmt: skip

@@ -70,6 +70,21 @@ def radius_for(
     return v * v / (G * math.tan(margin * bank_limit_rad))
 
 
+def scenario_orbit_radius(scenario: object) -> float:
+    """The loiter radius a scenario's mission flies about its service point (the one place
+    it is decided: the mission flies it, orbit-aware service placement scores it):
+    ``mission.orbit_radius_m`` if given, else :func:`radius_for` the ownship's start airspeed,
+    ``avoidance.bank_limit_deg`` and the scenario's steady wind."""
+    from uavxai.dynamics.environment import EnvironmentConfig  # imports jsbsim
+
+    given = getattr(getattr(scenario, "mission", None), "orbit_radius_m", None)
+    if given:
+        return float(given)
+    start, av = scenario.ownship.start, scenario.avoidance  # type: ignore[attr-defined]
+    wind = EnvironmentConfig.from_scenario(scenario).wind_speed_mps
+    return radius_for(start.speed_mps, math.radians(av.bank_limit_deg), wind_mps=wind)
+
+
 def _wrap(angle: float) -> float:
     """Angle in [-pi, pi)."""
     return (angle + math.pi) % (2 * math.pi) - math.pi

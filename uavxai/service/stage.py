@@ -16,7 +16,17 @@ link at the chosen point. Planners:
 - ``grid`` — the exact optimum over the lattice and the discrete power levels.
 
 Positions are ranked by the fading-free objective (fading averages out over the time the UAV
-hovers there). ``sinr_db``/``rate_bps`` are fading-free; ``ergodic_*`` average over fading.
+serves there). ``service.platform`` says which: ``hover`` is the paper's, the objective at the
+point itself; ``orbit`` (the default: a fixed wing circles the point) is the objective averaged
+over the loiter orbit the mission will fly about the point, power fixed over the orbit
+(``uavxai.service.orbit``): ``grid`` is then the exact orbit optimum, ``random`` ranks its
+draws by it, and the learned planners fly their (hover-trained) network and refine and set
+the power on it. A per-layout model from ``uavxai train`` is flown as trained either way.
+
+``sinr_db``/``rate_bps``/``objective`` are the hover point's values, fading-free;
+``ergodic_*`` average over fading; ``orbit_*`` are the orbit's fading-free averages at the
+chosen point with the chosen power (reported whatever the platform, so a hover placement can
+be judged by what an orbiting aircraft would give there).
 """
 
 from __future__ import annotations
@@ -31,12 +41,14 @@ import numpy as np
 import torch
 
 from uavxai.comms.channel import Channel
+from uavxai.comms.orbit_rate import orbit_average
 from uavxai.comms.service_env import ServiceEnv, levels_to_power
 from uavxai.errors import CheckpointError, UserError
 from uavxai.paths import service_checkpoints_dir
 from uavxai.scenario import Scenario
 from uavxai.service import d3qn, universal
 from uavxai.service.grid import solve_grid
+from uavxai.service.orbit import OrbitObjective, solve_grid_orbit
 from uavxai.service.random_search import random_search
 
 ERGODIC_DRAWS = 2000
@@ -96,28 +108,33 @@ def plan_service(scenario: Scenario, planner: str | None = None) -> ServiceResul
     if name not in PLANNERS:
         raise UserError(f"service planner '{name}' is unknown; allowed: {', '.join(PLANNERS)}.")
     env = ServiceEnv.from_scenario(scenario)
+    orbit = OrbitObjective.from_scenario(scenario, env.channel, env.power_levels)
     extras: dict[str, Any] = {
         "access": scenario.comms.access,
         "environment": scenario.comms.environment,
         "fading": scenario.comms.fading,
     }
     if name == "grid":
-        best = solve_grid(env.channel, env.space, env.power_levels)
+        if orbit is None:
+            best = solve_grid(env.channel, env.space, env.power_levels)
+        else:
+            best = solve_grid_orbit(orbit, env.space)
         levels, position = best.levels, best.position
         visited = np.array([env.space.start, position])
         extras.update(lattice_points=best.lattice_points, grid_evaluations=best.evaluations)
     elif name == "random":
-        ep = random_search(env, scenario.service.steps, np.random.default_rng(scenario.seed))
+        rng = np.random.default_rng(scenario.seed)
+        ep = random_search(env, scenario.service.steps, rng, orbit.value if orbit else None)
         levels, position, visited = ep.levels, ep.position, ep.path
     else:
-        ep, info = _learned_search(scenario, env, name)
+        ep, info = _learned_search(scenario, env, name, orbit)
         levels, position, visited = ep.levels, ep.position, ep.path
         extras.update(info)
     return _report(name, scenario, env, position, levels, visited, t0, extras)
 
 
 def _learned_search(
-    scenario: Scenario, env: ServiceEnv, algo: str
+    scenario: Scenario, env: ServiceEnv, algo: str, orbit: OrbitObjective | None = None
 ) -> tuple[d3qn.Episode, dict[str, Any]]:
     given = scenario.service.checkpoint
     if given is not None and not _is_universal(Path(given)):
@@ -125,7 +142,7 @@ def _learned_search(
         net, info, _ = resolve_checkpoint(scenario, algo)
         return d3qn.rollout(net, d3qn.fading_free(env)), {"checkpoint": info["path"]}
     policy, label = universal_policy(scenario, algo)
-    result = universal.plan(policy, d3qn.fading_free(env))
+    result = universal.plan(policy, d3qn.fading_free(env), scorer=orbit)
     flight, position, levels = result.flight, result.position, result.levels
     report = {
         "checkpoint": label,
@@ -134,6 +151,9 @@ def _learned_search(
         "flight_steps": len(flight.path) - 1,
         "refine_rounds": int(result.refine_rounds),
     }
+    if orbit is not None:  # the network's own point and levels, judged on the orbit
+        alone = orbit.value(flight.position, flight.levels)
+        report["d3qn_alone_orbit_objective"] = float(alone[0])
     path = np.vstack([flight.path, position[None]])
     return d3qn.Episode(result.objective, position, levels, path), report
 
@@ -266,6 +286,7 @@ def _report(
     rng = np.random.default_rng(scenario.seed)
     draws = np.broadcast_to(position, (ERGODIC_DRAWS, 3))
     ergodic = channel.evaluate(draws, power, rng)
+    extras = {**extras, **orbit_fields(scenario, channel, position, power)}
     return ServiceResult(
         planner=name,
         users=channel.users,
@@ -284,3 +305,21 @@ def _report(
         wall_s=time.perf_counter() - t0,
         extras=extras,
     )
+
+
+def orbit_fields(
+    scenario: Scenario, channel: Channel, position: np.ndarray, power_w: np.ndarray
+) -> dict[str, Any]:
+    """What the orbit the mission flies about ``position`` gives with ``power_w``, fading-free
+    (``platform`` says which objective chose the point)."""
+    from uavxai.dynamics.orbit import scenario_orbit_radius
+
+    radius = scenario_orbit_radius(scenario)
+    avg = orbit_average(channel, np.asarray(position, dtype=float), radius, power_w)
+    return {
+        "platform": scenario.service.platform,
+        "orbit_radius_m": float(radius),
+        "orbit_objective": float(avg.objective),
+        "orbit_sum_rate_bps": float(avg.sum_rate_bps),
+        "orbit_qos_satisfied": int((avg.rate_bps >= channel.qos_rate_bps).sum()),
+    }

@@ -44,7 +44,7 @@ import json
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
@@ -60,6 +60,9 @@ from uavxai.comms.service_env import (
 )
 from uavxai.errors import CheckpointError
 from uavxai.service.layouts import random_problem
+
+if TYPE_CHECKING:
+    from uavxai.service.orbit import OrbitObjective
 
 CHECKPOINT_FORMAT = "uavxai.service.universal-q/1"
 K_MAX = 20
@@ -275,11 +278,14 @@ def refine(
     levels: np.ndarray,
     max_rounds: int = 300,
     move: bool = True,
+    scorer: OrbitObjective | None = None,
 ) -> tuple[np.ndarray, np.ndarray, float, int]:
     """Best-improvement local search on the lattice and the levels (see the module doc).
 
     Returns position, levels, objective and the number of rounds. Stays on the planner's
-    lattice and discrete levels, so the result is never above the grid optimum.
+    lattice and discrete levels, so the result is never above the grid optimum. With a
+    ``scorer`` (``service.platform: orbit``) candidates are ranked by ``scorer.value``, the
+    orbit objective, instead of the hover objective.
     """
     L, k = power_levels, channel.k
     pos, lev = np.asarray(position, float).copy(), np.asarray(levels, np.int64).copy()
@@ -297,6 +303,8 @@ def refine(
         return np.array([gains[key] for key in keys])
 
     def value(p: np.ndarray, lv: np.ndarray) -> np.ndarray:
+        if scorer is not None:
+            return scorer.value(p, lv)
         power = levels_to_power(lv, channel.p_max_w, L)
         return channel.objective(channel.rate(gain(p), power))
 
@@ -338,7 +346,9 @@ class Plan:
 EXACT_POWER_MAX_COST = 2.1  # grid.dp_cost: K <= 12 users at L = 6, 5-25 ms on one core
 
 
-def plan(policy: SetQNetwork | NumpyPolicy, env: ServiceEnv) -> Plan:
+def plan(
+    policy: SetQNetwork | NumpyPolicy, env: ServiceEnv, scorer: OrbitObjective | None = None
+) -> Plan:
     """The ``service.planner: d3qn|dqn`` search on a fading-free env: the greedy flight, then
     ``refine`` from its best point twice — with the network's levels and with all levels full
     (equal power) — keeping the better. Two starts because a local search over levels cannot
@@ -346,7 +356,11 @@ def plan(policy: SetQNetwork | NumpyPolicy, env: ServiceEnv) -> Plan:
     shared band with many users the network's levels can start it inside one. Last, where the
     exact power DP of ``grid`` is cheap (K <= 12 at L = 6), the levels at the final point are
     replaced by the exact optimum for that point: single-level and pair moves stop short of
-    the shared band's optimum (all users but one exactly at the QoS rate), 0.96 for K = 10."""
+    the shared band's optimum (all users but one exactly at the QoS rate), 0.96 for K = 10.
+
+    With a ``scorer`` (``service.platform: orbit``) the network still flies as trained (on the
+    hover objective) and its best visited point is the start, but the refinement and the exact
+    power step score the orbit objective (``uavxai.service.orbit``)."""
     from uavxai.service.grid import dp_cost, optimal_levels
 
     flight = fly(policy, env)
@@ -355,13 +369,17 @@ def plan(policy: SetQNetwork | NumpyPolicy, env: ServiceEnv) -> Plan:
     full = np.full(env.channel.k, env.power_levels - 1, np.int64)
     for levels in (flight.levels, full):
         pos, lev, value, r = refine(env.channel, env.space, env.power_levels, flight.position,
-                                    levels)
+                                    levels, scorer=scorer)
         rounds += r
         if best is None or value > best[2]:
             best = (pos, lev, value)
     assert best is not None
     if dp_cost(env.channel.k, env.power_levels) <= EXACT_POWER_MAX_COST:
-        lev, value = optimal_levels(env.channel, env.channel.mean_gain(best[0]), env.power_levels)
+        if scorer is not None:
+            lev, value = scorer.optimal_levels(best[0])
+        else:
+            gain = env.channel.mean_gain(best[0])
+            lev, value = optimal_levels(env.channel, gain, env.power_levels)
         if value > best[2]:
             best = (best[0], lev, value)
     return Plan(flight, best[0], best[1], best[2], rounds)

@@ -30,8 +30,7 @@ from enum import StrEnum
 import numpy as np
 
 from uavxai.avoidance.types import Decision, Intruder, Ownship
-from uavxai.dynamics.environment import EnvironmentConfig
-from uavxai.dynamics.orbit import radius_for
+from uavxai.dynamics.orbit import scenario_orbit_radius
 from uavxai.dynamics.state import TrafficState
 from uavxai.scenario import Scenario
 from uavxai.sim.episode import Episode, Observer
@@ -60,11 +59,8 @@ class MissionConfig:
     @classmethod
     def from_scenario(cls, scenario: Scenario, station: Sequence[float]) -> MissionConfig:
         m = getattr(scenario, "mission", None)
-        start, av = scenario.ownship.start, scenario.avoidance
-        wind = EnvironmentConfig.from_scenario(scenario).wind_speed_mps
-        radius = getattr(m, "orbit_radius_m", None) or radius_for(
-            start.speed_mps, math.radians(av.bank_limit_deg), wind_mps=wind
-        )
+        start = scenario.ownship.start
+        radius = scenario_orbit_radius(scenario)  # the radius service placement scores too
         return cls(
             station=tuple(float(v) for v in station),
             home=(float(start.x), float(start.y), float(start.h)),
