@@ -121,3 +121,31 @@ def test_bad_platform_is_refused_naming_the_field_and_the_choices(tmp_path: Path
     err = capsys.readouterr().err
     assert "service.platform" in err and "Traceback" not in err
     assert "orbit" in err and "hover" in err
+
+
+@pytest.mark.parametrize("platform", ["orbit", "hover"])
+def test_mission_reports_the_prediction_of_the_placement_it_flew(platform):
+    """JSBSim flies the plan's orbit; the summary's prediction is the planner's own orbit
+    average of that placement, and with fading none what is delivered on the flown orbit is
+    close to it (the aircraft holds the radius; no re-plan, static users)."""
+    from uavxai.avoidance.planners import make_planner
+    from uavxai.avoidance.types import PlannerConfig
+    from uavxai.sim.build import fly
+    from uavxai.sim.mission import mission_of
+    from uavxai.sim.observers import Service
+
+    sc = default_scenario(
+        seed=2, comms={"access": "ofdma", "fading": "none", "qos_rate_bps": 1.2e6},
+        service={"platform": platform}, intruders={"count": 0, "flow": "none"},
+        avoidance={"planner": "none"}, mission={"service_s": 60, "return_home": False},
+        ownship={"start": {"x": 700, "y": 700}}, log={"rerun": False},
+    )  # fmt: skip
+    plan = plan_service(sc)
+    goal = tuple(float(v) for v in plan.service_point)
+    service = Service(sc, Channel.from_scenario(sc, users=plan.users), plan.power_w, None)
+    result = fly(sc, make_planner("none", PlannerConfig.from_scenario(sc)), goal,
+                 intruders=[], observers=[service], mission=mission_of(sc, goal))  # fmt: skip
+    m = result.summary["mission"]
+    assert result.outcome.value == "completed" and m["on_station_s"] >= 60 - 1e-6
+    assert m["predicted_orbit_sum_rate_bps"] == pytest.approx(plan.extras["orbit_sum_rate_bps"])
+    assert m["mean_sum_rate_bps"] == pytest.approx(m["predicted_orbit_sum_rate_bps"], rel=0.03)

@@ -256,7 +256,13 @@ class Service(Observer):
     are accounted with fading drawn per sample, and while avoiding, what the planned orbit
     would have delivered under the same fading (the service lost to avoidance). Writes
     ``users.csv`` and ``service.csv`` (SPEC §4); re-plans the service point every
-    ``service.replan_s`` and when a user drops below the QoS rate, moving the orbit."""
+    ``service.replan_s`` and when a user drops below the QoS rate, moving the orbit.
+
+    ``predicted_orbit_sum_rate_bps`` is what the placements in use promised: the orbit-mean
+    sum rate (fading-free) about the service point with the plan's power and the users where
+    the plan saw them (``orbit_average``, the number the planner's ``orbit_sum_rate_bps``
+    reports), averaged over the same served samples as the delivered ``mean_sum_rate_bps``,
+    so that a re-planned point counts for the time it was flown."""
 
     def __init__(self, scenario, channel, power_w, out: Path | None, replan=None) -> None:
         from uavxai.comms.delivery import Delivery
@@ -313,6 +319,8 @@ class Service(Observer):
             rates = np.array([r[4] for r in rows])
             ep.sample_metrics["user_rates_bps"] = rates
             ep.sample_metrics["delivered_rate_bps"] = float(rates.sum())
+            self._promised_bits += self._promise_bps * dt
+            self._promised_s += dt
             self._maybe_replan(ep, users, rows)
         self.walk.advance(dt)
 
@@ -333,21 +341,32 @@ class Service(Observer):
         point, power = self.replan(users)
         self.delivery.set_power(power)
         ep.mission.move_station(ep, point, "users moved" if due else "a user fell below QoS")
+        self._promise(ep.mission.config, users)
 
-    def on_start(self, ep: Episode) -> None:
+    def _promise(self, c, users: np.ndarray) -> None:
+        """What the plan in use promises: the orbit's mean sum rate, fading-free, about
+        ``c.station`` with the current power, for the users where the plan saw them."""
+        import dataclasses
+
         from uavxai.comms.orbit_rate import orbit_average
 
-        if ep.mission is not None:  # what the plan promised: the orbit's mean, fading-free
-            c = ep.mission.config
-            avg = orbit_average(self.channel, c.station, c.radius_m, self.delivery.power_w)
-            self.predicted_bps = float(avg.sum_rate_bps)
+        seen = dataclasses.replace(self.channel, users=np.asarray(users, dtype=float))
+        avg = orbit_average(seen, c.station, c.radius_m, self.delivery.power_w)
+        self._promise_bps = float(avg.sum_rate_bps)
+
+    def on_start(self, ep: Episode) -> None:
+        self._promise_bps, self._promised_bits, self._promised_s = math.nan, 0.0, 0.0
+        if ep.mission is not None:
+            self._promise(ep.mission.config, self.channel.users)
 
     def on_end(self, ep: Episode, summary: dict) -> None:
         if ep.mission is None:
             return
         mission = summary.setdefault("mission", {})
         mission.update(self.delivery.summary())
-        mission["predicted_orbit_sum_rate_bps"] = self.predicted_bps
+        served = self._promised_s > 0  # else: the first plan's promise, never flown
+        predicted = self._promised_bits / self._promised_s if served else self._promise_bps
+        mission["predicted_orbit_sum_rate_bps"] = predicted
         energy = summary.get("energy", {}).get("energy_wh")
         bits = mission.get("delivered_bits", 0.0)
         mission["energy_wh"] = energy
