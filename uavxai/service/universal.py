@@ -357,19 +357,27 @@ def plan(
     exact power DP of ``grid`` is cheap (K <= 12 at L = 6), the levels at the final point are
     replaced by the exact optimum for that point: single-level and pair moves stop short of
     the shared band's optimum (all users but one exactly at the QoS rate), 0.96 for K = 10.
+    On the hover objective the refinement also starts from the two best points of a coarse
+    screen at equal power, and the exact power step is followed by an exact climb
+    (``uavxai.service.starts``: needles a local search from the flight cannot reach).
 
     With a ``scorer`` (``service.platform: orbit``) the network still flies as trained (on the
     hover objective) and its best visited point is the start, but the refinement and the exact
     power step score the orbit objective (``uavxai.service.orbit``)."""
     from uavxai.service.grid import dp_cost, optimal_levels
+    from uavxai.service.starts import climb_exact, screened_starts
 
     flight = fly(policy, env)
     best: tuple[np.ndarray, np.ndarray, float] | None = None
     rounds = 0
     full = np.full(env.channel.k, env.power_levels - 1, np.int64)
-    for levels in (flight.levels, full):
-        pos, lev, value, r = refine(env.channel, env.space, env.power_levels, flight.position,
-                                    levels, scorer=scorer)
+    starts = [(flight.position, flight.levels), (flight.position, full)]
+    if scorer is None:  # hover: also the screen's best points (uavxai.service.starts)
+        starts += [(p, full) for p in screened_starts(env.channel, env.space, flight.position)]
+    for start, levels in starts:
+        pos, lev, value, r = refine(
+            env.channel, env.space, env.power_levels, start, levels, scorer=scorer
+        )
         rounds += r
         if best is None or value > best[2]:
             best = (pos, lev, value)
@@ -382,6 +390,8 @@ def plan(
             lev, value = optimal_levels(env.channel, gain, env.power_levels)
         if value > best[2]:
             best = (best[0], lev, value)
+        if scorer is None:  # hover: the exact climb (uavxai.service.starts)
+            best = climb_exact(env.channel, env.space, env.power_levels, best)
     return Plan(flight, best[0], best[1], best[2], rounds)
 
 
