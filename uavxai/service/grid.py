@@ -22,9 +22,10 @@ on the level sums that can still end in the block (a third of the table for K = 
 incumbent can be seeded by a ``hint`` (a planner's answer), so boxes are pruned from the
 start; and the DP drops allocations with so many users below QoS that, even at the lattice's
 per-user peak gains, ``sum rate / 2^lambda`` cannot reach the incumbent (``_failure_cap``:
-7 of 21 failure counts kept in the shared band with K = 20, 1 in OFDMA). Idle, one core:
-K = 5 under 1 s, K = 10 1-3 s, K = 20 4-8 s (OFDMA) and 15-20 s (shared), against 1-6.5 min
-for K = 20 before.
+7 of 21 failure counts kept in the shared band with K = 20, 1 in OFDMA), and the level totals
+S whose best at those peak gains cannot reach it either (``_useful_totals``: in the shared
+band, where the position hardly matters, a few of the hundred). One core: K = 5 under 1 s,
+K = 10 1-3 s, K = 20 about 2 s (shared) and 4-8 s (OFDMA), against 1-6.5 min for K = 20 before.
 """
 
 from __future__ import annotations
@@ -45,7 +46,7 @@ S_BLOCK = 5  # level totals per DP block (one level range: few sums wasted, few 
 
 
 def level_rates(
-    channel: Channel, gain: np.ndarray, power_levels: int
+    channel: Channel, gain: np.ndarray, power_levels: int, totals: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
     """Rate of user k at level l when the levels add up to S, and whether it misses QoS.
 
@@ -53,7 +54,8 @@ def level_rates(
     ``i`` along axis 1 is the total ``S = i + 1``.
     """
     L = power_levels
-    s_total = np.arange(1, channel.k * (L - 1) + 1, dtype=float)  # (nS,)
+    every = np.arange(1, channel.k * (L - 1) + 1)
+    s_total = (every if totals is None else np.asarray(totals)).astype(float)  # (nS,)
     unit = channel.p_max_w / np.maximum(s_total, L - 1)
     p = unit[:, None] * np.arange(L)  # (nS, L)
     g = gain[:, None, :, None]  # (N, 1, K, 1)
@@ -68,26 +70,37 @@ def level_rates(
 
 
 def _knapsack(
-    rates: np.ndarray, fails: np.ndarray, keep_choices: bool = False, cap: int | None = None
+    rates: np.ndarray,
+    fails: np.ndarray,
+    keep_choices: bool = False,
+    cap: int | None = None,
+    totals: np.ndarray | None = None,
 ) -> tuple[np.ndarray, tuple[int, int] | None, list[np.ndarray]]:
     """Exact DP over users: the best objective per position ``(N,)``; with ``keep_choices``
     (N = 1) also the best ``(S index, lambda)`` and the per-user choice tables to backtrack.
 
     With ``cap`` only allocations with fewer than ``cap`` users below QoS are considered (the
     branch-and-bound caps where no allocation with more failures can matter, ``_failure_cap``):
-    the DP's work is proportional to the number of failure counts it keeps.
+    the DP's work is proportional to the number of failure counts it keeps. ``totals`` (the
+    level totals S the tables were made for, ``level_rates(totals=...)``) restricts it to those.
     """
     N, nS, K, L = rates.shape
     cap = K + 1 if cap is None else min(cap, K + 1)
     final = np.empty((N, nS, cap))  # best sum rate per (S, lambda)
     choices: list[np.ndarray] = []
-    # Totals S in blocks: a block only needs the level sums that can still end inside it.
+    totals = np.arange(1, nS + 1) if totals is None else np.asarray(totals)
+    # Totals S in blocks of consecutive ones: a block only needs the level sums that can
+    # still end inside it.
     size = nS if keep_choices else S_BLOCK
-    for first in range(0, nS, size):
-        last = min(first + size, nS)
+    first = 0
+    while first < nS:
+        last = first + 1
+        while last < min(first + size, nS) and totals[last] == totals[last - 1] + 1:
+            last += 1
         final[:, first:last], choices = _knapsack_block(
-            rates[:, first:last], fails[:, first:last], first + 1, cap, keep_choices
+            rates[:, first:last], fails[:, first:last], int(totals[first]), cap, keep_choices
         )
+        first = last
     objective = (final / 2.0 ** np.arange(cap)).reshape(N, -1)
     flat = objective.argmax(axis=1)
     best = objective[np.arange(N), flat]
@@ -146,20 +159,26 @@ def _knapsack_block(
 
 
 def optimal_objective(
-    channel: Channel, gain: np.ndarray, power_levels: int, cap: int | None = None
+    channel: Channel,
+    gain: np.ndarray,
+    power_levels: int,
+    cap: int | None = None,
+    totals: np.ndarray | None = None,
 ) -> np.ndarray:
     """The best objective over all discrete power levels for each row of ``gain (N, K)``
-    (over the allocations with fewer than ``cap`` users below QoS, if given)."""
+    (over the allocations with fewer than ``cap`` users below QoS and level totals in
+    ``totals``, if given)."""
     gain = np.atleast_2d(gain)
     s_max = channel.k * (power_levels - 1)
     lams = channel.k + 1 if cap is None else min(cap, channel.k + 1)
     # rates and fails (N, S, K, L), a block's states (N, S_BLOCK, s, lambda), in float64
-    per_row = 8 * (2 * s_max * channel.k * power_levels + 3 * S_BLOCK * (s_max + 1) * lams)
+    n_totals = s_max if totals is None else len(totals)
+    per_row = 8 * (2 * n_totals * channel.k * power_levels + 3 * S_BLOCK * (s_max + 1) * lams)
     batch = max(1, DP_BYTES_PER_CALL // per_row)
     out = np.empty(len(gain))
     for i in range(0, len(gain), batch):
-        rates, fails = level_rates(channel, gain[i : i + batch], power_levels)
-        out[i : i + batch] = _knapsack(rates, fails, cap=cap)[0]
+        rates, fails = level_rates(channel, gain[i : i + batch], power_levels, totals)
+        out[i : i + batch] = _knapsack(rates, fails, cap=cap, totals=totals)[0]
     return out
 
 
@@ -269,6 +288,19 @@ def _failure_cap(
     )
 
 
+def _useful_totals(
+    channel: Channel, peak: np.ndarray, power_levels: int, incumbent: float, cap: int
+) -> np.ndarray:
+    """The level totals S whose best allocation can beat the incumbent somewhere: for fixed
+    levels the objective grows with every gain, so the best with total S at the lattice's
+    per-user peak gains bounds it at every position. In the shared band, where the position
+    hardly matters, this leaves a few totals of the hundred for K = 20."""
+    rates, fails = level_rates(channel, peak[None, :], power_levels)
+    final, _ = _knapsack_block(rates, fails, 1, cap, False)
+    per_total = (final[0] / 2.0 ** np.arange(cap)).max(axis=1)
+    return np.flatnonzero(per_total > incumbent) + 1
+
+
 def _branch_and_bound(
     channel: Channel,
     gains: np.ndarray,
@@ -279,16 +311,18 @@ def _branch_and_bound(
 ) -> tuple[tuple[int, ...], int]:
     """The lattice index of the optimum and the number of DP solves.
 
-    The DP leaves out allocations with ``_failure_cap`` or more users below QoS: they cannot
-    beat the incumbent, so every bound above it, and every position's value above it, is
-    exactly what the full DP gives.
+    The DP leaves out allocations with ``_failure_cap`` or more users below QoS and level
+    totals other than ``_useful_totals``: they cannot beat the incumbent, so every bound above
+    it, and every position's value above it, is exactly what the full DP gives.
     """
     best_value, best_index = incumbent
-    cap = _failure_cap(channel, gains.max(axis=(0, 1, 2)), power_levels, best_value, failures)
-    evaluations, frontier = 1, boxes
+    peak = gains.max(axis=(0, 1, 2))
+    cap = _failure_cap(channel, peak, power_levels, best_value, failures)
+    totals = _useful_totals(channel, peak, power_levels, best_value, cap)
+    evaluations, frontier = 2, boxes if len(totals) else []
     while frontier:
         peaks = np.array([gains[b].max(axis=(0, 1, 2)) for b in frontier])
-        bounds = optimal_objective(channel, peaks, power_levels, cap)
+        bounds = optimal_objective(channel, peaks, power_levels, cap, totals)
         evaluations += len(frontier)
         children: list[Box] = []
         for i in np.argsort(-bounds, kind="stable"):
