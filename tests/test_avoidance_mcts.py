@@ -68,8 +68,10 @@ def test_first_decision_turns_or_slows_away_and_says_why(name):
     hold = by_action[4]
     chosen = by_action[decision.action]
     assert decision.action != 4
-    assert hold.outcome == "collision" and hold.predicted_min_separation_m < 50.0
-    assert chosen.outcome != "collision" and chosen.predicted_min_separation_m >= 50.0
+    # holding comes inside the separation it needs (d_min plus the intruder's margin)
+    assert hold.outcome == "collision" and hold.meets.miss_m < hold.meets.needed_m
+    assert chosen.outcome != "collision" and chosen.meets is None
+    assert chosen.predicted_min_separation_m >= 50.0
     assert chosen.q > hold.q
     assert "holding bank and speed meets intruder 1" in decision.explanation
     assert decision.counterfactual.startswith("why not")

@@ -247,3 +247,40 @@ def test_scenario_checkpoint_errors_exit_2_through_the_cli(tmp_path: Path, capsy
     )  # fmt: skip
     assert code == 2
     assert str(missing) in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("name", ["dqn", "safe_dqn"])
+def test_learned_planners_check_inputs_and_measure_exactly(name: str) -> None:
+    """The same input checks as the tree planners, and separations solved exactly (not the
+    sampled minimum, which overstates a closest approach between sub-steps)."""
+    from dataclasses import replace
+
+    from uavxai.avoidance.mcts import intruder_arrays
+    from uavxai.avoidance.model import EncounterModel, ownship_state
+    from uavxai.errors import UserError
+
+    planner = make_planner(name, CONFIG)
+    with pytest.raises(UserError, match="non-finite"):
+        planner.plan(replace(OWN, x=math.nan), [], GOAL)
+    with pytest.raises(UserError, match="goal"):
+        planner.plan(OWN, [], (0.0, math.inf, 120.0))
+    # a crossing intruder whose closest approach (100 m) falls between two sub-step instants
+    own_v = 20.0 * np.array([math.sin(OWN.heading), math.cos(OWN.heading)])
+    rel_v = np.array([-25.0, 25.0]) - own_v
+    normal = np.array([rel_v[1], -rel_v[0]]) / np.linalg.norm(rel_v)
+    start = np.array([OWN.x, OWN.y]) + 100.0 * normal - 0.25 * rel_v
+    intruders = [*_traffic(20, seed=5), Intruder(99, *start, 120.0, -25.0, 25.0)]
+    d = planner.plan(OWN, intruders, GOAL)
+    model = EncounterModel(CONFIG)
+    pos, vel = intruder_arrays(intruders)
+    period = CONFIG.decision_period_s
+    flown = [
+        model.fly(
+            ownship_state(OWN)[None], np.array([d.action]), np.asarray(GOAL, dtype=float),
+            period, model.predict(pos, vel, period), cull=False, exact=exact,
+        ).min_sep[0]
+        for exact in (True, False)
+    ]  # fmt: skip
+    assert flown[1] - flown[0] > 0.1  # sampling would overstate this one
+    assert d.predicted_min_separation_m == pytest.approx(float(flown[0]), abs=1e-9)
+    assert d.branch_min_separation_m == d.children[d.action].predicted_min_separation_m

@@ -132,3 +132,35 @@ def test_without_a_tree_the_root_actions_come_from_child_stats():
     assert graph.labels[0] == "now\nn=13"
     assert graph.colors[2] == CHOSEN_COLOR
     assert len(graph.edges) == 3
+
+
+def _colors(graph) -> dict[int, tuple[int, int, int]]:
+    return {int(n[1:]): c for n, c in zip(graph.node_ids, graph.colors, strict=True)}
+
+
+def test_the_green_node_below_the_choice_is_the_plan_on_a_visit_tie():
+    """Two children of the chosen action tie on visits: the plan (best_line) takes the higher
+    Q, and so must the green node, whatever the action order says."""
+    tree, _ = hand_made_tree()
+    under_4 = [int(c) for c in tree.children_of(5)]  # node 5 is root action 4
+    tree.visits[under_4[1]] = tree.visits[under_4[0]]  # a visit tie between actions 0 and 1
+    tree.value_sum[under_4[0]] = 0.2 * tree.visits[under_4[0]]
+    tree.value_sum[under_4[1]] = 0.9 * tree.visits[under_4[1]]  # the later one has the higher Q
+    plan = tree.best_line(5)
+    assert plan[1] == under_4[1]  # the situation under test
+    colors = _colors(tree_graph(decision_with(tree, 4)))
+    green = [n for n, c in colors.items() if c == CHOSEN_COLOR and tree.depth[n] == 2]
+    assert green == [plan[1]]
+
+
+def test_the_chosen_action_is_green_even_when_its_line_collides():
+    tree, _ = hand_made_tree()
+    tree.terminal[5] = 2  # root action 4, the chosen one, ends in a collision
+    graph = tree_graph(decision_with(tree, 4))
+    index = graph.node_ids.index("n5")
+    assert graph.colors[index] == CHOSEN_COLOR
+    assert graph.labels[index].endswith("\ncollision")
+    other = graph.node_ids.index("n1")  # root action 0, not chosen
+    tree.terminal[1] = 2
+    graph = tree_graph(decision_with(tree, 4))
+    assert graph.colors[other] == COLLISION_COLOR

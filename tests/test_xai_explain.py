@@ -22,7 +22,8 @@ def run_dir(tmp_path_factory):
     sc = default_scenario(
         "explain-test",
         ownship={"start": {"x": 1000, "y": 300, "h": 120, "heading_deg": 0, "speed_mps": 20}},
-        intruders={"list": [{"x": 1000, "y": 800, "h": 120, "heading_deg": 180, "speed_mps": 20}]},
+        # 400 m apart, closing at 40 m/s: holding meets it within the 12 s search horizon
+        intruders={"list": [{"x": 1000, "y": 700, "h": 120, "heading_deg": 180, "speed_mps": 20}]},
         avoidance={"mcts": {"simulations": 60, "depth": 3}},
         surveillance={"model": "truth"},
     )
@@ -38,7 +39,7 @@ def test_sentence_names_the_threat_the_choice_and_the_support():
     own, intruders = HEAD_ON
     d = MCTSPlanner(PlannerConfig(seed=0)).plan(own, intruders, (1000, 1800, 120))
     assert d.explanation.startswith("banked ")
-    assert "holding bank and speed meets intruder 7 at" in d.explanation
+    assert "holding bank and speed meets intruder 7 in " in d.explanation
     assert f"{round(100 * d.confidence)}% of simulations agree" in d.explanation
     runner = max((c for c in d.children if c.action != d.action), key=lambda c: (c.visits, c.q))
     assert d.counterfactual.startswith("why not ")
@@ -71,6 +72,14 @@ def test_overview_counts_and_finds_the_tightest(run_dir):
     assert f"Tightest: decision {tightest}, predicted {seps[tightest]:.0f} m" in text
     avoided = int(text.split("; ")[1].split(" ")[0])
     assert 1 <= avoided <= n  # the head-on encounter is avoided at least once
+    # "steered away from a predicted conflict": holding's line conflicts, the chosen one's not
+    expected = 0
+    for r in result.records:
+        kids = {c["action"]["index"]: c for c in r["children"]}
+        hold, chosen = kids[4], kids[r["action"]["index"]]
+        other = chosen["flies"] != hold["flies"]
+        expected += hold["meets"] is not None and chosen["meets"] is None and other
+    assert avoided == expected
 
 
 def test_bad_input_is_a_clear_error(run_dir, tmp_path):
@@ -154,3 +163,89 @@ def test_a_rejected_option_with_the_higher_q_is_not_called_lower():
     assert "has the higher Q (0.750 against 0.700) but fewer simulations (10 against 30)" in (
         d.explanation
     )
+
+
+def test_a_conflict_quotes_its_predicted_miss_not_where_it_first_came_too_close():
+    own, intruders = HEAD_ON
+    d = MCTSPlanner(PlannerConfig(seed=0)).plan(own, intruders, (1000, 1800, 120))
+    hold = next(c for c in d.children if c.action == 4)
+    m = hold.meets
+    # dead ahead: on the predicted tracks the two would nearly touch; where holding first
+    # comes inside the separation it needs (75 m here) is no miss distance
+    assert m is not None and m.miss_m < 10.0 and m.needed_m >= d.d_min_m
+    assert f"meets intruder 7 in {m.time_s:.1f} s (predicted miss {m.miss_m:.0f} m, " in (
+        d.explanation
+    )
+
+
+def test_clamped_commands_are_not_called_manoeuvres():
+    """At the bank limit and the top speed, "right" and "faster" change nothing: no sentence
+    says the aircraft banked right or sped up, and no option that flies the chosen manoeuvre
+    is offered as its alternative."""
+    import math
+
+    from uavxai.vocabulary import ACTIONS
+
+    own = Ownship(1000, 1000, 120, 30.0, 0.0, bank=math.radians(30))
+    for seed in range(4):
+        d = MCTSPlanner(PlannerConfig(seed=seed, depth=2)).plan(own, [], (1000, 1900, 120))
+        for c in d.children:
+            a, flown = ACTIONS[c.action], ACTIONS[c.flies]
+            assert flown.accel == min(a.accel, 0) and flown.bank == min(a.bank, 0)
+        chosen = next(c for c in d.children if c.action == d.action)
+        assert d.explanation.startswith(ACTIONS[chosen.flies].verb)
+        assert "banked right" not in d.explanation and "sped up" not in d.explanation
+        runner = next(c for c in d.children if d.counterfactual.startswith(f"why not {_phrase(c)}"))
+        assert runner.flies != chosen.flies
+
+
+def _phrase(c) -> str:
+    from uavxai.vocabulary import ACTIONS
+
+    return ACTIONS[c.action].phrase + (":" if c.effect is None else " (flies as")
+
+
+def _meeting_child(action: int, visits: int, q: float, when: float, miss: float):
+    from uavxai.avoidance.types import ChildStats, Meeting
+
+    return ChildStats(
+        action, 0.0, 0.0, visits, q, miss, 3, when, "collision",
+        meets=Meeting(3, when, miss, 75.0),
+    )  # fmt: skip
+
+
+def test_why_not_a_collision_is_said_only_when_the_choice_does_not_collide():
+    from uavxai.avoidance.types import Decision
+
+    chosen, runner = _meeting_child(0, 30, 0.05, 9.0, 20.0), _meeting_child(4, 20, 0.04, 6.0, 5.0)
+    clear = _child(8, 1, 0.9)
+    d = Decision(0.0, 1.0, 0, [chosen, runner, clear], planner="mcts")
+    assert "a predicted collision" not in d.counterfactual  # the chosen line collides too
+    assert d.counterfactual.startswith("why not holding bank and speed: it meets intruder 3 in ")
+    assert " too; " in d.counterfactual
+
+
+def test_when_every_option_conflicts_the_rule_is_stated_and_applied():
+    from uavxai.avoidance.lines import cornered_choice
+    from uavxai.avoidance.types import Decision
+
+    kids = [
+        _meeting_child(0, 50, 0.03, 6.0, 30.0),  # most simulated, meets soonest
+        _meeting_child(4, 10, 0.04, 9.0, 10.0),  # meets latest
+        _meeting_child(8, 10, 0.04, 9.0, 25.0),  # as late, passes wider: the rule's pick
+    ]
+    assert cornered_choice(kids).action == 8
+    d = Decision(0.0, 0.0, 8, kids, planner="mcts", cornered=True)
+    assert (
+        "every option meets an intruder, so it took the one that meets its intruder latest "
+        "(in 9.0 s, as another does) and passes it widest (25.0 m against 10.0 m)"
+    ) in d.explanation
+    assert d.counterfactual.endswith(", as soon and closer")
+    assert cornered_choice([*kids, _child(2, 1, 0.9)]) is None  # one option is clear
+
+
+def test_steering_away_needs_holding_to_conflict():
+    hold_clear = [_child(4, 30, 0.8), _meeting_child(0, 10, 0.05, 6.0, 5.0), _child(8, 40, 0.9)]
+    assert not is_avoidance(hold_clear, 8, 50.0)  # another option conflicted, holding did not
+    hold_meets = [_meeting_child(4, 30, 0.05, 6.0, 5.0), _child(8, 40, 0.9)]
+    assert is_avoidance(hold_meets, 8, 50.0)

@@ -78,6 +78,9 @@ class DirectPlanner:
             ),
             plan=seg.samples[0],
             predicted_min_separation_m=float(seg.min_sep[0]),
+            # its plan is this one period, and that is what the trust figure checks
+            branch_min_separation_m=float(seg.min_sep[0]),
+            branch_horizon_s=period,
             confidence=1.0,
             ms=1000.0 * (time.perf_counter() - t0),
             planner=self.name,

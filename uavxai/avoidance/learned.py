@@ -33,6 +33,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from uavxai.avoidance.lines import flies, measure_line, with_measure
 from uavxai.avoidance.mcts import intruder_arrays
 from uavxai.avoidance.model import (
     PHI_CMD,
@@ -52,6 +53,7 @@ from uavxai.avoidance.types import (
     Ownship,
     PlannerConfig,
     action_name,
+    check_plan_inputs,
 )
 from uavxai.errors import CheckpointError
 from uavxai.paths import avoidance_checkpoints_dir
@@ -470,6 +472,7 @@ class LearnedPlanner:
         self, own: Ownship, intruders: Sequence[Intruder], goal: Goal, *, step: int = 0
     ) -> Decision:
         t0 = time.perf_counter()
+        check_plan_inputs(own, intruders, goal)  # as the tree planners do
         cfg, model = self.config, self.model
         root = ownship_state(own)
         pos, vel = intruder_arrays(intruders)
@@ -479,13 +482,15 @@ class LearnedPlanner:
 
         # What the encounter model says each action leads to, held for one tree level's time.
         hold = cfg.action_hold_s
+        track = model.predict(pos, vel, hold)
         seg = model.fly(
             np.repeat(root[None], N_ACTIONS, axis=0),
             np.arange(N_ACTIONS),
             goal_xyz,
             hold,
-            model.predict(pos, vel, hold),
+            track,
             cull=False,
+            exact=True,
         )
         ids = [i.id for i in intruders]
         children = []
@@ -502,12 +507,19 @@ class LearnedPlanner:
                     closest_intruder=ids[int(seg.closest[a])] if finite else None,
                     time_to_closest_s=float(seg.t_closest[a]) if finite else None,
                     outcome=_OUTCOME.get(int(seg.event[a]), ""),
+                    effect=flies(a, own, cfg),
                 )
             )
+            # the numbers the words quote: a collision's predicted miss, not where it began
+            line = measure_line(
+                [seg.samples[a]], [0], [(int(seg.event[a]), float(seg.t_event[a]))], [track],
+                hold, cfg.d_min_m,
+            )  # fmt: skip
+            children[-1] = with_measure(children[-1], line, ids)
         period = cfg.decision_period_s
         next_seg = model.fly(
             root[None], np.array([action]), goal_xyz, period, model.predict(pos, vel, period),
-            cull=False,
+            cull=False, exact=True,
         )  # fmt: skip
         sentence, counterfactual = self.explain(action, q, children)
         return Decision(
@@ -518,7 +530,8 @@ class LearnedPlanner:
             words=(sentence, counterfactual),
             plan=np.concatenate([root[None, :3], seg.samples[action, 1:]]),
             predicted_min_separation_m=float(next_seg.min_sep[0]),
-            branch_min_separation_m=float(seg.min_sep[action]),
+            branch_min_separation_m=children[action].predicted_min_separation_m,
+            branch_horizon_s=hold,
             ms=1000.0 * (time.perf_counter() - t0),
             planner=self.name,
             d_min_m=cfg.d_min_m,
@@ -590,12 +603,17 @@ _OUTCOME = {1: "goal", 2: "collision", 3: "out_of_bounds"}
 def _keeps(c: ChildStats, cfg: PlannerConfig) -> str:
     """What the encounter model predicts for an action held ``action_hold_s``, in words."""
     hold = f"held {cfg.action_hold_s:g} s"
+    if c.meets is not None:
+        m = c.meets
+        return (
+            f"{hold} it meets intruder {m.intruder} in {m.time_s:.1f} s (predicted miss "
+            f"{m.miss_m:.0f} m, {m.needed_m:.0f} m needed)"
+        )
     if c.closest_intruder is None or not math.isfinite(c.predicted_min_separation_m):
         return f"{hold} it meets no intruder"
-    verb = "meets" if c.predicted_min_separation_m < cfg.d_min_m else "keeps"
     return (
-        f"{hold} it {verb} {c.predicted_min_separation_m:.0f} m from intruder "
-        f"{c.closest_intruder} in {c.time_to_closest_s or 0.0:.0f} s"
+        f"{hold} it is predicted to keep {c.predicted_min_separation_m:.0f} m from intruder "
+        f"{c.closest_intruder} (in {c.time_to_closest_s or 0.0:.0f} s)"
     )
 
 

@@ -33,6 +33,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from uavxai.avoidance.lines import cornered_choice, measured_children
 from uavxai.avoidance.model import (
     COLLISION,
     NONE,
@@ -282,12 +283,20 @@ def decision_from_tree(
     ids = [i.id for i in intruders]
     root_children = tree.children_of(0)
     lines = {int(tree.action[ch]): tree.best_line(int(ch)) for ch in root_children}
-    samples = _remeasure(model, tree, [n for line in lines.values() for n in line], goal, tracks)
+    samples, t_events = _remeasure(
+        model, tree, [n for line in lines.values() for n in line], goal, tracks
+    )
     shares = collision_shares(tree) if sampled else None
     children = [
         _child_stats(tree, a, line, own, model, goal, ids, None if shares is None else shares[a])
         for a, line in lines.items()
     ]
+    children, horizons = measured_children(
+        children, lines, tree, samples, t_events, tracks, ids, own, cfg
+    )
+    cornered = cornered_choice(children)  # every option conflicts: a rule words can state
+    if cornered is not None:
+        action = cornered.action
 
     chosen_line = lines[action]
     plan = [np.array([[own.x, own.y, own.h]])]
@@ -324,6 +333,8 @@ def decision_from_tree(
         predicted_min_separation_m=float(next_seg.min_sep[0]),
         confidence=chosen.visits / visits_root if visits_root else 0.0,
         branch_min_separation_m=chosen.predicted_min_separation_m,
+        branch_horizon_s=horizons[action],
+        cornered=cornered is not None,
         planner=name,
         d_min_m=cfg.d_min_m,
     )
@@ -361,11 +372,12 @@ def _remeasure(
     nodes: list[int],
     goal: np.ndarray,
     tracks: Sequence[Track],
-) -> dict[int, np.ndarray]:
+) -> tuple[dict[int, np.ndarray], dict[int, float]]:
     """Re-fly the edges into ``nodes`` exactly, against every intruder, in one batch.
 
     Updates the tree's min_sep, closest and t_closest of those nodes; returns each node's
-    (n+1, 3) sub-step positions.
+    (n+1, 3) sub-step positions and the time of its event's sub-step within the edge (nan:
+    none).
     """
     assert tree.state is not None and tree.t_closest is not None
     hold = model.config.action_hold_s
@@ -377,7 +389,10 @@ def _remeasure(
     tree.min_sep[group] = seg.min_sep
     tree.closest[group] = seg.closest
     tree.t_closest[group] = seg.t_closest + level * hold
-    return dict(zip(group.tolist(), seg.samples, strict=True))
+    nodes = group.tolist()
+    return dict(zip(nodes, seg.samples, strict=True)), dict(
+        zip(nodes, seg.t_event.tolist(), strict=True)
+    )
 
 
 def _child_stats(

@@ -390,6 +390,8 @@ class Decision:
     ms: float = 0.0  # planner wall time
     branch_min_separation_m: float = math.inf  # along the chosen line, depth x action_hold_s
     branch_horizon_s: float = 0.0  # how far ahead the chosen line reaches, s
+    # every option conflicted and the planner chose by uavxai.avoidance.lines.cornered_key
+    cornered: bool = False
     planner: str = ""  # which planner decided (mcts, exhaustive, none, ...)
     d_min_m: float = 50.0  # the collision distance the planner worked with
     # (explanation, counterfactual) in words. Planners return evidence and leave this None;
@@ -453,6 +455,7 @@ class Decision:
             "predicted_min_separation_m": _finite(self.predicted_min_separation_m),
             "branch_min_separation_m": _finite(self.branch_min_separation_m),
             "branch_horizon_s": self.branch_horizon_s,
+            "cornered": self.cornered,
             "d_min_m": self.d_min_m,
             "ms": self.ms,
         }

@@ -94,7 +94,9 @@ def _from_tree(decision: Decision, max_depth: int, expand: int, branch: int) -> 
         if depth >= max_depth:
             continue
         kids = [int(c) for c in tree.children_of(node) if tree.visits[c] > 0]
-        kids.sort(key=lambda c: -int(tree.visits[c]))
+        # Most visited first, ties as the plan breaks them (higher Q, then action order), so
+        # that the first below a chosen node is the plan's next node (SearchTree.best_child).
+        kids.sort(key=lambda c: (-int(tree.visits[c]), -float(q[c]), int(tree.action[c])))
         if depth >= 1:
             kids = kids[:branch]
         chosen_kid = _chosen_child(tree, kids, decision.action, depth) if chosen else None
@@ -105,11 +107,15 @@ def _from_tree(decision: Decision, max_depth: int, expand: int, branch: int) -> 
             opened.add(c)
         # Drawn in action order, so "left" branches sit on top in every decision.
         for c in sorted(kids, key=lambda c: int(tree.action[c])):
-            if tree.terminal[c] == _COLLISION:
-                color = COLLISION_COLOR
+            # The plan stays green to its end, a collision on it included (said in the
+            # label), so the chosen action is never drawn red without a green line.
+            if c == chosen_kid:
+                color = CHOSEN_COLOR
             else:
-                color = CHOSEN_COLOR if c == chosen_kid else OTHER_COLOR
+                color = COLLISION_COLOR if tree.terminal[c] == _COLLISION else OTHER_COLOR
             label = f"{short_action(int(tree.action[c]))}\nn={int(tree.visits[c])} Q={q[c]:.2f}"
+            if tree.terminal[c] == _COLLISION:
+                label += "\ncollision"
             index = graph.add(f"n{c}", label, color, int(tree.visits[c]), root_visits, g_index)
             if c in opened:
                 frontier.append((c, index, c == chosen_kid))
@@ -117,7 +123,8 @@ def _from_tree(decision: Decision, max_depth: int, expand: int, branch: int) -> 
 
 
 def _chosen_child(tree, kids: list[int], action: int, depth: int) -> int | None:
-    """The root action the planner took, then the most visited line below it (its plan)."""
+    """The root action the planner took, then the line below it that is its plan
+    (:meth:`SearchTree.best_line`)."""
     if depth == 0:
         return next((c for c in kids if int(tree.action[c]) == action), None)
     return kids[0] if kids else None

@@ -145,7 +145,7 @@ class KinematicResult:
     flight_time_s: float
     final_distance_m: float
     decision_ms: list[float]
-    separation_error_m: list[float]  # per decision: |predicted - flown| over its period
+    separation_error_m: list[float]  # per decision: |branch's prediction - flown| (Trust)
     path: np.ndarray  # (steps + 1, 3) ownship at every decision and at the end
     decisions: list = field(default_factory=list)  # with keep_decisions
     records: list[dict] = field(default_factory=list)  # decisions.jsonl lines, likewise

@@ -82,18 +82,47 @@ class DecisionsJSONL(Observer):
 
 
 class Trust(Observer):
-    """How far the planner's predicted minimum separation for the next decision period was
-    from what was then flown (``summary.trust``)."""
+    """How far what the explanations claim was from what was then flown (``summary.trust``).
+
+    Each decision's sentence quotes its chosen branch's predicted minimum separation
+    (``Decision.branch_min_separation_m``: the planned line against the intruders flying on as
+    predicted, ``branch_horizon_s`` ahead). Here that number is set against the smallest
+    separation really flown (to any aircraft, between samples included) over the same
+    window, from the decision to its horizon or the end of the flight;
+    ``separation_error_m`` summarises ``|predicted - flown|`` over the decisions.
+    """
 
     def __init__(self) -> None:
         self.errors: list[float] = []
+        self._open: list[list[float]] = []  # [end time, predicted, flown so far]
+        self._prev: TrafficState | None = None
 
-    def on_period(self, ep: Episode, event: DecisionEvent, flown_min_m: float) -> None:
-        predicted = event.decision.predicted_min_separation_m
-        if math.isfinite(predicted) and math.isfinite(flown_min_m):
-            self.errors.append(abs(predicted - flown_min_m))
+    def on_start(self, ep: Episode) -> None:
+        self._prev = ep.state
+
+    def on_decision(self, ep: Episode, event: DecisionEvent) -> None:
+        d = event.decision
+        if math.isfinite(d.branch_min_separation_m) and d.branch_horizon_s > 0:
+            self._open.append([event.t + d.branch_horizon_s, d.branch_min_separation_m, math.inf])
+
+    def on_sample(self, ep: Episode, state: TrafficState) -> None:
+        prev, self._prev = self._prev, state
+        if not self._open or prev is None:
+            return
+        sep = ep.judge.separation(prev, state)  # the closest approach since the last sample
+        for window in self._open:
+            window[2] = min(window[2], sep)
+        done = [w for w in self._open if state.t >= w[0] - 1e-9]
+        self._close(done)
+
+    def _close(self, windows: list[list[float]]) -> None:
+        for w in windows:
+            if math.isfinite(w[2]):
+                self.errors.append(abs(w[1] - w[2]))
+            self._open.remove(w)
 
     def on_end(self, ep: Episode, summary: dict) -> None:
+        self._close(list(self._open))  # the flight ended first: what was flown until then
         summary["trust"] = {"separation_error_m": stats(self.errors, ("mean", "p95", "max"))}
 
 

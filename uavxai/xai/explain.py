@@ -15,6 +15,7 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
+from uavxai.avoidance.lines import conflicts, cornered_key
 from uavxai.avoidance.types import ChildStats, Decision, Intruder, Ownship, set_narrator
 from uavxai.errors import UserError
 from uavxai.vocabulary import ACTIONS, HOLD
@@ -24,65 +25,79 @@ from uavxai.vocabulary import ACTIONS, HOLD
 def explain(decision: Decision) -> tuple[str, str]:
     """(sentence, counterfactual) for a decision, e.g.
 
-    "banked right: holding bank and speed meets intruder 7 at 34 m in 9 s; right keeps 180 m;
-    71% of simulations agree" and "why not left: its best line meets intruder 3 at 41 m ...".
+    "banked right: holding bank and speed meets intruder 7 in 9 s (predicted miss 21 m, 74 m
+    needed); right is predicted to keep 180 m from intruder 3; 71% of simulations agree" and
+    "why not left: ...".
+
+    The verb says the manoeuvre flown: an action whose command is clamped (a bank step at
+    the bank limit, a speed change at the speed limit) is said to change nothing; options
+    are named as in the table of root actions, and one that flies the chosen manoeuvre is
+    never offered as an alternative to it.
+    Separations are predictions (:class:`ChildStats`), and are worded as such.
     """
-    verb = ACTIONS[decision.action].verb
     by_action = {c.action: c for c in decision.children}
     chosen = by_action.get(decision.action)
     if chosen is None:  # a planner without a search behind it
+        verb = ACTIONS[decision.action].verb
         return f"{verb} ({decision.planner or 'planner'} gives no reasons)", ""
     parts: list[str] = []
-    hold = by_action.get(HOLD)
-    if hold is not None and decision.action != HOLD:
-        parts.append(_reference(hold, chosen, decision))
-    parts.append(f"{_short(decision.action)} {_keeps(chosen, decision.d_min_m)}")
+    if decision.cornered:
+        parts.append(_cornered(chosen, decision))
+        parts.append(f"{_short(chosen.action)} {_meets(chosen)}")
+    else:
+        hold = by_action.get(HOLD)
+        if hold is not None and hold.flies != chosen.flies:
+            parts.append(_reference(hold, chosen, decision))
+        parts.append(f"{_short(chosen.action)} {_keeps(chosen, decision)}")
     parts.append(_support(decision))
-    sentence = f"{verb}: " + "; ".join(parts)
+    sentence = f"{ACTIONS[chosen.flies].verb}{_clamped(chosen)}: " + "; ".join(parts)
     return sentence, counterfactual(decision)
 
 
 def counterfactual(decision: Decision) -> str:
-    """Why not the runner-up (the next most visited root action)."""
-    runner = runner_up(decision.children, decision.action)
+    """Why not the runner-up: the best other manoeuvre by the rule the planner chose by."""
     chosen = next((c for c in decision.children if c.action == decision.action), None)
-    if runner is None or chosen is None:
+    if chosen is None:
         return ""
-    head = f"why not {_short(runner.action)}"
+    runner = runner_up(decision.children, chosen, cornered=decision.cornered)
+    if runner is None:
+        return ""
+    head = f"why not {_short(runner.action)}{_flies_as(runner)}"
+    if decision.cornered:
+        return f"{head}: {_cornered_loser(runner, chosen, decision)}"
     if _conflict(runner, decision.d_min_m):
-        return f"{head}: it {_meets(runner)}, a collision"
-    if _tied(runner, chosen):
-        reason = f"as good (Q {chosen.q:.3f} both)"
-    else:
-        reason = f"Q {runner.q:.3f} against {chosen.q:.3f}"
-    if decision.planner != "exhaustive":  # there every sequence is scored once
-        reason += f" ({runner.visits} simulations against {chosen.visits}{_risk(runner)})"
-    elif _tied(runner, chosen):
-        reason += ", the tie goes to the first in action order"
+        if not _conflict(chosen, decision.d_min_m):
+            return f"{head}: it {_meets(runner)}, a predicted collision"
+        return f"{head}: it {_meets(runner)} too; {_q_against(runner, chosen, decision)}"
+    reason = _q_against(runner, chosen, decision)
     if math.isfinite(runner.predicted_min_separation_m) and runner.closest_intruder is not None:
-        reason += (
-            f"; it passes {_name(runner.closest_intruder)} at "
-            f"{runner.predicted_min_separation_m:.0f} m"
-        )
+        reason += f"; it {_keeps(runner, decision)}"
     if runner.outcome in ("out_of_bounds", "timeout"):
         reason += f"; its best line ends {runner.outcome.replace('_', ' ')}"
     return f"{head}: {reason}"
 
 
-def runner_up(children: Sequence[ChildStats], action: int) -> ChildStats | None:
-    others = [c for c in children if c.action != action]
+def runner_up(
+    children: Sequence[ChildStats], chosen: ChildStats, *, cornered: bool = False
+) -> ChildStats | None:
+    """The best option that flies another manoeuvre than ``chosen``: by the cornered rule
+    when the planner chose by it, else as the search ranks (simulations, Q, action order)."""
+    others = [c for c in children if c.flies != chosen.flies]
     if not others:
         return None
+    if cornered:
+        return max(others, key=cornered_key)
     return max(others, key=lambda c: (c.visits, c.q, -c.action))
 
 
 def is_avoidance(children: Sequence[ChildStats], action: int, d_min_m: float) -> bool:
-    """Did the decision steer away from something: some action's line conflicts, the chosen
-    one's does not."""
-    chosen = next((c for c in children if c.action == action), None)
-    if chosen is None or _conflict(chosen, d_min_m):
+    """Did the decision steer away from a predicted conflict: holding bank and speed conflicts,
+    the chosen manoeuvre (another one) does not."""
+    by_action = {c.action: c for c in children}
+    chosen, hold = by_action.get(action), by_action.get(HOLD)
+    if chosen is None or hold is None or chosen.flies == hold.flies:
         return False
-    return any(_conflict(c, d_min_m) for c in children)
+    return _conflict(hold, d_min_m) and not _conflict(chosen, d_min_m)
 
 
 def _reference(hold: ChildStats, chosen: ChildStats, decision: Decision) -> str:
@@ -92,9 +107,7 @@ def _reference(hold: ChildStats, chosen: ChildStats, decision: Decision) -> str:
     if hold.outcome in ("out_of_bounds", "timeout"):
         return f"{held} ends {hold.outcome.replace('_', ' ')}"
     if _tied(hold, chosen):  # e.g. near the goal, where every line reaches it
-        if decision.planner == "exhaustive":
-            return f"{held} is as good (Q {chosen.q:.3f}), the tie goes to action order"
-        return f"{held} is as good (Q {chosen.q:.3f}), {_why_this_one(chosen, hold)}"
+        return f"{held} is as good (Q {chosen.q:.3f}), {_why_this_one(chosen, hold, decision)}"
     if hold.q > chosen.q:  # chosen for its simulations, not its value: say so, not "lower"
         return (
             f"{held} has the higher Q ({hold.q:.3f} against {chosen.q:.3f}{_risk(hold)}) but "
@@ -103,10 +116,29 @@ def _reference(hold: ChildStats, chosen: ChildStats, decision: Decision) -> str:
     return f"{held} scores lower (Q {hold.q:.3f} against {chosen.q:.3f}{_risk(hold)})"
 
 
-def _why_this_one(chosen: ChildStats, other: ChildStats) -> str:
+def _q_against(runner: ChildStats, chosen: ChildStats, decision: Decision) -> str:
+    """How the search ranked a rejected option against the chosen one, with what decided."""
+    if _tied(runner, chosen):
+        return f"as good (Q {chosen.q:.3f} both), {_why_this_one(chosen, runner, decision)}"
+    if runner.q > chosen.q:
+        return (
+            f"a higher Q ({runner.q:.3f} against {chosen.q:.3f}{_risk(runner)}) but fewer "
+            f"simulations ({runner.visits} against {chosen.visits})"
+        )
+    text = f"Q {runner.q:.3f} against {chosen.q:.3f}"
+    if _sampled(decision):  # in an exhaustive search every sequence is scored once
+        text += f" ({runner.visits} simulations against {chosen.visits}{_risk(runner)})"
+    return text
+
+
+def _why_this_one(chosen: ChildStats, other: ChildStats, decision: Decision) -> str:
     """What decided between two options of equal printed Q, as the search decides: the more
-    simulated one, then the higher Q, then action order. Never claims "more simulations" on a
-    tie of visits."""
+    simulated one (MCTS), then the higher Q, then action order. Never claims "more
+    simulations" on a tie of visits."""
+    if not _sampled(decision):
+        if chosen.q > other.q:
+            return "a higher Q beyond 3 decimals decided"
+        return "the tie goes to the first in action order"
     if chosen.visits > other.visits:
         return f"this one had more simulations ({chosen.visits} against {other.visits})"
     if chosen.visits == other.visits:
@@ -114,6 +146,42 @@ def _why_this_one(chosen: ChildStats, other: ChildStats) -> str:
             return f"as many simulations ({chosen.visits} each): a higher Q beyond 3 decimals"
         return f"as many simulations ({chosen.visits} each) and Q: the first in action order"
     return f"though it had fewer simulations ({chosen.visits} against {other.visits})"
+
+
+def _cornered(chosen: ChildStats, decision: Decision) -> str:
+    """Every option conflicts: which rule picked this one, against the best other."""
+    head = "every option meets an intruder, so it took the one that "
+    runner = runner_up(decision.children, chosen, cornered=True)
+    m = chosen.meets
+    if runner is None or m is None or runner.meets is None:
+        return head + "meets its intruder latest"
+    r = runner.meets
+    if round(m.time_s, 6) != round(r.time_s, 6):
+        latest = f"in {m.time_s:.1f} s, the next in {r.time_s:.1f} s"
+        return head + f"meets its intruder latest ({latest})"
+    if m.miss_m != r.miss_m:
+        return head + (
+            f"meets its intruder latest (in {m.time_s:.1f} s, as another does) and passes it "
+            f"widest ({m.miss_m:.1f} m against {r.miss_m:.1f} m)"
+        )
+    tie = _why_this_one(chosen, runner, decision)
+    return head + f"meets its intruder latest and passes it widest, tied: {tie}"
+
+
+def _cornered_loser(runner: ChildStats, chosen: ChildStats, decision: Decision) -> str:
+    m, r = chosen.meets, runner.meets
+    if m is None or r is None:
+        return f"it {_meets(runner)} too"
+    if round(m.time_s, 6) != round(r.time_s, 6):
+        return f"it {_meets(runner)}, sooner"
+    if m.miss_m != r.miss_m:
+        return f"it {_meets(runner)}, as soon and closer"
+    return f"it {_meets(runner)}, the same; {_why_this_one(chosen, runner, decision)}"
+
+
+def _sampled(decision: Decision) -> bool:
+    """Do visits count simulations (MCTS) rather than one per sequence (exhaustive)?"""
+    return not decision.planner.startswith("exhaustive")
 
 
 def _tied(a: ChildStats, b: ChildStats) -> bool:
@@ -128,32 +196,70 @@ def _risk(c: ChildStats) -> str:
     return f"; {100 * c.collision_share:.0f}% of its simulations collide"
 
 
-def _keeps(c: ChildStats, d_min: float) -> str:
-    if _conflict(c, d_min):
-        return f"{_meets(c)} too (every option conflicts)"
+def _keeps(c: ChildStats, decision: Decision) -> str:
+    if _conflict(c, decision.d_min_m):
+        text = _meets(c)
+        if all(_conflict(o, decision.d_min_m) for o in decision.children):
+            text += "; every option meets an intruder"
+        return text
     if c.closest_intruder is None or not math.isfinite(c.predicted_min_separation_m):
-        text = "keeps clear of every intruder in reach"
+        text = "keeps clear of every known intruder"
     else:
-        text = f"keeps {c.predicted_min_separation_m:.0f} m from {_name(c.closest_intruder)}"
+        text = (
+            f"is predicted to keep {c.predicted_min_separation_m:.0f} m from "
+            f"{_name(c.closest_intruder)}"
+        )
     if c.outcome == "goal":
         text += " and reaches the goal"
     return text
 
 
 def _support(decision: Decision) -> str:
-    if decision.planner == "exhaustive":
+    if not _sampled(decision):
         return "the best of every action sequence to the search depth"
     return f"{100 * decision.confidence:.0f}% of simulations agree"
 
 
 def _conflict(c: ChildStats, d_min: float) -> bool:
-    return c.outcome == "collision" or c.predicted_min_separation_m < d_min
+    return conflicts(c) or c.predicted_min_separation_m < d_min
 
 
 def _meets(c: ChildStats) -> str:
-    who = _name(c.closest_intruder) if c.closest_intruder is not None else "an intruder"
-    when = f" in {c.time_to_closest_s:.0f} s" if c.time_to_closest_s is not None else ""
-    return f"meets {who} at {c.predicted_min_separation_m:.0f} m{when}"
+    m = c.meets
+    if m is None:  # a planner that does not measure its conflicts
+        who = _name(c.closest_intruder) if c.closest_intruder is not None else "an intruder"
+        return f"meets {who}"
+    return (
+        f"meets {_name(m.intruder)} in {m.time_s:.1f} s (predicted miss {m.miss_m:.0f} m, "
+        f"{m.needed_m:.0f} m needed)"
+    )
+
+
+def _clamped(c: ChildStats) -> str:
+    """What a clamped command did not do, e.g. " (right changes nothing: the bank command is
+    at its limit)"; "" when the action flies as itself."""
+    if c.effect is None:
+        return ""
+    return f" ({ACTIONS[c.action].phrase} changes nothing: {_limits(c)})"
+
+
+def _flies_as(c: ChildStats) -> str:
+    """ " (flies as left: the speed is at its limit)" for a clamped option."""
+    if c.effect is None:
+        return ""
+    return f" (flies as {_short(c.flies)}: {_limits(c)})"
+
+
+def _limits(c: ChildStats) -> str:
+    asked, flown = ACTIONS[c.action], ACTIONS[c.flies]
+    limits = []
+    if asked.bank != flown.bank:
+        limits.append("the bank command")
+    if asked.accel != flown.accel:
+        limits.append("the speed")
+    if len(limits) > 1:
+        return " and ".join(limits) + " are at their limits"
+    return f"{limits[0]} is at its limit"
 
 
 def _short(action: int) -> str:
@@ -341,9 +447,11 @@ def _record_avoids(record: dict[str, Any]) -> bool:
     children = []
     for c in record.get("children") or []:
         sep = c.get("predicted_min_separation_m")
+        action = (c.get("action") or {}).get("index", -1)
+        flies = _INDEX_OF.get(c.get("flies"), action)
         children.append(
             ChildStats(
-                action=(c.get("action") or {}).get("index", -1),
+                action=action,
                 bank_cmd_rad=0.0,
                 accel_mps2=0.0,
                 visits=int(c.get("visits") or 0),
@@ -351,9 +459,13 @@ def _record_avoids(record: dict[str, Any]) -> bool:
                 predicted_min_separation_m=math.inf if sep is None else float(sep),
                 closest_intruder=c.get("closest_intruder"),
                 outcome=c.get("outcome") or "",
+                effect=None if flies == action else flies,
             )
         )
     return index is not None and is_avoidance(children, index, d_min)
+
+
+_INDEX_OF = {a.name: a.index for a in ACTIONS}  # decisions.jsonl names actions
 
 
 def _num(x: Any, fmt: str = ".0f") -> str:

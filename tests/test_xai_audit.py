@@ -1,0 +1,922 @@
+"""An audit of the explanations (issue 14, "Explanations must be true to the tree").
+
+Recorded runs with real avoidance (dense manoeuvring traffic with a collision, a crossing
+swarm, a head-on; MCTS and the exhaustive search; one JSBSim run through `uavxai run`) are
+flown, and every sentence and counterfactual in their decisions.jsonl is parsed with one
+regular expression per claim type. Every claim is checked against what it is about: the
+decision's record, its search tree (each option's line re-flown here, its separations
+solved here, apart from the planner's code), the tree graph and plan label the viewer
+draws, and the flight in trajectory.csv. Text a claim pattern does not account for fails
+the audit too, so a new kind of sentence cannot slip past unchecked.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from uavxai.avoidance.mcts import predict_levels
+from uavxai.avoidance.model import GOAL, NONE, OUT_OF_BOUNDS, EncounterModel
+from uavxai.avoidance.planners import make_planner
+from uavxai.avoidance.types import Intruder, PlannerConfig
+from uavxai.dynamics.traffic import draw_intruders
+from uavxai.recording.recorder import _plan_label
+from uavxai.recording.tree_graph import CHOSEN_COLOR, tree_graph
+from uavxai.scenario import Scenario, load_scenario
+from uavxai.sim.build import episode_goal, fly
+from uavxai.sim.episode import Observer
+from uavxai.sim.observers import DecisionsJSONL, TrajectoryCSV, Trust
+from uavxai.vocabulary import ACTIONS, HOLD
+from uavxai.xai.explain import explain_command
+
+SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
+SPEED_SHARE = 0.1  # a speed change below this share of what is commanded is none (docs)
+
+
+# ------------------------------------------------------------------------------ flying
+class _Keep(Observer):
+    """The planner's Decision objects, search trees included (the files do not hold them)."""
+
+    def __init__(self) -> None:
+        self.decisions: list = []
+
+    def on_decision(self, ep, event) -> None:
+        self.decisions.append(event.decision)
+
+
+@dataclass
+class Run:
+    folder: Path
+    config: PlannerConfig
+    goal: tuple[float, float, float]
+    records: list[dict]
+    decisions: list  # Decision objects (None: only the files, e.g. a `uavxai run`)
+    summary: dict
+    contexts: list = field(default_factory=list)  # per decision, as the audit read it
+
+
+def fly_recorded(sc: Scenario, planner_name: str, folder: Path) -> Run:
+    """Fly ``sc`` on the kinematic dynamics, writing the files `uavxai run` writes."""
+    folder.mkdir(parents=True, exist_ok=True)
+    planner = make_planner(planner_name, PlannerConfig.from_scenario(sc))
+    goal = episode_goal(sc)
+    keep = _Keep()
+    observers = [
+        Trust(),
+        TrajectoryCSV(folder / "trajectory.csv"),
+        DecisionsJSONL(folder / "decisions.jsonl"),
+        keep,
+    ]
+    intruders = draw_intruders(sc, np.random.default_rng(sc.seed), None)
+    result = fly(sc, planner, goal, dynamics="kinematic", intruders=intruders, observers=observers)
+    (folder / "summary.json").write_text(json.dumps(result.summary))
+    records = [json.loads(line) for line in (folder / "decisions.jsonl").open()]
+    return Run(folder, planner.config, tuple(goal), records, keep.decisions, result.summary)
+
+
+def scenario(name: str, **changes) -> Scenario:
+    """A shipped scenario with ``changes`` merged into its sections."""
+    sc = load_scenario(SCENARIOS / f"{name}.yaml")
+    data = sc.model_dump()
+    for section, values in changes.items():
+        if isinstance(values, dict):
+            for key, value in values.items():
+                if isinstance(value, dict):
+                    data[section][key].update(value)
+                else:
+                    data[section][key] = value
+        else:
+            data[section] = values
+    return Scenario.model_validate(data)
+
+
+# ------------------------------------------------------------------- lines, re-measured
+@dataclass
+class Line:
+    """What the audit finds an option's line predicts (its own geometry, not the planner's)."""
+
+    min_sep: float = math.inf
+    closest: object = None
+    meets: tuple | None = None  # (intruder id, time, miss, needed)
+    end: int = NONE  # the line's terminal code
+    horizon: float = 0.0
+
+
+def line_truths(decision, record: dict, cfg: PlannerConfig, goal) -> dict[int, Line]:
+    """Every root option's line (the tree's best line below it) re-flown against the
+    intruders the record says the planner saw, predicted as the planner predicts them."""
+    model = EncounterModel(cfg)
+    intruders = [Intruder(**i) for i in record["state"]["intruders"]]
+    tracks = predict_levels(model, intruders, cfg.depth, cfg.action_hold_s)
+    tree = decision.tree
+    out = {}
+    for child in tree.children_of(0):
+        line = tree.best_line(int(child))
+        out[int(tree.action[child])] = _line(tree, line, model, tracks, intruders, cfg, goal)
+    return out
+
+
+def _line(tree, line, model, tracks, intruders, cfg, goal) -> Line:
+    hold, ids = cfg.action_hold_s, [i.id for i in intruders]
+    best = np.full(len(ids), math.inf)
+    best_t = np.full(len(ids), math.nan)
+    truth = Line()
+    for node in line:
+        level = int(tree.depth[node]) - 1
+        track = tracks[level]
+        seg = model.fly(
+            tree.state[tree.parent[node]][None],
+            np.array([tree.action[node]]),
+            np.asarray(goal, dtype=float),
+            hold,
+            track,
+            cull=False,
+            exact=True,
+        )
+        own = seg.samples[0]
+        n = own.shape[0] - 1
+        dt = hold / n
+        truth.end = int(tree.terminal[node])
+        keep = n
+        if truth.end in (GOAL, OUT_OF_BOUNDS):  # the line stops at the end of that sub-step
+            keep = int(round(float(seg.t_event[0]) / dt)) + 1
+        truth.horizon = level * hold + keep * dt
+        if ids:
+            dist, frac = _closest_on_substeps(own, track.pos)
+            t = level * hold + (np.arange(n)[:, None] + frac) * dt
+            k = np.argmin(dist[:keep], axis=0)
+            cols = np.arange(len(ids))
+            closer = dist[k, cols] < best
+            best[closer], best_t[closer] = dist[k, cols][closer], t[k, cols][closer]
+            need = cfg.d_min_m + (0.0 if track.margin is None else track.margin[1:])
+            need = np.broadcast_to(need, dist.shape)
+            inside = np.argwhere(dist < need)
+            if truth.meets is None and inside.size:
+                k = int(inside[0, 0])
+                j = int(np.argmax(need[k] - dist[k]))
+                truth.meets = (ids[j], level * hold + k * dt, j, float(need[k, j]))
+        if truth.end != NONE:
+            break
+    if ids:
+        j = int(np.argmin(best))
+        truth.min_sep, truth.closest = float(best[j]), ids[j]
+    if truth.meets is not None:
+        who, when, j, need = truth.meets
+        truth.meets = (who, when, float(best[j]), need)
+    return truth
+
+
+def _closest_on_substeps(own: np.ndarray, others: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(n, N) closest distance within each sub-step (both moving straight) and where."""
+    r0 = own[:-1, None, :] - others[:-1]
+    dr = (own[1:, None, :] - others[1:]) - r0
+    s = np.clip(-(r0 * dr).sum(-1) / np.maximum((dr * dr).sum(-1), 1e-12), 0.0, 1.0)
+    return np.linalg.norm(r0 + s[..., None] * dr, axis=-1), s
+
+
+# ------------------------------------------------------------------------ the flight
+def flight(folder: Path) -> tuple[np.ndarray, list[dict[str, np.ndarray]]]:
+    """Sample times and, per sample, each aircraft's position (ownship first)."""
+    times, samples = [], []
+    with (folder / "trajectory.csv").open() as f:
+        next(f)
+        for row in f:
+            t, ident, x, y, h = row.split(",")[:5]
+            if not times or times[-1] != t:
+                times.append(t)
+                samples.append({})
+            samples[-1][ident] = np.array([float(x), float(y), float(h)])
+    return np.array([float(t) for t in times]), samples
+
+
+def flown_min(times: np.ndarray, samples: list, t0: float, t1: float) -> float:
+    """The smallest ownship-intruder distance flown from ``t0`` until the first sample at or
+    after ``t1`` (linear between samples; an aircraft new in a sample counts from there)."""
+    out = math.inf
+    first = int(np.searchsorted(times, t0 + 1e-9))
+    for i in range(max(first, 1), len(times)):
+        prev, now = samples[i - 1], samples[i]
+        own0, own1 = prev["ownship"], now["ownship"]
+        for ident, p1 in now.items():
+            if ident == "ownship":
+                continue
+            p0 = prev.get(ident) if len(prev) == len(now) else None
+            if p0 is None:
+                out = min(out, float(np.linalg.norm(own1 - p1)))
+            else:
+                d, _ = _closest_on_substeps(np.stack([own0, own1]), np.stack([p0, p1])[:, None])
+                out = min(out, float(d[0, 0]))
+        if times[i] >= t1 - 1e-9:
+            break
+    return out
+
+
+# ------------------------------------------------------------------------- the claims
+OPT = "|".join(sorted((re.escape(a.phrase) for a in ACTIONS), key=len, reverse=True))
+VERB = "|".join(sorted({re.escape(a.verb) for a in ACTIONS}, key=len, reverse=True))
+LIMITS = (
+    "the bank command and the speed are at their limits|the bank command is at its limit"
+    "|the speed is at its limit"
+)
+MEETS = (
+    r"meets intruder (?P<k>[^\s;,()]+) in (?P<t>\d+\.\d) s "
+    r"\(predicted miss (?P<miss>\d+) m, (?P<need>\d+) m needed\)"
+)
+Q = r"\d+\.\d{3}"
+RISK = r"(?:; (?P<risk>\d+)% of its simulations collide)?"
+WHY = (
+    r"(?P<why>this one had more simulations \((?P<wa>\d+) against (?P<wb>\d+)\)"
+    r"|as many simulations \((?P<wn>\d+) each\): a higher Q beyond 3 decimals"
+    r"|as many simulations \((?P<wm>\d+) each\) and Q: the first in action order"
+    r"|a higher Q beyond 3 decimals decided|the tie goes to the first in action order)"
+)
+KEEPS = r"is predicted to keep (?P<n>\d+) m from intruder (?P<k>[^\s;,()]+?)"
+GOAL_TAIL = r"(?P<goal> and reaches the goal)?(?=;|$)"
+PHRASE = {a.phrase: a.index for a in ACTIONS}
+
+# (claim type, where, pattern), matched in this order; each match is blanked before the next
+# pattern runs, and what is left must be punctuation only.
+CLAIMS = [
+    ("verb", "s",
+     rf"^(?P<verb>{VERB})(?: \((?P<asked>{OPT}) changes nothing: (?P<lim>{LIMITS})\))?:"),
+    ("why not names the runner-up", "c",
+     rf"^why not (?P<opt>{OPT})(?: \(flies as (?P<as>{OPT}): (?P<lim>{LIMITS})\))?:"),
+    ("cornered: chose by the stated rule", "s",
+     r"every option meets an intruder, so it took the one that meets its intruder latest"
+     r"(?: \(in (?P<t>\d+\.\d) s, the next in (?P<t2>\d+\.\d) s\)"
+     r"| \(in (?P<t3>\d+\.\d) s, as another does\) and passes it widest "
+     rf"\((?P<m>\d+\.\d) m against (?P<m2>\d+\.\d) m\)| and passes it widest, tied: {WHY})?"),
+    ("why not: a collision", "c", rf"(?P<opt>it) {MEETS}, a predicted collision"),
+    ("why not: both conflict", "c", rf"(?P<opt>it) {MEETS} too;"),
+    ("cornered: why not", "c",
+     rf"(?P<opt>it) {MEETS}, (?P<how>sooner|as soon and closer|the same; {WHY})"),
+    ("meets k at N m", "sc", rf"(?P<opt>{OPT}|it) {MEETS}"),
+    ("every option conflicts", "s", r"every option meets an intruder"),
+    ("keeps N m from k", "sc", rf"(?P<opt>{OPT}|it) {KEEPS}{GOAL_TAIL}"),
+    ("keeps clear", "sc", rf"(?P<opt>{OPT}|it) keeps clear of every known intruder{GOAL_TAIL}"),
+    ("line ends", "sc", r"(?P<opt>" + OPT + r"|its best line) ends (?P<how>out of bounds|timeout)"),
+    ("Q lower", "s", rf"(?P<opt>{OPT}) scores lower \(Q (?P<a>{Q}) against (?P<b>{Q}){RISK}\)"),
+    ("Q higher, fewer simulations", "sc",
+     rf"(?P<opt>{OPT}) has the higher Q \((?P<a>{Q}) against (?P<b>{Q}){RISK}\) but fewer "
+     r"simulations \((?P<va>\d+) against (?P<vb>\d+)\)"
+     rf"|a higher Q \((?P<a2>{Q}) against (?P<b2>{Q}){RISK.replace('risk', 'risk2')}\) but "
+     r"fewer simulations \((?P<va2>\d+) against (?P<vb2>\d+)\)"),
+    ("Q tie says what decided", "sc",
+     rf"(?:(?P<opt>{OPT}) is as good \(Q (?P<a>{Q})\)|as good \(Q (?P<a2>{Q}) both\)), {WHY}"),
+    ("Q comparison", "c",
+     rf"Q (?P<a>{Q}) against (?P<b>{Q})"
+     rf"(?: \((?P<va>\d+) simulations against (?P<vb>\d+){RISK}\))?"),
+    ("support", "s",
+     r"(?:(?P<p>\d+)% of simulations agree"
+     r"|the best of every action sequence to the search depth)$"),
+]  # fmt: skip
+_COMPILED = [(name, where, re.compile(p)) for name, where, p in CLAIMS]
+
+
+@dataclass
+class Audit:
+    checked: Counter = field(default_factory=Counter)
+    false: Counter = field(default_factory=Counter)
+    failures: list[str] = field(default_factory=list)
+    info: Counter = field(default_factory=Counter)
+
+    def claim(self, kind: str, ok: bool, where: str) -> None:
+        self.checked[kind] += 1
+        if not ok:
+            self.false[kind] += 1
+            if len(self.failures) < 40:
+                self.failures.append(f"{kind}: {where}")
+
+    def table(self) -> str:
+        rows = [f"{'claim':<40}{'checked':>9}{'false':>7}"]
+        for kind in sorted(self.checked):
+            rows.append(f"{kind:<40}{self.checked[kind]:>9}{self.false[kind]:>7}")
+        rows.append(f"{'total':<40}{sum(self.checked.values()):>9}{sum(self.false.values()):>7}")
+        return "\n".join(rows)
+
+
+@dataclass
+class Ctx:
+    """One decision as the checks see it."""
+
+    record: dict
+    cfg: PlannerConfig
+    kids: dict[int, dict]
+    chosen: dict
+    flies: dict[int, int]  # the audit's own reading of the clamped commands
+    lines: dict[int, Line] | None  # None: no tree (a run known only from its files)
+    decision: object = None
+    runner: dict | None = None
+    text: str = ""
+
+    def q(self, c: dict) -> float:
+        return float(c["q"])
+
+    @property
+    def sampled(self) -> bool:
+        return not self.record["planner"].startswith("exhaustive")
+
+    def conflicts(self, c: dict) -> bool:
+        """From the re-flown line when there is a tree, else from the record."""
+        if self.lines is not None:
+            return self.lines[c["action"]["index"]].meets is not None
+        return c["meets"] is not None
+
+
+def flies_of(record: dict, child: dict, cfg: PlannerConfig) -> int:
+    """The manoeuvre ``child`` flies, read from its recorded command and the ownship's state."""
+    own, a = record["state"]["ownship"], ACTIONS[child["action"]["index"]]
+    step = child["action"]["bank_cmd_rad"] - own["bank"]
+    bank = int(np.sign(step)) if abs(step) > 1e-9 else 0
+    commanded = cfg.accel_mps2 * cfg.action_hold_s
+    v = own["speed"]
+    lo, hi = min(cfg.speed_mps[0], v), max(cfg.speed_mps[1], v)
+    change = min(max(v + a.accel * commanded, lo), hi) - v
+    accel = a.accel if commanded > 0 and abs(change) >= SPEED_SHARE * commanded else 0
+    return next(b.index for b in ACTIONS if (b.bank, b.accel, b.climb) == (bank, accel, a.climb))
+
+
+def _subject(ctx: Ctx, m: re.Match) -> dict | None:
+    opt = m.groupdict().get("opt")
+    if opt in ("it", "its best line"):
+        return ctx.runner
+    if opt is None:
+        return ctx.runner if ctx.text == "c" else ctx.chosen
+    return ctx.kids.get(PHRASE[opt])
+
+
+def _name_ok(intruder_id, said: str) -> bool:
+    return str(intruder_id).removeprefix("intruder-") == said.removeprefix("intruder-")
+
+
+def _near(value: float, said: str, half_unit: float) -> bool:
+    return abs(value - float(said)) <= half_unit + 1e-6
+
+
+def _limits_ok(asked: int, flown: int, said: str) -> bool:
+    a, f = ACTIONS[asked], ACTIONS[flown]
+    differs = (("bank", a.bank != f.bank), ("speed", a.accel != f.accel))
+    parts = [p for p, differ in differs if differ]
+    expected = {
+        ("bank",): "the bank command is at its limit",
+        ("speed",): "the speed is at its limit",
+        ("bank", "speed"): "the bank command and the speed are at their limits",
+    }
+    return expected.get(tuple(parts)) == said
+
+
+def check_verb(ctx: Ctx, m: re.Match) -> bool:
+    index = ctx.chosen["action"]["index"]
+    flown = ctx.flies[index]
+    if m["verb"] != ACTIONS[flown].verb:
+        return False
+    if m["asked"] is None:
+        return flown == index
+    return PHRASE[m["asked"]] == index and flown != index and _limits_ok(index, flown, m["lim"])
+
+
+def check_runner(ctx: Ctx, m: re.Match) -> bool:
+    runner, chosen = ctx.runner, ctx.chosen
+    if runner is None:
+        return False
+    r, c = runner["action"]["index"], chosen["action"]["index"]
+    if ctx.flies[r] == ctx.flies[c]:  # the same manoeuvre is no alternative
+        return False
+    if m["as"] is None and ctx.flies[r] != r:
+        return False
+    if m["as"] is not None and not (
+        PHRASE[m["as"]] == ctx.flies[r] and _limits_ok(r, ctx.flies[r], m["lim"])
+    ):
+        return False
+    others = [k for k in ctx.kids.values() if ctx.flies[k["action"]["index"]] != ctx.flies[c]]
+    best = max(others, key=lambda k: _rank(ctx, k))
+    return best is runner
+
+
+def _rank(ctx: Ctx, k: dict) -> tuple:
+    """How the planner ranks options: by the cornered rule when it said it used it, else as the
+    search does (simulations, Q, action order)."""
+    if ctx.record.get("cornered"):
+        line = ctx.lines[k["action"]["index"]] if ctx.lines else None
+        meets = line.meets if line else k["meets"] and tuple(k["meets"].values())
+        when, miss = (round(meets[1], 6), meets[2]) if meets else (-math.inf, -math.inf)
+        return (when, miss, k["visits"], k["q"], -k["action"]["index"])
+    return (k["visits"], k["q"], -k["action"]["index"])
+
+
+def check_meets(ctx: Ctx, m: re.Match, c: dict | None = None) -> bool:
+    c = c or _subject(ctx, m)
+    if c is None or c["outcome"] != "collision" or c["meets"] is None:
+        return False
+    if ctx.lines is None:  # against the record alone
+        rec = c["meets"]
+        truth = (rec["intruder"], rec["time_s"], rec["miss_m"], rec["needed_m"])
+    else:
+        truth = ctx.lines[c["action"]["index"]].meets
+        if truth is None:
+            return False
+    who, when, miss, need = truth
+    return (
+        _name_ok(who, m["k"])
+        and _near(when, m["t"], 0.05)
+        and _near(miss, m["miss"], 0.5)
+        and _near(need, m["need"], 0.5)
+    )
+
+
+def check_why_not_collision(ctx: Ctx, m: re.Match) -> bool:
+    return check_meets(ctx, m) and not ctx.conflicts(ctx.chosen)
+
+
+def check_both_conflict(ctx: Ctx, m: re.Match) -> bool:
+    return check_meets(ctx, m) and ctx.conflicts(ctx.chosen) and not ctx.record.get("cornered")
+
+
+def _meeting(ctx: Ctx, c: dict) -> tuple:
+    if ctx.lines is not None:
+        return ctx.lines[c["action"]["index"]].meets
+    rec = c["meets"]
+    return (rec["intruder"], rec["time_s"], rec["miss_m"], rec["needed_m"])
+
+
+def check_cornered_loser(ctx: Ctx, m: re.Match) -> bool:
+    if not (check_meets(ctx, m) and ctx.record.get("cornered")):
+        return False
+    mine, theirs = _meeting(ctx, ctx.chosen), _meeting(ctx, ctx.runner)
+    if m["how"] == "sooner":
+        return theirs[1] < mine[1] - 1e-9
+    if m["how"] == "as soon and closer":
+        return abs(theirs[1] - mine[1]) < 1e-9 and theirs[2] < mine[2]
+    return abs(theirs[1] - mine[1]) < 1e-9 and theirs[2] == mine[2] and _why(ctx, m, ctx.runner)
+
+
+def check_every(ctx: Ctx, m: re.Match) -> bool:
+    return all(ctx.conflicts(k) for k in ctx.kids.values())
+
+
+def check_cornered(ctx: Ctx, m: re.Match) -> bool:
+    kids = list(ctx.kids.values())
+    if not (ctx.record.get("cornered") and all(ctx.conflicts(k) for k in kids)):
+        return False
+    if max(kids, key=lambda k: _rank(ctx, k)) is not ctx.chosen:  # the rule really chose it
+        return False
+    c = ctx.chosen["action"]["index"]
+    others = [k for k in kids if ctx.flies[k["action"]["index"]] != ctx.flies[c]]
+    mine = _meeting(ctx, ctx.chosen)
+    best = max(others, key=lambda k: _rank(ctx, k)) if others else None
+    if best is None:
+        return m["t"] is None and m["t3"] is None
+    theirs = _meeting(ctx, best)
+    if m["t"] is not None:
+        return (
+            _near(mine[1], m["t"], 0.05)
+            and _near(theirs[1], m["t2"], 0.05)
+            and (mine[1] > theirs[1])
+        )
+    if m["t3"] is not None:
+        return (
+            abs(mine[1] - theirs[1]) < 1e-9
+            and _near(mine[1], m["t3"], 0.05)
+            and _near(mine[2], m["m"], 0.05)
+            and _near(theirs[2], m["m2"], 0.05)
+            and mine[2] > theirs[2]
+        )
+    return abs(mine[1] - theirs[1]) < 1e-9 and mine[2] == theirs[2] and _why(ctx, m, best)
+
+
+def check_keeps(ctx: Ctx, m: re.Match) -> bool:
+    c = _subject(ctx, m)
+    if c is None or ctx.conflicts(c) or c["outcome"] == "collision":
+        return False
+    if ctx.lines is None:
+        sep, who = c["predicted_min_separation_m"], c["closest_intruder"]
+        reaches = c["outcome"] == "goal"
+    else:
+        line = ctx.lines[c["action"]["index"]]
+        sep, who, reaches = line.min_sep, line.closest, line.end == GOAL
+        if not math.isclose(c["predicted_min_separation_m"] or math.inf, sep, abs_tol=0.01):
+            return False  # the record must hold the number the words quote
+    if (m["goal"] is not None) != reaches:
+        return False
+    return sep is not None and _near(sep, m["n"], 0.5) and _name_ok(who, m["k"])
+
+
+def check_clear(ctx: Ctx, m: re.Match) -> bool:
+    c = _subject(ctx, m)
+    reaches = c is not None and c["outcome"] == "goal"
+    return (
+        c is not None
+        and not ctx.record["state"]["intruders"]
+        and ((m["goal"] is not None) == reaches)
+    )
+
+
+def check_ends(ctx: Ctx, m: re.Match) -> bool:
+    c = _subject(ctx, m)
+    if c is None or c["outcome"] != m["how"].replace(" ", "_"):
+        return False
+    code = {"out of bounds": OUT_OF_BOUNDS, "timeout": 4}[m["how"]]
+    return ctx.lines is None or ctx.lines[c["action"]["index"]].end == code
+
+
+def _risk_ok(c: dict, said: str | None) -> bool:
+    share = c["collision_share"]
+    if said is None:
+        return share is None or share < 0.005
+    return share is not None and f"{100 * share:.0f}" == said
+
+
+def check_lower(ctx: Ctx, m: re.Match) -> bool:
+    c, chosen = _subject(ctx, m), ctx.chosen
+    return (
+        c is not None
+        and m["a"] == f"{c['q']:.3f}"
+        and m["b"] == f"{chosen['q']:.3f}"
+        and m["a"] != m["b"]
+        and c["q"] < chosen["q"]
+        and _risk_ok(c, m["risk"])
+    )
+
+
+def check_higher(ctx: Ctx, m: re.Match) -> bool:
+    c = _subject(ctx, m) if m["opt"] else ctx.runner
+    a, b = m["a"] or m["a2"], m["b"] or m["b2"]
+    va, vb = m["va"] or m["va2"], m["vb"] or m["vb2"]
+    risk = m["risk"] if m["opt"] else m["risk2"]
+    chosen = ctx.chosen
+    return (
+        c is not None
+        and a == f"{c['q']:.3f}"
+        and b == f"{chosen['q']:.3f}"
+        and a != b
+        and c["q"] > chosen["q"]
+        and int(va) == c["visits"] < chosen["visits"] == int(vb)
+        and _risk_ok(c, risk)
+    )
+
+
+def _why(ctx: Ctx, m: re.Match, other: dict) -> bool:
+    """The stated decider is the first key the planner's ranking separates the two by."""
+    chosen = ctx.chosen
+    cv, ov = chosen["visits"], other["visits"]
+    cq, oq = chosen["q"], other["q"]
+    first_in_order = chosen["action"]["index"] < other["action"]["index"]
+    why = m["why"]
+    if ctx.sampled:
+        if cv != ov:
+            return m["wa"] is not None and int(m["wa"]) == cv > ov == int(m["wb"])
+        if cq != oq:
+            return m["wn"] is not None and int(m["wn"]) == cv and cq > oq
+        return m["wm"] is not None and int(m["wm"]) == cv and first_in_order
+    if cq != oq:
+        return why == "a higher Q beyond 3 decimals decided" and cq > oq
+    return why == "the tie goes to the first in action order" and first_in_order
+
+
+def check_tie(ctx: Ctx, m: re.Match) -> bool:
+    other = _subject(ctx, m) if m["opt"] else ctx.runner
+    chosen = ctx.chosen
+    said = m["a"] or m["a2"]
+    return (
+        other is not None
+        and f"{other['q']:.3f}" == f"{chosen['q']:.3f}" == said
+        and _why(ctx, m, other)
+    )
+
+
+def check_q(ctx: Ctx, m: re.Match) -> bool:
+    c, chosen = ctx.runner, ctx.chosen
+    if c is None or m["a"] != f"{c['q']:.3f}" or m["b"] != f"{chosen['q']:.3f}":
+        return False
+    if not (c["q"] < chosen["q"] and m["a"] != m["b"]):  # "Q a against b" says it is lower
+        return False
+    if ctx.sampled != (m["va"] is not None):
+        return False
+    return m["va"] is None or (
+        int(m["va"]) == c["visits"] and int(m["vb"]) == chosen["visits"] and _risk_ok(c, m["risk"])
+    )
+
+
+def check_support(ctx: Ctx, m: re.Match) -> bool:
+    if m["p"] is None:
+        return not ctx.sampled and ctx.chosen["q"] == max(k["q"] for k in ctx.kids.values())
+    if not ctx.sampled:
+        return False
+    if ctx.decision is not None and ctx.decision.tree is not None:
+        tree = ctx.decision.tree
+        node = next(c for c in tree.children_of(0) if tree.action[c] == ctx.decision.action)
+        share = tree.visits[node] / tree.visits[0]
+    else:
+        share = ctx.record["confidence"]
+    return f"{100 * share:.0f}" == m["p"]
+
+
+CHECKS = {
+    "verb": check_verb,
+    "why not names the runner-up": check_runner,
+    "cornered: chose by the stated rule": check_cornered,
+    "why not: a collision": check_why_not_collision,
+    "why not: both conflict": check_both_conflict,
+    "cornered: why not": check_cornered_loser,
+    "meets k at N m": check_meets,
+    "every option conflicts": check_every,
+    "keeps N m from k": check_keeps,
+    "keeps clear": check_clear,
+    "line ends": check_ends,
+    "Q lower": check_lower,
+    "Q higher, fewer simulations": check_higher,
+    "Q tie says what decided": check_tie,
+    "Q comparison": check_q,
+    "support": check_support,
+}
+
+
+def audit_text(audit: Audit, ctx: Ctx, text: str, where: str, label: str) -> None:
+    """Every claim in ``text`` (the sentence "s" or the counterfactual "c"), checked."""
+    rest = text
+    ctx.text = where
+    for name, places, pattern in _COMPILED:
+        if where not in places:
+            continue
+        for m in pattern.finditer(rest):
+            audit.claim(name, CHECKS[name](ctx, m), f"{label}: {m.group(0)!r} in {text!r}")
+            rest = rest[: m.start()] + "\0" * (m.end() - m.start()) + rest[m.end() :]
+    audit.claim("every claim parsed", re.fullmatch(r"[\s;:,()\0]*", rest) is not None,
+                f"{label}: unparsed {rest.replace(chr(0), '')!r}")  # fmt: skip
+    # a named option is never the chosen manoeuvre offered as an alternative
+    chosen = ctx.chosen["action"]["index"]
+    named = rf"(?:^|: |; )({OPT}) (?:meets|is as good|has the higher|scores lower|ends)"
+    for opt in re.findall(named, text):
+        if where == "s" and PHRASE[opt] != chosen:
+            other = ctx.flies[PHRASE[opt]] != ctx.flies[chosen]
+            audit.claim("alternative is another manoeuvre", other, f"{label}: {text!r}")
+
+
+# ---------------------------------------------------------------------- whole decisions
+def audit_run(audit: Audit, run: Run) -> None:
+    times, samples = flight(run.folder)
+    errors = []
+    run.contexts = [
+        _context(run, r, run.decisions[i] if run.decisions else None)
+        for i, r in enumerate(run.records)
+    ]
+    for i, (record, ctx) in enumerate(zip(run.records, run.contexts, strict=True)):
+        decision = ctx.decision
+        label = f"{run.folder.name}#{i}"
+        audit_text(audit, ctx, record["explanation"], "s", label)
+        if record["counterfactual"]:
+            audit_text(audit, ctx, record["counterfactual"], "c", label)
+        _audit_record(audit, ctx, label)
+        if decision is not None and decision.tree is not None:
+            _audit_drawing(audit, ctx, decision, label)
+        error = _audit_trust_window(audit, ctx, times, samples, label)
+        if error is not None:
+            errors.append(error)
+    _audit_summary(audit, run, errors)
+    _audit_overview(audit, run)
+
+
+def _context(run: Run, record: dict, decision) -> Ctx:
+    kids = {c["action"]["index"]: c for c in record["children"]}
+    chosen = kids[record["action"]["index"]]
+    flies = {a: flies_of(record, c, run.config) for a, c in kids.items()}
+    lines = None
+    if decision is not None and decision.tree is not None:
+        lines = line_truths(decision, record, run.config, run.goal)
+    ctx = Ctx(record, run.config, kids, chosen, flies, lines, decision)
+    head = re.match(rf"^why not ({OPT})", record["counterfactual"] or "")
+    ctx.runner = kids.get(PHRASE[head.group(1)]) if head else None
+    return ctx
+
+
+def _audit_record(audit: Audit, ctx: Ctx, label: str) -> None:
+    """What the record says beside the words: which manoeuvre each option flies, and the
+    number the trust figure is computed from is the one the sentence quotes."""
+    for a, c in ctx.kids.items():
+        audit.claim("record: the manoeuvre flown", c["flies"] == ACTIONS[ctx.flies[a]].name,
+                    f"{label}: {c['action']['name']} flies {c['flies']}")  # fmt: skip
+        own = ctx.record["state"]["ownship"]
+        act = ACTIONS[a]
+        step = c["action"]["bank_cmd_rad"] - own["bank"]
+        lim = math.radians(ctx.cfg.bank_limit_deg)
+        at_limit = abs(step) < 1e-9 and abs(own["bank"]) >= lim - 1e-9
+        sign_ok = np.sign(step) == act.bank or at_limit
+        audit.claim("option phrase matches its command",
+                    bool(sign_ok) and np.sign(c["action"]["accel_mps2"]) == act.accel,
+                    f"{label}: {act.phrase}")  # fmt: skip
+    branch = ctx.record["branch_min_separation_m"]
+    quoted = ctx.chosen["predicted_min_separation_m"]
+    audit.claim("trust figure is the quoted number", branch == quoted, f"{label}: {branch}")
+    if ctx.lines is not None:
+        line = ctx.lines[ctx.chosen["action"]["index"]]
+        said = ctx.record["branch_horizon_s"]
+        audit.claim("trust horizon is the branch's", abs(said - line.horizon) < 1e-6,
+                    f"{label}: {said} against {line.horizon}")  # fmt: skip
+
+
+def _audit_drawing(audit: Audit, ctx: Ctx, decision, label: str) -> None:
+    """The tree graph and the plan label the viewer shows for the decision."""
+    tree, graph = decision.tree, tree_graph(decision)
+    green = {int(n[1:]) for n, color in zip(graph.node_ids, graph.colors, strict=True)
+             if color == CHOSEN_COLOR and n != "n0"}  # fmt: skip
+    root = next(int(c) for c in tree.children_of(0) if tree.action[c] == decision.action)
+    audit.claim("tree: chosen action drawn green", root in green, label)
+    plan = tree.best_line(root)
+    for depth in range(1, int(tree.depth.max(initial=0)) + 1):
+        at = {n for n in green if tree.depth[n] == depth}
+        if not at:
+            continue
+        ok = len(at) == 1 and len(plan) >= depth and plan[depth - 1] in at
+        audit.claim("tree: green node on the executed plan", ok, f"{label} depth {depth}")
+    line = ctx.lines[decision.action]
+    text = _plan_label(decision, [])
+    m = re.fullmatch(r"plan: (\d+) m from (\S+)", text)
+    ok = m is not None and _near(line.min_sep, m[1], 0.5) and _name_ok(line.closest, m[2])
+    if not math.isfinite(line.min_sep):
+        ok = text == "plan"
+    audit.claim("plan label: branch minimum and its intruder", ok, f"{label}: {text}")
+
+
+def _audit_trust_window(audit, ctx: Ctx, times, samples, label) -> float | None:
+    """The window the trust figure compares; how often flight held the quoted separation is
+    recorded for the report (the words call it a prediction, so it is no false claim)."""
+    branch, horizon = ctx.record["branch_min_separation_m"], ctx.record["branch_horizon_s"]
+    if branch is None or not horizon > 0:
+        return None
+    flown = flown_min(times, samples, ctx.record["t"], ctx.record["t"] + horizon)
+    if not math.isfinite(flown):
+        return None
+    audit.info["predictions compared with flight"] += 1
+    audit.info["held within 10 m"] += flown >= branch - 10.0
+    return abs(branch - flown)
+
+
+def _audit_summary(audit: Audit, run: Run, errors: list[float]) -> None:
+    trust = run.summary["trust"]["separation_error_m"]
+    if not errors:
+        audit.claim("summary trust", trust["mean"] is None, run.folder.name)
+        return
+    mine = {"mean": np.mean(errors), "p95": np.percentile(errors, 95), "max": np.max(errors)}
+    for key, value in mine.items():
+        audit.claim("summary trust", abs(trust[key] - value) < 0.01,
+                    f"{run.folder.name} {key}: {trust[key]} against {value}")  # fmt: skip
+    audit.info["trust mean (m), sum over runs"] += int(round(mine["mean"]))
+
+
+def _audit_overview(audit: Audit, run: Run) -> None:
+    """`uavxai explain RUN`: "N steered away from a predicted conflict" and its list."""
+    text = explain_command(run.folder, None)
+    said = int(re.search(r"; (\d+) steered away from a predicted conflict", text).group(1))
+    truth = []
+    for i, ctx in enumerate(run.contexts):
+        hold = ctx.kids.get(HOLD)
+        if hold is None:
+            continue
+        index = ctx.chosen["action"]["index"]
+        other = ctx.flies[index] != ctx.flies[HOLD]
+        if other and ctx.conflicts(hold) and not ctx.conflicts(ctx.chosen):
+            truth.append(i)
+    audit.claim("steered away from a predicted conflict", said == len(truth),
+                f"{run.folder.name}: said {said}, true {len(truth)}")  # fmt: skip
+    for i in (int(x) for x in re.findall(r"^  \[(\d+)\]", text, flags=re.M)):
+        audit.claim("steered away from a predicted conflict", i in truth, f"{run.folder.name}#{i}")
+
+
+# ------------------------------------------------------------------------------- tests
+def fast_runs(tmp: Path) -> list[Run]:
+    """Short runs with real avoidance, kinematic for speed (about 20 s in all)."""
+    sims = {"mcts": {"simulations": 100}}
+    return [
+        # dense manoeuvring traffic: cornered decisions, then a collision at step 55
+        fly_recorded(
+            scenario("manoeuvring", seed=6, intruders={"count": 40}, avoidance=sims),
+            "mcts",
+            tmp / "dense-collision",
+        ),  # fmt: skip
+        fly_recorded(
+            scenario("crossing_swarm", avoidance={"max_steps": 60, **sims}),
+            "mcts",
+            tmp / "crossing",
+        ),  # fmt: skip
+        fly_recorded(scenario("head_on", avoidance=sims), "mcts", tmp / "head-on"),
+        fly_recorded(
+            scenario("head_on", avoidance={"max_steps": 30, "mcts": {"depth": 3}}),
+            "exhaustive",
+            tmp / "head-on-exhaustive",
+        ),  # fmt: skip
+    ]
+
+
+# The claim types the fast runs must exercise: an audit that never meets a claim proves nothing.
+MUST_SEE = (
+    "verb", "why not names the runner-up", "cornered: chose by the stated rule",
+    "cornered: why not", "meets k at N m", "keeps N m from k", "Q lower", "Q tie says what decided",
+    "Q comparison", "support", "tree: green node on the executed plan",
+    "plan label: branch minimum and its intruder", "summary trust",
+    "steered away from a predicted conflict", "alternative is another manoeuvre",
+)  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def fast_audit(tmp_path_factory) -> tuple[Audit, list[Run]]:
+    runs = fast_runs(tmp_path_factory.mktemp("audit"))
+    audit = Audit()
+    for run in runs:
+        audit_run(audit, run)
+    return audit, runs
+
+
+def test_every_claim_of_recorded_runs_is_true(fast_audit):
+    audit, runs = fast_audit
+    print("\n" + audit.table())
+    assert any(r.summary["outcome"] == "collision" for r in runs)  # the situation under test
+    assert any(d.cornered for r in runs for d in r.decisions)
+    missing = [k for k in MUST_SEE if not audit.checked[k]]
+    assert not missing, f"claim types never met: {missing}"
+    assert sum(audit.false.values()) == 0, "\n".join(audit.failures)
+
+
+def test_the_audit_catches_false_claims(fast_audit):
+    """Each check can fail: corrupt true sentences the way the issue found them false."""
+    _, runs = fast_audit
+    corrupted = [
+        (r"predicted miss (\d+) m", lambda m: f"predicted miss {int(m.group(1)) + 7} m"),
+        (r"is predicted to keep (\d+) m", lambda m: f"is predicted to keep {int(m[1]) + 3} m"),
+        (r"scores lower \(Q (\d\.\d{3}) against (\d\.\d{3})",
+         lambda m: f"scores lower (Q {m.group(2)} against {m.group(1)}"),
+        (r"\((\d+) simulations against", lambda m: f"({m[1]}1 simulations against"),
+        (r"this one had more simulations", lambda m: "the tie goes to the first in action order"),
+        (r"^held its bank", lambda m: "banked right"),
+        (r"its intruder latest \(in (\d+\.\d) s", lambda m: "its intruder latest (in 99.5 s"),
+        (r"(\d+)% of simulations agree", lambda m: f"{int(m.group(1)) + 1}% of simulations agree"),
+    ]  # fmt: skip
+    for pattern, change in corrupted:
+        audit = Audit()
+        hits = 0
+        for run in runs:
+            for i, record in enumerate(run.records):
+                for key, where in (("explanation", "s"), ("counterfactual", "c")):
+                    text = record[key] or ""
+                    bad = re.sub(pattern, change, text, count=1)
+                    if bad == text:
+                        continue
+                    hits += 1
+                    ctx = run.contexts[i]
+                    audit_text(audit, ctx, bad, where, f"#{i}")
+        assert hits, pattern  # the corruption found something to corrupt
+        assert sum(audit.false.values()) >= hits, (pattern, audit.table())
+
+
+@pytest.mark.slow
+def test_audit_at_scale(tmp_path):
+    """More seeds, denser traffic, both tree planners; prints the table (issue 14's audit had
+    881 decisions and 68,924 claims)."""
+    audit, n = Audit(), 0
+    runs = []
+    for seed in range(6):
+        for count in (40, 60):
+            sc = scenario("manoeuvring", seed=seed, intruders={"count": count},
+                          avoidance={"max_steps": 120})  # fmt: skip
+            runs.append(fly_recorded(sc, "mcts", tmp_path / f"m{count}-{seed}"))
+    for name in ("crossing_swarm", "head_on"):
+        for seed in range(3):
+            sc = scenario(name, seed=seed, avoidance={"max_steps": 120})
+            runs.append(fly_recorded(sc, "mcts", tmp_path / f"{name}-{seed}"))
+    runs.append(fly_recorded(scenario("head_on", avoidance={"max_steps": 80, "mcts": {"depth": 3}}),
+                             "exhaustive", tmp_path / "exhaustive"))  # fmt: skip
+    for run in runs:
+        audit_run(audit, run)
+        n += len(run.records)
+    outcomes = Counter(r.summary["outcome"] for r in runs)
+    print(f"\n{len(runs)} runs, {n} decisions, outcomes {dict(outcomes)}")
+    print(audit.table())
+    print({k: v for k, v in audit.info.items()})
+    assert sum(audit.false.values()) == 0, "\n".join(audit.failures)
+
+
+def test_a_jsbsim_run_through_the_command_line(tmp_path):
+    """`uavxai run` (JSBSim, MAVLink): its files alone, every claim against its record and
+    the trust figure against its trajectory."""
+    from uavxai.cli import main
+
+    sc = scenario("head_on", avoidance={"max_steps": 25, "mcts": {"simulations": 60}},
+                  log={"rerun": False})  # fmt: skip
+    path = tmp_path / "head_on.yaml"
+    path.write_text(json.dumps(sc.model_dump(mode="json")))
+    assert main(["run", str(path), "--out", str(tmp_path / "run")]) == 0
+    folder = tmp_path / "run"
+    records = [json.loads(line) for line in (folder / "decisions.jsonl").open()]
+    summary = json.loads((folder / "summary.json").read_text())
+    run = Run(folder, PlannerConfig.from_scenario(sc), episode_goal(sc), records, [], summary)
+    audit = Audit()
+    audit_run(audit, run)
+    print("\n" + audit.table())
+    assert audit.checked["summary trust"] == 3 and audit.checked["verb"] == len(records)
+    assert sum(audit.false.values()) == 0, "\n".join(audit.failures)

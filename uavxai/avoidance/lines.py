@@ -1,0 +1,215 @@
+"""What a planner's lines predict, in the terms an explanation quotes them.
+
+A tree search decides on separations net of the intruders' margins (what they could do, how
+uncertain their tracks are: :func:`uavxai.avoidance.model.intruder_margin`) and stops a line
+at its first conflict. Words need other numbers: how close the line passes each intruder on
+its predicted track (a distance flight can be compared with), and for a conflict the
+*predicted miss* (the closest approach, the line's last action held to the end of its level)
+beside the separation that was needed. :func:`measure_line` computes them from the line's
+sampled positions and the intruders' tracks; :func:`flies` says which manoeuvre an action
+really is once its commands are clamped; :func:`cornered_choice` is the rule a tree planner
+chooses by when every option conflicts.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from uavxai.avoidance.model import COLLISION, GOAL, NONE, OUT_OF_BOUNDS, Track
+from uavxai.avoidance.types import ChildStats, Meeting, Ownship, PlannerConfig, SearchTree
+from uavxai.vocabulary import ACTIONS
+
+# A speed change smaller than this share of what the action commands over one tree level
+# (accel_mps2 x action_hold_s) is no change: at the speed limit "faster" flies as "same".
+SPEED_CHANGE_SHARE = 0.1
+
+
+@dataclass(frozen=True)
+class LineMeasure:
+    """Predicted separations along one line (see the module docstring)."""
+
+    min_sep_m: float  # closest approach to any intruder on its predicted track (inf: none)
+    closest: int  # index of that intruder (-1: none)
+    t_closest_s: float | None  # when, from the decision
+    meets: tuple[int, float, float, float] | None  # (intruder index, time, miss, needed)
+    horizon_s: float  # how far ahead the line reaches
+
+
+def measure_line(
+    samples: Sequence[np.ndarray],
+    levels: Sequence[int],
+    ends: Sequence[tuple[int, float]],
+    tracks: Sequence[Track],
+    hold_s: float,
+    d_min_m: float,
+) -> LineMeasure:
+    """Measure a line of edges: ``samples[e]`` (n+1, 3) ownship positions at the sub-step
+    instants of edge ``e``, flown at tree level ``levels[e]`` against ``tracks[level]``;
+    ``ends[e]`` its (terminal code, time of the event's sub-step within the edge).
+
+    Within a sub-step both aircraft move on straight lines, so the closest approach of each
+    is solved exactly. A line that reaches the goal or leaves the area counts up to the end of
+    that event's sub-step (it stops there); one that collides is measured to the end of the
+    edge, so that its miss is the closest approach, not where it first came too close.
+    """
+    n_int = tracks[0].count if tracks else 0
+    best = np.full(n_int, math.inf)
+    best_t = np.full(n_int, math.nan)
+    meets = None
+    horizon = 0.0
+    for own, level, (code, t_event) in zip(samples, levels, ends, strict=True):
+        track = tracks[level]
+        n = own.shape[0] - 1
+        dt = hold_s / n
+        t0 = level * hold_s
+        keep = n
+        if code in (GOAL, OUT_OF_BOUNDS) and math.isfinite(t_event):
+            keep = min(n, int(round(t_event / dt)) + 1)
+        horizon = t0 + keep * dt
+        if n_int:
+            dist, frac = _chord_distances(own, track.pos)
+            t = t0 + (np.arange(n)[:, None] + frac) * dt
+            kept = dist[:keep]
+            k = np.argmin(kept, axis=0)
+            cols = np.arange(n_int)
+            closer = kept[k, cols] < best
+            best = np.where(closer, kept[k, cols], best)
+            best_t = np.where(closer, t[k, cols], best_t)
+            if code == COLLISION and meets is None:
+                meets = _first_conflict(dist, track, d_min_m, t0, dt)
+        if code != NONE:
+            break
+    if not n_int or not np.isfinite(best).any():
+        return LineMeasure(math.inf, -1, None, None, horizon)
+    j = int(np.argmin(best))
+    met = None
+    if meets is not None:
+        who, when, needed = meets
+        met = (who, when, float(best[who]), needed)
+    return LineMeasure(float(best[j]), j, float(best_t[j]), met, horizon)
+
+
+def _chord_distances(own: np.ndarray, intruders: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(n, N) closest distance on every sub-step to every intruder, and its fraction along
+    the sub-step; ``own`` (n+1, 3), ``intruders`` (n+1, N, 3)."""
+    rel = own[:, None, :] - intruders
+    step = np.diff(rel, axis=0)
+    a = np.einsum("ijk,ijk->ij", step, step)
+    b = np.einsum("ijk,ijk->ij", rel[:-1], step)
+    s = np.clip(-b / np.maximum(a, 1e-12), 0.0, 1.0)
+    closest = rel[:-1] + s[..., None] * step
+    return np.sqrt(np.einsum("ijk,ijk->ij", closest, closest)), s
+
+
+def _first_conflict(
+    dist: np.ndarray, track: Track, d_min_m: float, t0: float, dt: float
+) -> tuple[int, float, float]:
+    """(intruder index, time, separation needed) of the first sub-step of an edge where the
+    line comes inside ``d_min`` plus an intruder's margin (a sub-step needs its end's margin,
+    as the model holds it); the deepest intrusion on that sub-step names the intruder."""
+    need = d_min_m + (0.0 if track.margin is None else track.margin[1:])
+    need = np.broadcast_to(need, dist.shape)
+    depth = need - dist
+    inside = (depth > 0).any(axis=1)
+    if inside.any():
+        k = int(np.argmax(inside))
+        j = int(np.argmax(depth[k]))
+    else:  # decided on a hair's breadth by the search: its deepest approach
+        k, j = np.unravel_index(int(np.argmax(depth)), depth.shape)
+    return int(j), t0 + int(k) * dt, float(need[k, j])
+
+
+def measured_children(
+    children: Sequence[ChildStats],
+    lines: dict[int, list[int]],
+    tree: SearchTree,
+    samples: dict[int, np.ndarray],
+    t_events: dict[int, float],
+    tracks: Sequence[Track],
+    ids: Sequence,
+    own: Ownship,
+    config: PlannerConfig,
+) -> tuple[list[ChildStats], dict[int, float]]:
+    """A tree planner's root options quoting what their lines predict (:func:`measure_line`)
+    and which manoeuvre each flies (:func:`flies`); and how far ahead each line reaches."""
+    out, horizons = [], {}
+    for c in children:
+        line = lines[c.action]
+        m = measure_line(
+            [samples[node] for node in line],
+            [int(tree.depth[node]) - 1 for node in line],
+            [(int(tree.terminal[node]), t_events[node]) for node in line],
+            tracks,
+            config.action_hold_s,
+            config.d_min_m,
+        )
+        out.append(replace(with_measure(c, m, ids), effect=flies(c.action, own, config)))
+        horizons[c.action] = m.horizon_s
+    return out, horizons
+
+
+def with_measure(child: ChildStats, m: LineMeasure, ids: Sequence) -> ChildStats:
+    """``child`` quoting ``m``'s predictions (intruders named by their ids)."""
+    meets = None
+    if m.meets is not None:
+        who, when, miss, needed = m.meets
+        meets = Meeting(ids[who], when, miss, needed)
+    return replace(
+        child,
+        predicted_min_separation_m=m.min_sep_m,
+        closest_intruder=ids[m.closest] if m.closest >= 0 else None,
+        time_to_closest_s=m.t_closest_s,
+        meets=meets,
+    )
+
+
+def flies(action: int, own: Ownship, config: PlannerConfig) -> int | None:
+    """The action whose manoeuvre ``action`` flies from ``own`` once its commands are clamped
+    (None: its own). A bank step that the bank limit cancels holds the bank command; a speed
+    change that the speed limits cut below ``SPEED_CHANGE_SHARE`` of what it commands holds
+    the speed."""
+    a = ACTIONS[action]
+    bank, accel = a.bank, a.accel
+    if bank:
+        lim = config.bank_limit_rad
+        cmd = min(max(own.bank + bank * config.bank_step_rad, -lim), lim)
+        if abs(cmd - own.bank) < 1e-9:
+            bank = 0
+    if accel:
+        commanded = config.accel_mps2 * config.action_hold_s
+        lo, hi = min(config.speed_mps[0], own.speed), max(config.speed_mps[1], own.speed)
+        change = min(max(own.speed + accel * commanded, lo), hi) - own.speed
+        if abs(change) < SPEED_CHANGE_SHARE * commanded or commanded == 0:
+            accel = 0
+    if (bank, accel) == (a.bank, a.accel):
+        return None
+    return next(b.index for b in ACTIONS if (b.bank, b.accel, b.climb) == (bank, accel, a.climb))
+
+
+def conflicts(c: ChildStats) -> bool:
+    """Does the option's line conflict (come inside the separation it needs)?"""
+    return c.outcome == "collision" or c.meets is not None
+
+
+def cornered_key(c: ChildStats) -> tuple:
+    """How a cornered planner ranks options: the latest meeting, then the largest predicted
+    miss, then the search's preference (simulations, Q), then action order."""
+    m = c.meets
+    return (
+        -math.inf if m is None else round(m.time_s, 6),
+        -math.inf if m is None else m.miss_m,
+        c.visits,
+        c.q,
+        -c.action,
+    )
+
+
+def cornered_choice(children: Sequence[ChildStats]) -> ChildStats | None:
+    """When every option's line conflicts, the one to take (:func:`cornered_key`), else None."""
+    if not children or not all(conflicts(c) for c in children):
+        return None
+    return max(children, key=cornered_key)
