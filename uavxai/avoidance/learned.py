@@ -606,15 +606,20 @@ def _keeps(c: ChildStats, cfg: PlannerConfig) -> str:
     if c.meets is not None:
         m = c.meets
         return (
-            f"{hold} it meets intruder {m.intruder} in {m.time_s:.1f} s (predicted miss "
+            f"{hold} it meets intruder {_id(m.intruder)} in {m.time_s:.1f} s (predicted miss "
             f"{m.miss_m:.0f} m, {m.needed_m:.0f} m needed)"
         )
     if c.closest_intruder is None or not math.isfinite(c.predicted_min_separation_m):
         return f"{hold} it meets no intruder"
     return (
         f"{hold} it is predicted to keep {c.predicted_min_separation_m:.0f} m from intruder "
-        f"{c.closest_intruder} (in {c.time_to_closest_s or 0.0:.0f} s)"
+        f"{_id(c.closest_intruder)} (in {c.time_to_closest_s or 0.0:.0f} s)"
     )
+
+
+def _id(intruder_id: object) -> str:
+    """"7" for intruder 7 or "intruder-7": the sentence already says "intruder"."""
+    return str(intruder_id).removeprefix("intruder-")
 
 
 def make_learned_planner(

@@ -36,6 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from uavxai.avoidance.lines import flies, measure_line, with_measure
 from uavxai.avoidance.mcts import intruder_arrays, predict_levels
 from uavxai.avoidance.model import (
     OUTCOME_NAMES,
@@ -265,7 +266,7 @@ class MVPPlanner:
         goal_xyz = np.asarray(goal, dtype=float)
         state = ownship_state(own)
         action, miss = self._realise(state, goal_xyz, track, speed)
-        seg, children = self._evidence(own, state, goal_xyz, intruders, action, miss)
+        seg, children, horizon = self._evidence(own, state, goal_xyz, intruders, action, miss)
         pos, vel = intruder_arrays(intruders)
         period = cfg.decision_period_s
         nxt = self.model.fly(
@@ -282,7 +283,8 @@ class MVPPlanner:
             confidence=1.0,
             planner=self.name,
             d_min_m=cfg.d_min_m,
-            branch_min_separation_m=float(seg.min_sep[action]),
+            branch_min_separation_m=children[action].predicted_min_separation_m,
+            branch_horizon_s=horizon,
         )
         # MVP's own reason; the options' separations are evidence
         decision.words = (self._reason(conflicts, intruders, track, speed), "")
@@ -323,8 +325,9 @@ class MVPPlanner:
         intruders: Sequence[Intruder],
         action: int,
         miss: np.ndarray,
-    ) -> tuple[Segment, list[ChildStats]]:
-        """Evidence for the explanation: every action flown against the predicted traffic.
+    ) -> tuple[Segment, list[ChildStats], float]:
+        """Evidence for the explanation: every action flown against the predicted traffic;
+        and how far ahead the chosen action's line reaches.
 
         MVP does not search, so these separations only illustrate the options; ``q`` scores
         how closely each realises the MVP velocity.
@@ -336,12 +339,12 @@ class MVPPlanner:
             np.arange(N_ACTIONS),
             goal_xyz,
             hold,
-            predict_levels(self.model, intruders, 1, hold)[0],
+            track := predict_levels(self.model, intruders, 1, hold)[0],
             cull=False,
             exact=True,
         )
         ids = [i.id for i in intruders]
-        children = []
+        children, horizon = [], hold
         for a in range(N_ACTIONS):
             known = bool(np.isfinite(seg.min_sep[a])) and int(seg.closest[a]) >= 0
             children.append(
@@ -355,9 +358,16 @@ class MVPPlanner:
                     closest_intruder=ids[int(seg.closest[a])] if known else None,
                     time_to_closest_s=float(seg.t_closest[a]) if known else None,
                     outcome=OUTCOME_NAMES[int(seg.event[a])],
+                    effect=flies(a, own, cfg),
                 )
             )
-        return seg, children
+            # quoted as the tree planners quote theirs: on the tracks as predicted, a
+            # collision's predicted miss (uavxai.avoidance.lines)
+            end = (int(seg.event[a]), float(seg.t_event[a]))
+            line = measure_line([seg.samples[a]], [0], [end], [track], hold, cfg.d_min_m)
+            children[-1] = with_measure(children[-1], line, ids)
+            horizon = line.horizon_s if a == action else horizon
+        return seg, children, horizon
 
     def _reason(
         self, conflicts: list[Conflict], intruders: Sequence[Intruder], track: float, speed: float
