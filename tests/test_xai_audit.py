@@ -274,8 +274,8 @@ CLAIMS = [
      rf"Q (?P<a>{Q}) against (?P<b>{Q})"
      rf"(?: \((?P<va>\d+) simulations against (?P<vb>\d+){RISK}\))?"),
     ("support", "s",
-     r"(?:(?P<p>\d+)% of simulations agree"
-     r"|the best of every action sequence to the search depth)$"),
+     r"(?:(?P<p>\d+)% of simulations agree|(?P<all>every action sequence to the search depth "
+     r"scored)|the best of every action sequence to the search depth)$"),
 ]  # fmt: skip
 _COMPILED = [(name, where, re.compile(p)) for name, where, p in CLAIMS]
 
@@ -605,6 +605,8 @@ def check_q(ctx: Ctx, m: re.Match) -> bool:
 
 
 def check_support(ctx: Ctx, m: re.Match) -> bool:
+    if m["all"] is not None:  # an exhaustive search that chose by the cornered rule
+        return not ctx.sampled and bool(ctx.record.get("cornered"))
     if m["p"] is None:
         return not ctx.sampled and ctx.chosen["q"] == max(k["q"] for k in ctx.kids.values())
     if not ctx.sampled:

@@ -216,6 +216,8 @@ def _keeps(c: ChildStats, decision: Decision) -> str:
 
 def _support(decision: Decision) -> str:
     if not _sampled(decision):
+        if decision.cornered:  # chosen by the rule above, not by its value
+            return "every action sequence to the search depth scored"
         return "the best of every action sequence to the search depth"
     return f"{100 * decision.confidence:.0f}% of simulations agree"
 
