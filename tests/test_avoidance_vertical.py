@@ -176,6 +176,7 @@ def test_jsbsim_climb_through_mavlink_right_way_within_the_aircraft_limit() -> N
     than its autopilot's limit (2.5 m/s; 2.7-2.8 m/s peaks measured on height steps, see
     aircraft/uav_fw/README.md), the engine reads the command back, and a descend returns
     it downwards. The direct path gives the autopilot the same target to the bit."""
+    from uavxai.dynamics.aircraft import CLIMB_RATE_LIMIT
     from uavxai.dynamics.world import JSBSimWorld
     from uavxai.sim.run import mavlink_path
 
@@ -187,6 +188,8 @@ def test_jsbsim_climb_through_mavlink_right_way_within_the_aircraft_limit() -> N
     feed = path.bridge.feed
     path.bridge.feed = lambda data: (frames.append(data), feed(data))[1]  # a recorder
     try:
+        # the planner's climb rate is the aircraft's: its autopilot's limit (uav_fw XML)
+        assert world.aircraft[0].fdm[CLIMB_RATE_LIMIT] == cfg.climb_rate_mps
         path.altitude(120.0, 0.0)
         climb = _climb_decision(cfg, OWN)
         assert climb.alt_target_m == pytest.approx(313.3)
