@@ -25,7 +25,7 @@ from uavxai.vocabulary import ACTIONS, HOLD
 def explain(decision: Decision) -> tuple[str, str]:
     """(sentence, counterfactual) for a decision, e.g.
 
-    "banked right: holding bank and speed meets intruder 7 in 9 s (predicted miss 21 m, 74 m
+    "banked right: holding bank and speed meets intruder 7 in 9.0 s (predicted miss 21 m, 74 m
     needed); right is predicted to keep 180 m from intruder 3; 71% of simulations agree" and
     "why not left: ...".
 
