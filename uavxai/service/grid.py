@@ -23,7 +23,7 @@ incumbent can be seeded by a ``hint`` (a planner's answer), so boxes are pruned 
 start; and the DP drops allocations with so many users below QoS that, even at the lattice's
 per-user peak gains, ``sum rate / 2^lambda`` cannot reach the incumbent (``_failure_cap``:
 7 of 21 failure counts kept in the shared band with K = 20, 1 in OFDMA), and the level totals
-S whose best at those peak gains cannot reach it either (``_useful_totals``: in the shared
+S whose best at those peak gains cannot reach it either (``useful_totals``: in the shared
 band, where the position hardly matters, a few of the hundred). One core: K = 5 under 1 s,
 K = 10 1-3 s, K = 20 about 2 s, against 1-6.5 min for K = 20 before. In OFDMA a water-filling
 ceiling (``_rate_ceiling``, no DP) drops most boxes before the DP is run.
@@ -289,7 +289,7 @@ def _failure_cap(
     )
 
 
-def _useful_totals(
+def useful_totals(
     channel: Channel, peak: np.ndarray, power_levels: int, incumbent: float, cap: int
 ) -> np.ndarray:
     """The level totals S whose best allocation can beat the incumbent somewhere: for fixed
@@ -330,13 +330,13 @@ def _branch_and_bound(
     """The lattice index of the optimum and the number of DP solves.
 
     The DP leaves out allocations with ``_failure_cap`` or more users below QoS and level
-    totals other than ``_useful_totals``: they cannot beat the incumbent, so every bound above
+    totals other than ``useful_totals``: they cannot beat the incumbent, so every bound above
     it, and every position's value above it, is exactly what the full DP gives.
     """
     best_value, best_index = incumbent
     peak = gains.max(axis=(0, 1, 2))
     cap = _failure_cap(channel, peak, power_levels, best_value, failures)
-    totals = _useful_totals(channel, peak, power_levels, best_value, cap)
+    totals = useful_totals(channel, peak, power_levels, best_value, cap)
     evaluations, frontier = 2, boxes if len(totals) else []
     while frontier:
         peaks = np.array([gains[b].max(axis=(0, 1, 2)) for b in frontier])

@@ -20,7 +20,7 @@ import numpy as np
 
 from uavxai.comms.channel import Channel
 from uavxai.comms.service_env import MOVES, SearchSpace, levels_to_power
-from uavxai.service.grid import optimal_levels, optimal_objective
+from uavxai.service.grid import optimal_levels, optimal_objective, useful_totals
 
 SCREEN_STRIDE = 3  # lattice points between screened ones, horizontally
 SCREEN_STARTS = 2  # refinements from the screen's best points
@@ -58,14 +58,17 @@ def exact_climb(
     """Best-improvement climb over the 6 lattice neighbours, each scored by the exact power
     optimum among allocations with at most ``failures`` users below QoS (what the start has:
     an objective some allocation achieves, at a fraction of the full DP's cost)."""
-    pos = np.asarray(position, float)
-    best = float(optimal_objective(channel, channel.mean_gain(pos), power_levels, failures + 1)[0])
+    pos, cap = np.asarray(position, float), failures + 1
+    best = float(optimal_objective(channel, channel.mean_gain(pos), power_levels, cap)[0])
     for _ in range(CLIMB_ROUNDS):
         neighbours = pos + MOVES[:6] * space.step_m
         neighbours = neighbours[space.contains(neighbours)]
-        values = optimal_objective(
-            channel, channel.mean_gain(neighbours), power_levels, failures + 1
-        )
+        gains = channel.mean_gain(neighbours)
+        # only the level totals that can beat the current point at the neighbours' peak gains
+        totals = useful_totals(channel, gains.max(axis=0), power_levels, best, cap)
+        if not len(totals):
+            break
+        values = optimal_objective(channel, gains, power_levels, cap, totals)
         i = int(values.argmax())
         if values[i] <= best * (1.0 + 1e-12):
             break
