@@ -15,7 +15,13 @@ from uavxai.comms.orbit_rate import orbit_average
 from uavxai.comms.service_env import SearchSpace, levels_to_power
 from uavxai.dynamics.orbit import scenario_orbit_radius
 from uavxai.scenario import default_scenario
-from uavxai.service.orbit import OrbitObjective, solve_grid_orbit
+from uavxai.service import grid
+from uavxai.service.orbit import (
+    OrbitObjective,
+    bound_tables,
+    orbit_gain_means,
+    solve_grid_orbit,
+)
 from uavxai.service.stage import plan_service
 from uavxai.sim.mission import MissionConfig
 
@@ -51,6 +57,26 @@ def test_orbit_power_dp_equals_brute_force_and_the_orbit_average(access, k, L, q
         assert value == pytest.approx(brute.max(), rel=1e-12)
         assert best == pytest.approx(brute.max(), rel=1e-12)
         assert float(objective.value(c, levels)[0]) == pytest.approx(brute.max(), rel=1e-12)
+
+
+@pytest.mark.parametrize("access", ["shared", "ofdma"])
+@pytest.mark.parametrize("environment", ["suburban", "highrise_urban"])
+def test_bound_tables_bound_the_orbit_rates_and_ofdma_tightly(access, environment):
+    sc = default_scenario(seed=3, comms={"access": access, "environment": environment,
+                                         "users": {"count": 5}, "qos_rate_bps": 1.2e6})
+    ch = Channel.from_scenario(sc)
+    objective = OrbitObjective(ch, 6, 106.0)
+    rng = np.random.default_rng(0)
+    centres = np.column_stack([rng.uniform(750, 1250, 100), rng.uniform(750, 1250, 100),
+                               rng.uniform(50, 300, 100)])  # fmt: skip
+    arith, geo, harm = orbit_gain_means(objective, centres)
+    bound, _ = bound_tables(ch, 6, np.array([arith, geo, geo, geo / harm]))
+    exact, _ = objective.tables(centres)
+    assert (bound >= exact).all()  # at single centres too, for every level and total
+    jensen, _ = grid.level_rates(ch, arith, 6)
+    assert (bound <= jensen * (1 + 1e-12)).all()  # never looser than Jensen (to rounding)
+    if access == "ofdma":  # the second bound: far tighter than Jensen's
+        assert float((bound - exact).sum()) < 0.1 * float((jensen - exact).sum())
 
 
 @pytest.mark.parametrize("access", ["shared", "ofdma"])
