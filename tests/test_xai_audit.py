@@ -157,7 +157,7 @@ def _line(tree, line, model, tracks, intruders, cfg, goal) -> Line:
             best[closer], best_t[closer] = dist[k, cols][closer], t[k, cols][closer]
             need = cfg.d_min_m + (0.0 if track.margin is None else track.margin[1:])
             need = np.broadcast_to(need, dist.shape)
-            inside = np.argwhere(dist < need)
+            inside = np.argwhere(dist[:keep] < need[:keep])  # nothing counts past the end
             if truth.meets is None and inside.size:
                 k = int(inside[0, 0])
                 j = int(np.argmax(need[k] - dist[k]))
