@@ -19,7 +19,8 @@ user below it on the orbit on many layouts), where placement matters; ``demo`` â
 comms (``scenarios/demo.yaml``: OFDMA, QoS 100 kbit/s), users static.
 
     nice -n 10 .venv/bin/python benchmarks/bench_orbit_placement.py [--layouts 20]
-        [--service-s 240] [--settings edge demo] [--json out.json] [--optimum N]
+        [--service-s 240] [--settings edge demo] [--planner d3qn|grid|random]
+        [--json out.json] [--optimum N]
 """
 
 from __future__ import annotations
@@ -53,13 +54,15 @@ T_975 = {  # two-sided 95 % Student t quantiles by degrees of freedom
 }
 
 
-def scenario_for(setting: str, seed: int, service_s: float, platform: str) -> Scenario:
+def scenario_for(
+    setting: str, seed: int, service_s: float, platform: str, planner: str = "d3qn"
+) -> Scenario:
     base = load_scenario("scenarios/demo.yaml").model_dump(mode="json")
     base["name"] = f"orbit-placement-{setting}"
     base["seed"] = seed
     base["comms"].update(SETTINGS[setting])
     base["comms"]["users"]["mobility"] = {"model": "static"}
-    base["service"].update({"platform": platform, "replan_s": None})
+    base["service"].update({"platform": platform, "replan_s": None, "planner": planner})
     base["intruders"].update({"count": 0, "flow": "none"})
     base["avoidance"]["planner"] = "none"  # no traffic: fly straight to the point
     base["mission"].update({"service_s": service_s, "return_home": False})
@@ -166,6 +169,8 @@ def main() -> None:
     p.add_argument("--service-s", type=float, default=240.0)
     p.add_argument("--settings", nargs="+", default=list(SETTINGS), choices=list(SETTINGS))
     p.add_argument("--json", default=None)
+    p.add_argument("--planner", choices=("d3qn", "grid", "random"), default="d3qn",
+                   help="the service planner placing both (grid: the exact optimum of each)")
     p.add_argument("--optimum", type=int, default=0,
                    help="also compare d3qn with the exact grid orbit optimum on N layouts")
     args = p.parse_args()
@@ -181,7 +186,8 @@ def main() -> None:
             seed = SEED0 + i
             row = {"seed": seed}
             for platform in ("orbit", "hover"):
-                row[platform] = fly_plan(scenario_for(setting, seed, args.service_s, platform))
+                sc = scenario_for(setting, seed, args.service_s, platform, args.planner)
+                row[platform] = fly_plan(sc)
             o, h = row["orbit"], row["hover"]
             same = o["service_point"] == h["service_point"]
             print(f"{setting} seed {seed}: orbit {o['delivered_bits'] / 1e6:8.1f} Mbit "
@@ -193,7 +199,7 @@ def main() -> None:
                   flush=True)
             rows.append(row)
         out[setting] = rows
-        print(table(setting, rows), flush=True)
+        print(table(f"{setting} ({args.planner})", rows), flush=True)
     if args.json:
         with open(args.json, "w") as f:
             json.dump(out, f, indent=1)
