@@ -284,3 +284,31 @@ def test_learned_planners_check_inputs_and_measure_exactly(name: str) -> None:
     assert flown[1] - flown[0] > 0.1  # sampling would overstate this one
     assert d.predicted_min_separation_m == pytest.approx(float(flown[0]), abs=1e-9)
     assert d.branch_min_separation_m == d.children[d.action].predicted_min_separation_m
+
+
+@pytest.mark.parametrize("name", ["dqn", "safe_dqn"])
+def test_learned_words_name_the_manoeuvre_flown_and_real_alternatives(name: str) -> None:
+    """At the bank limit and the top speed, 'right' and 'faster' change nothing: the words
+    say what a clamped action flies, and the why-not never offers the chosen manoeuvre
+    under another name (even when the network ranks that twin second)."""
+    from dataclasses import replace
+
+    from uavxai.vocabulary import ACTIONS, HOLD
+
+    own = replace(OWN, bank=CONFIG.bank_limit_rad, speed=CONFIG.speed_mps[1])
+    planner = make_planner(name, CONFIG)
+    children = planner.plan(own, _traffic(10, seed=2), GOAL).children
+    right_faster = next(a.index for a in ACTIONS if (a.bank, a.accel) == (1, 1))
+    assert children[right_faster].flies == HOLD  # both commands clamped
+    twins = [c.action for c in children if c.flies == HOLD and c.action != right_faster]
+    assert twins  # hold itself at least
+    # the network's ranking: right/faster first, its twins next, real alternatives last
+    order = [right_faster, *twins] + [a for a in range(N_ACTIONS) if children[a].flies != HOLD]
+    ranked = np.zeros(N_ACTIONS)
+    ranked[order] = np.linspace(1.0, 0.1, N_ACTIONS)
+    q = {"q": ranked, "goal": ranked, "safety": np.ones(N_ACTIONS)}
+    sentence, why_not = planner.explain(right_faster, q, children)
+    assert "(flown as hold bank, hold speed: clamped at a limit)" in sentence
+    named = why_not.removeprefix("why not ").split(":")[0].split(" (")[0]
+    alternative = next(a for a in ACTIONS if a.name == named)
+    assert children[alternative.index].flies != HOLD, why_not

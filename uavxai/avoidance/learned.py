@@ -541,14 +541,17 @@ class LearnedPlanner:
         self, action: int, q: dict[str, np.ndarray], children: list[ChildStats]
     ) -> tuple[str, str]:
         qa = q["q"]
-        runner = max((a for a in range(N_ACTIONS) if a != action), key=lambda a: qa[a])
         sentence = (
-            f"{self.label}: Q({action_name(action)}) = {qa[action]:.2f} highest; "
-            f"{_keeps(children[action], self.config)}"
+            f"{self.label}: Q({action_name(action)}) = {qa[action]:.2f} highest"
+            f"{_flown(children[action])}; {_keeps(children[action], self.config)}"
         )
+        others = _other_manoeuvres(children, action)
+        if not others:
+            return sentence, ""
+        runner = max(others, key=lambda a: qa[a])
         why_not = (
-            f"why not {action_name(runner)}: Q {qa[runner]:.2f} against {qa[action]:.2f}; "
-            f"{_keeps(children[runner], self.config)}"
+            f"why not {action_name(runner)}{_flown(children[runner])}: Q {qa[runner]:.2f} "
+            f"against {qa[action]:.2f}; {_keeps(children[runner], self.config)}"
         )
         return sentence, why_not
 
@@ -576,21 +579,25 @@ class SafeDQNPlanner(LearnedPlanner):
             f"{self.label}: {int(passed.sum())} of 9 actions pass the safety filter "
             f"(Q_safety >= median {median:.2f}); {action_name(action)} has the best "
             f"Q_goal + Q_safety = {qg[action] + qs[action]:.2f} (goal {qg[action]:.2f}, "
-            f"safety {qs[action]:.2f}) among them; {_keeps(children[action], self.config)}"
+            f"safety {qs[action]:.2f}) among them{_flown(children[action])}; "
+            f"{_keeps(children[action], self.config)}"
         )
-        greedy = int(np.argmax(qg))
-        if greedy != action and not passed[greedy]:
+        others = _other_manoeuvres(children, action)
+        filtered = [a for a in others if qg[a] > qg[action] and not passed[a]]
+        safe = [a for a in others if passed[a]]
+        if filtered:  # the goal would have preferred it: the filter is why not
+            greedy = max(filtered, key=lambda a: qg[a])
             why_not = (
-                f"why not {action_name(greedy)} (best for the goal, Q_goal {qg[greedy]:.2f}): "
-                f"its Q_safety {qs[greedy]:.2f} is below the median; "
-                f"{_keeps(children[greedy], self.config)}"
+                f"why not {action_name(greedy)}{_flown(children[greedy])} (better for the "
+                f"goal, Q_goal {qg[greedy]:.2f}): its Q_safety {qs[greedy]:.2f} is below the "
+                f"median; {_keeps(children[greedy], self.config)}"
             )
+        elif not safe:
+            return sentence, ""
         else:
-            total = np.where(passed, qg + qs, -np.inf)
-            total[action] = -np.inf
-            runner = int(np.argmax(total))
+            runner = max(safe, key=lambda a: qg[a] + qs[a])
             why_not = (
-                f"why not {action_name(runner)}: Q_goal + Q_safety "
+                f"why not {action_name(runner)}{_flown(children[runner])}: Q_goal + Q_safety "
                 f"{qg[runner] + qs[runner]:.2f} against {qg[action] + qs[action]:.2f}; "
                 f"{_keeps(children[runner], self.config)}"
             )
@@ -598,6 +605,18 @@ class SafeDQNPlanner(LearnedPlanner):
 
 
 _OUTCOME = {1: "goal", 2: "collision", 3: "out_of_bounds"}
+
+
+def _flown(c: ChildStats) -> str:
+    """" (flown as bank left, hold speed: clamped at a limit)" when the action's commands are
+    clamped into another manoeuvre; "" when it flies as itself."""
+    return "" if c.effect is None else f" (flown as {action_name(c.flies)}: clamped at a limit)"
+
+
+def _other_manoeuvres(children: list[ChildStats], action: int) -> list[int]:
+    """The actions that fly a manoeuvre other than ``action``'s: the only real alternatives."""
+    flown = children[action].flies
+    return [c.action for c in children if c.flies != flown]
 
 
 def _keeps(c: ChildStats, cfg: PlannerConfig) -> str:
