@@ -167,3 +167,52 @@ def test_validate_refuses_a_k_the_shipped_model_does_not_serve(tmp_path, capsys)
     assert "serves 2 to 20" in capsys.readouterr().err
     path.write_text("name: k30\ncomms: {users: {count: 30}}\nservice: {planner: grid}\n")
     assert main(["validate", str(path)]) == 0
+
+
+def test_finetune_continues_the_shipped_model_on_one_layout(tmp_path, capsys) -> None:
+    """`uavxai train --stage service --finetune` starts from the shipped universal model,
+    trains on the scenario's layout alone (seeded: twice the same weights), never returns a
+    network worse on that layout than the one it started from, and writes a model that
+    `service.checkpoint` flies as the zero-shot one is flown."""
+    import yaml
+
+    from uavxai.cli import main
+
+    users = [[800, 820], [810, 830], [1150, 1190], [1000, 900], [1190, 810]]
+    spec = {
+        "name": "ft", "seed": 3,
+        "comms": {"access": "ofdma", "environment": "highrise_urban",
+                  "users": {"positions": users}},
+        "service": {"planner": "d3qn", "platform": "hover"},
+    }  # fmt: skip
+    path = tmp_path / "ft.yaml"
+    path.write_text(yaml.safe_dump(spec))
+    reports = []
+    for run in ("a", "b"):
+        out = tmp_path / run
+        argv = ["train", str(path), "--stage", "service", "--algo", "d3qn", "--finetune"]
+        assert main([*argv, "--episodes", "12", "--out", str(out)]) == 0
+        reports.append(json.loads((out / "train_report.json").read_text()))
+    a, b = reports
+    alone = a["network_alone_over_optimum"]
+    assert alone["after"] >= alone["before"] > 0
+    assert a["planner_over_optimum"]["after"] >= 0.99
+    wa = torch.load(tmp_path / "a" / "model.pt", weights_only=True)["state_dict"]
+    wb = torch.load(tmp_path / "b" / "model.pt", weights_only=True)["state_dict"]
+    assert all(torch.equal(wa[k], wb[k]) for k in wa)
+    if a["best_episode"] > 0:  # it moved: the weights are not the shipped ones
+        shipped, _ = universal.load(universal.shipped_path("d3qn"))
+        assert not all(torch.equal(wa[k], v) for k, v in shipped.state_dict().items())
+
+    model = str(tmp_path / "a" / "model.pt")
+    scenario = default_scenario(
+        "ft", seed=3, comms=spec["comms"], service={**spec["service"], "checkpoint": model}
+    )
+    result = plan_service(scenario).to_summary()
+    assert result["checkpoint"] == model
+    optimum = a["grid_objective"]
+    assert result["d3qn_alone_objective"] / optimum == pytest.approx(alone["after"], rel=1e-9)
+
+    assert main(["train", str(path), "--stage", "avoidance", "--algo", "dqn", "--finetune",
+                 "--out", str(tmp_path / "c")]) == 2  # fmt: skip
+    assert "--finetune is for --stage service" in capsys.readouterr().err

@@ -178,6 +178,12 @@ def _add_train(sub: argparse._SubParsersAction) -> None:
         help="service: d3qn | dqn; avoidance: dqn | safe_dqn",
     )
     t.add_argument("--episodes", type=_positive_int, help="training episodes (default per algo)")
+    t.add_argument(
+        "--finetune",
+        action="store_true",
+        help="service: fine-tune the universal model on this layout instead of training one "
+        "from scratch",
+    )
     t.add_argument("--seed", type=_seed)
     t.add_argument("--out", type=Path, help="output folder (default runs/train-<stage>-<algo>)")
     t.add_argument("--force", action="store_true")
@@ -431,11 +437,15 @@ def cmd_train(args: argparse.Namespace) -> int:
             f"allowed: {', '.join(allowed)}."
         )
     out = prepare_out_dir(args.out or Path("runs") / f"train-{args.stage}-{args.algo}", args.force)
+    if args.finetune and args.stage != "service":
+        raise UserError("--finetune is for --stage service (the universal d3qn/dqn model).")
     if args.stage == "service":
-        from uavxai.service.train import train_command
+        from uavxai.service.train import finetune_command, train_command
+
+        trainer = finetune_command if args.finetune else train_command
     else:
-        from uavxai.avoidance.train import train_command
-    report = train_command(sc, algo=args.algo, episodes=args.episodes, out=out)
+        from uavxai.avoidance.train import train_command as trainer
+    report = trainer(sc, algo=args.algo, episodes=args.episodes, out=out)
     path = out / "train_report.json"
     path.write_text(json.dumps(report, indent=2, default=float) + "\n")
     print_report(f"training {args.stage} {args.algo} ({sc.name})", report, path)

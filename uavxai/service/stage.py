@@ -196,12 +196,20 @@ def check_planner_fits(scenario: Scenario, planner: str | None = None) -> None:
         )
 
 
+def universal_model_path(scenario: Scenario, algo: str) -> Path:
+    """``service.checkpoint``, or the shipped universal model for ``algo``."""
+    given = scenario.service.checkpoint
+    if given is not None:
+        return Path(given)
+    return universal.shipped_path(algo, scenario.comms.power_levels)
+
+
 def universal_policy(scenario: Scenario, algo: str) -> tuple[universal.NumpyPolicy, str]:
     """The universal model for ``algo`` (``service.checkpoint`` or the shipped one), checked
     against the scenario's K and power levels; loaded once per process."""
     c = scenario.comms
     given = scenario.service.checkpoint
-    path = Path(given) if given is not None else universal.shipped_path(algo, c.power_levels)
+    path = universal_model_path(scenario, algo)
     if given is None and not path.is_file():
         have = sorted(p.name for p in service_checkpoints_dir().glob("universal_*.pt"))
         raise CheckpointError(

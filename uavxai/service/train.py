@@ -16,6 +16,13 @@ of the paper — the other one and the random baseline with the same budget, the
 within 5 % of the final level (the mean of the last 10 % of episodes); it is reported for the
 greedy objective (``episodes_to_converge``) and for the training reward (``..._return``).
 
+``uavxai train SCENARIO --stage service --algo d3qn|dqn --finetune`` calls
+:func:`finetune_command` instead: it continues the universal model's training (the shipped
+one, or a universal ``service.checkpoint``) on the scenario's layout alone and writes
+``model.pt`` in the universal format; ``service.checkpoint: .../model.pt`` then flies it as
+the zero-shot model is flown (network, refinement, power step). The report gives the
+network alone and the planner before and after, against the exact optimum.
+
 ``python -m uavxai.service.train shipped`` regenerates ``uavxai/service/checkpoints``: the
 universal D3QN and DQN of ``universal.py`` (any K from 2 to 20, both access modes, all four
 environments), used zero-shot by ``service.planner: d3qn|dqn``.
@@ -98,6 +105,53 @@ def train_command(scenario: Scenario, algo: str, episodes: int | None, out: Path
         },
         "comparison": summary,
         "learning_curve": str(out / "learning_curve.png"),
+    }
+
+
+def finetune_command(
+    scenario: Scenario, algo: str, episodes: int | None, out: Path
+) -> dict[str, Any]:
+    """Fine-tune the universal ``algo`` model on the scenario's layout; write model.pt."""
+    from dataclasses import replace
+
+    from rich.console import Console
+
+    from uavxai.service import universal
+    from uavxai.service.stage import universal_model_path, universal_policy
+
+    universal_policy(scenario, algo)  # the model fits this scenario (K, levels, algo)
+    start_path = universal_model_path(scenario, algo)
+    net, _ = universal.load(start_path)
+    env = d3qn.fading_free(ServiceEnv.from_scenario(scenario))
+    cfg = replace(
+        universal.FINETUNE, episodes=episodes or universal.FINETUNE.episodes, seed=scenario.seed
+    )
+    before = universal.plan(universal.NumpyPolicy(net), env)
+    with Console(stderr=True).status(f"fine-tuning {algo} on {scenario.name} ..."):
+        log = universal.finetune(net, env, cfg)
+        after = universal.plan(universal.NumpyPolicy(log.net), env)
+        optimum = solve_grid(env.channel, env.space, env.power_levels).objective
+    universal.save(out / "model.pt", log.net, algo, {
+        "fine_tuned_on": scenario.name, "seed": scenario.seed, "from": str(start_path),
+        "episodes": log.episodes, "best_episode": log.best_episode,
+        "config": universal.config_dict(log.config),
+    })  # fmt: skip
+    return {
+        "algo": algo,
+        "model": str(out / "model.pt"),
+        "use_with": f"service.checkpoint: {out / 'model.pt'}",
+        "started_from": str(start_path),
+        "episodes": log.episodes,
+        "best_episode": log.best_episode,
+        "wall_s": round(log.wall_s, 1),
+        "network_alone_over_optimum": {
+            "before": before.flight.objective / optimum,
+            "after": after.flight.objective / optimum,
+        },
+        "planner_over_optimum": {
+            "before": before.objective / optimum, "after": after.objective / optimum,
+        },
+        "grid_objective": optimum,
     }
 
 
