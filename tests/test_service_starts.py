@@ -48,3 +48,39 @@ def test_planner_reaches_the_needle_a_local_search_misses():
     assert universal.objective_at(env, result.position, result.levels) == pytest.approx(
         result.objective, rel=1e-12
     )
+
+
+# Benchmark layout shared / highrise_urban / K = 20 / uniform / i = 49 (rounded to 0.1 m):
+# from the flight's basin one more user stays below QoS than at the optimum.
+PLATEAU_USERS = [
+    [1229.7, 1208.7], [1204.5, 1210.5], [786.7, 794.7], [1152.4, 983.0], [1005.9, 832.5],
+    [891.6, 1030.5], [1181.0, 897.7], [850.6, 1233.0], [1181.4, 878.6], [842.1, 750.6],
+    [1068.0, 941.9], [957.3, 1108.2], [860.2, 1142.6], [996.8, 767.3], [1094.2, 875.1],
+    [1134.1, 1111.9], [1182.2, 1108.2], [757.4, 1092.9], [801.8, 1162.3], [1220.6, 1095.6],
+]  # fmt: skip
+
+
+def test_kicks_leave_a_qos_plateau(monkeypatch):
+    """Shared band, K = 20: without the kicks the planner ends where one more user misses QoS
+    than needs to (the objective halved); with them it crosses that step, and the reported
+    objective is the channel equations' at the returned point and levels."""
+    from uavxai.comms.service_env import levels_to_power
+    from uavxai.service import starts
+
+    env = ServiceEnv.from_scenario(
+        problem_scenario(np.array(PLATEAU_USERS), "shared", "highrise_urban")
+    )
+    net, _ = universal.load(universal.shipped_path("d3qn"))
+    policy = universal.NumpyPolicy(net)
+
+    def missing(plan: universal.Plan) -> int:
+        power = levels_to_power(plan.levels, env.channel.p_max_w, env.power_levels)
+        rate = env.channel.rate(env.channel.mean_gain(plan.position), power)
+        assert env.channel.objective(rate) == pytest.approx(plan.objective, rel=1e-9)
+        return int((rate < env.channel.qos_rate_bps).sum())
+
+    kicked = universal.plan(policy, env)
+    monkeypatch.setattr(starts, "KICKS", 0)
+    unkicked = universal.plan(policy, env)
+    assert missing(kicked) < missing(unkicked)
+    assert kicked.objective > 1.9 * unkicked.objective

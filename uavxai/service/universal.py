@@ -358,14 +358,15 @@ def plan(
     replaced by the exact optimum for that point: single-level and pair moves stop short of
     the shared band's optimum (all users but one exactly at the QoS rate), 0.96 for K = 10.
     On the hover objective the refinement also starts from the two best points of a coarse
-    screen at equal power, and the exact power step is followed by an exact climb
-    (``uavxai.service.starts``: needles a local search from the flight cannot reach).
+    screen at equal power, is kicked out of QoS plateaus (an iterated local search), and the
+    exact power step is followed by an exact climb (``uavxai.service.starts``: needles and
+    steps a local search from the flight cannot reach).
 
     With a ``scorer`` (``service.platform: orbit``) the network still flies as trained (on the
     hover objective) and its best visited point is the start, but the refinement and the exact
     power step score the orbit objective (``uavxai.service.orbit``)."""
     from uavxai.service.grid import dp_cost, optimal_levels
-    from uavxai.service.starts import climb_exact, screened_starts
+    from uavxai.service.starts import climb_exact, kicked, screened_starts
 
     flight = fly(policy, env)
     best: tuple[np.ndarray, np.ndarray, float] | None = None
@@ -382,6 +383,13 @@ def plan(
         if best is None or value > best[2]:
             best = (pos, lev, value)
     assert best is not None
+    if scorer is None:  # hover: kicks out of a QoS plateau (uavxai.service.starts)
+        best, r = kicked(
+            env.space,
+            best,
+            lambda p, lv: refine(env.channel, env.space, env.power_levels, p, lv),
+        )
+        rounds += r
     if dp_cost(env.channel.k, env.power_levels) <= EXACT_POWER_MAX_COST:
         if scorer is not None:
             lev, value = scorer.optimal_levels(best[0])
