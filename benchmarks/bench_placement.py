@@ -42,7 +42,7 @@ import numpy as np
 import torch
 
 from uavxai.comms.channel import ENVIRONMENTS
-from uavxai.comms.service_env import ServiceEnv, levels_to_power
+from uavxai.comms.service_env import HOVER, ServiceEnv, levels_to_power
 from uavxai.service import universal
 from uavxai.service.grid import solve_grid
 from uavxai.service.layouts import ACCESS, KINDS, draw_layout, problem_scenario
@@ -51,6 +51,7 @@ BENCH_SEED = 13_000  # training uses default_rng([seed < 1000, episode]): disjoi
 KS = (5, 10, 20)
 CACHE = Path(__file__).resolve().parents[1] / "docs" / "service" / "bench_placement_optima.jsonl"
 RUNS = CACHE.with_name("bench_placement_runs.jsonl")  # every method on every cached problem
+ABLATION = CACHE.with_name("bench_placement_ablation.jsonl")  # no_network for earlier runs
 # Rows solved by the faster exact solver (a hint, block DP, failure cap) carry solver = 3; the
 # optimum is the same, only the time differs, so the table times `grid` on those rows only.
 SOLVER = 3
@@ -136,6 +137,10 @@ def main(argv: list[str] | None = None) -> None:
     e.add_argument("--layouts", type=int, default=50, help="problems i < this per cell")
     e.add_argument("--part", type=int, default=0)
     e.add_argument("--parts", type=int, default=1)
+    a = sub.add_parser("ablate", help="add the no_network ablation to earlier runs")
+    a.add_argument("--layouts", type=int, default=50)
+    a.add_argument("--part", type=int, default=0)
+    a.add_argument("--parts", type=int, default=1)
     r = sub.add_parser("report")
     r.add_argument("--plot", type=Path, default=None)
     r.add_argument("--json", type=Path, default=None)
@@ -151,11 +156,28 @@ def main(argv: list[str] | None = None) -> None:
         optima(args.minutes, args.layouts, args.part, args.parts)
     elif args.command == "evaluate":
         evaluate(args.models, args.layouts, args.part, args.parts)
+    elif args.command == "ablate":
+        ablate(args.layouts, args.part, args.parts)
     else:
         report(args.plot, args.json, args.layouts)
 
 
-METHODS = ("d3qn", "d3qn_alone", "dqn", "dqn_alone", "refine_only", "random", "naive")
+METHODS = (
+    "d3qn", "d3qn_alone", "dqn", "dqn_alone", "no_network", "refine_only", "random", "naive"
+)  # fmt: skip
+
+
+class NoNetwork(universal.NumpyPolicy):
+    """The network's ablation inside the planner: a "flight" that hovers at the region centre
+    with equal power, so that ``universal.plan`` runs every search step (refinement from there,
+    screened starts, kicks, exact power and climb) without anything learned: what the planner
+    owes the network is the difference to ``d3qn``."""
+
+    def __init__(self, power_levels: int) -> None:  # no weights to hold
+        self.top = power_levels - 1
+
+    def __call__(self, obs: universal.Observation) -> np.ndarray:
+        return np.concatenate([[HOVER], np.full(len(obs.users), self.top)])
 
 
 # Times per layout are this process's CPU time (one thread: torch and BLAS are held to one),
@@ -191,6 +213,7 @@ def run_problem(row: dict, policies: dict[str, universal.NumpyPolicy]) -> dict[s
         out[f"{algo}_wall_s"] = time.perf_counter() - wall
         out[f"{algo}_alone"], out[f"{algo}_alone_s"] = flight.objective, t1 - t0
         out[algo], out[f"{algo}_s"] = value, cpu() - t1
+    out.update(no_network(env))
     # What the refinement finds without any network: from the flight's start, all levels full.
     t0 = cpu()
     full = np.full(env.channel.k, env.power_levels - 1)
@@ -202,6 +225,34 @@ def run_problem(row: dict, policies: dict[str, universal.NumpyPolicy]) -> dict[s
     out["random_s"] = out["d3qn_s"]
     out["random"] = random_for(env, out["d3qn_s"], rng)
     return out
+
+
+def no_network(env: ServiceEnv) -> dict[str, float]:
+    t0 = cpu()
+    value = universal.plan(NoNetwork(env.power_levels), env).objective
+    return {"no_network": value, "no_network_s": cpu() - t0}
+
+
+def ablate(layouts: int, part: int = 0, parts: int = 1) -> None:
+    """Add the ``no_network`` ablation to runs made before it existed: one line per problem
+    in ``ABLATION`` (resumable), merged into the runs by ``load_runs``."""
+    done = set()
+    if ABLATION.is_file():
+        done = {tuple(json.loads(x)[f] for f in (*CELL_FIELDS, "i"))
+                for x in ABLATION.read_text().splitlines() if x.strip()}  # fmt: skip
+    rows = [r for r in load_cache() if r["i"] < layouts]
+    for n, row in enumerate(rows):
+        key = tuple(row[f] for f in (*CELL_FIELDS, "i"))
+        if n % parts != part or key in done:
+            continue
+        env = ServiceEnv.from_scenario(
+            problem_scenario(np.asarray(row["users"]), row["access"], row["environment"])
+        )
+        out = {**dict(zip((*CELL_FIELDS, "i"), key, strict=True)), **no_network(env)}
+        with ABLATION.open("a") as f:
+            f.write(json.dumps(out) + "\n")
+        if (n + 1) % 100 == 0:
+            print(f"{n + 1}/{len(rows)} problems", flush=True)
 
 
 def summarise(rows: list[dict], results: list[dict]) -> dict[tuple, dict[str, float]]:
@@ -261,7 +312,14 @@ def load_runs() -> list[tuple[tuple, dict]]:
     if not RUNS.is_file():
         return []
     runs = [json.loads(line) for line in RUNS.read_text().splitlines() if line.strip()]
-    return [(tuple(r[f] for f in (*CELL_FIELDS, "i")), r) for r in runs]
+    extra = {}
+    if ABLATION.is_file():
+        for line in ABLATION.read_text().splitlines():
+            if line.strip():
+                r = json.loads(line)
+                extra[tuple(r[f] for f in (*CELL_FIELDS, "i"))] = r
+    keyed = [(tuple(r[f] for f in (*CELL_FIELDS, "i")), r) for r in runs]
+    return [(key, {**extra.get(key, {}), **r}) for key, r in keyed]
 
 
 def report(plot: Path | None, out_json: Path | None, layouts: int) -> None:
