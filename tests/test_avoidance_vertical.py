@@ -232,3 +232,22 @@ def _decode(frames: list[bytes]) -> list:
     for data in frames:
         out.extend(parser.parse_buffer(data) or [])
     return out
+
+
+def test_a_climb_while_climbing_is_said_to_change_nothing() -> None:
+    """Already climbing, another climb keeps the vertical command where it is: it flies as
+    holding bank and speed (its clamped twin), so the words never call it a climb; the limit
+    is named when it is quoted."""
+    from dataclasses import replace
+
+    from uavxai.xai.explain import explain
+
+    climbing = replace(OWN, vertical=1)
+    d = ExhaustivePlanner(PlannerConfig(actions="vertical", **CV)).plan(climbing, WALL, GOAL)
+    kids = {c.action: c for c in d.children}
+    assert kids[CLIMB].flies == HOLD and kids[DESCEND].flies == DESCEND
+    assert "climbed" not in d.explanation
+    # had it chosen the clamped climb, the sentence says what it flew and why
+    sentence, _ = explain(replace(d, action=CLIMB, words=None))
+    assert sentence.startswith("held its bank"), sentence
+    assert "the vertical command is at its limit" in sentence, sentence

@@ -171,9 +171,12 @@ def flies(action: int, own: Ownship, config: PlannerConfig) -> int | None:
     """The action whose manoeuvre ``action`` flies from ``own`` once its commands are clamped
     (None: its own). A bank step that the bank limit cancels holds the bank command; a speed
     change that the speed limits cut below ``SPEED_CHANGE_SHARE`` of what it commands holds
-    the speed."""
+    the speed; a climb (descend) that the vertical command's end cancels (already climbing or
+    descending) keeps it."""
     a = ACTIONS[action]
-    bank, accel = a.bank, a.accel
+    bank, accel, climb = a.bank, a.accel, a.climb
+    if climb and min(max(own.vertical + climb, -1), 1) == own.vertical:
+        climb = 0
     if bank:
         lim = config.bank_limit_rad
         cmd = min(max(own.bank + bank * config.bank_step_rad, -lim), lim)
@@ -185,9 +188,9 @@ def flies(action: int, own: Ownship, config: PlannerConfig) -> int | None:
         change = min(max(own.speed + accel * commanded, lo), hi) - own.speed
         if abs(change) < SPEED_CHANGE_SHARE * commanded or commanded == 0:
             accel = 0
-    if (bank, accel) == (a.bank, a.accel):
+    if (bank, accel, climb) == (a.bank, a.accel, a.climb):
         return None
-    return next(b.index for b in ACTIONS if (b.bank, b.accel, b.climb) == (bank, accel, a.climb))
+    return next(b.index for b in ACTIONS if (b.bank, b.accel, b.climb) == (bank, accel, climb))
 
 
 def conflicts(c: ChildStats) -> bool:

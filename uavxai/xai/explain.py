@@ -259,6 +259,8 @@ def _limits(c: ChildStats) -> str:
         limits.append("the bank command")
     if asked.accel != flown.accel:
         limits.append("the speed")
+    if asked.climb != flown.climb:
+        limits.append("the vertical command")
     if len(limits) > 1:
         return " and ".join(limits) + " are at their limits"
     return f"{limits[0]} is at its limit"
