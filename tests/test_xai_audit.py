@@ -223,7 +223,7 @@ OPT = "|".join(sorted((re.escape(a.phrase) for a in ACTIONS), key=len, reverse=T
 VERB = "|".join(sorted({re.escape(a.verb) for a in ACTIONS}, key=len, reverse=True))
 LIMITS = (
     "the bank command and the speed are at their limits|the bank command is at its limit"
-    "|the speed is at its limit"
+    "|the speed is at its limit|the vertical command is at its limit"
 )
 MEETS = (
     r"meets intruder (?P<k>[^\s;,()]+) in (?P<t>\d+\.\d) s "
@@ -340,7 +340,9 @@ def flies_of(record: dict, child: dict, cfg: PlannerConfig) -> int:
     lo, hi = min(cfg.speed_mps[0], v), max(cfg.speed_mps[1], v)
     change = min(max(v + a.accel * commanded, lo), hi) - v
     accel = a.accel if commanded > 0 and abs(change) >= SPEED_SHARE * commanded else 0
-    return next(b.index for b in ACTIONS if (b.bank, b.accel, b.climb) == (bank, accel, a.climb))
+    vertical = own.get("vertical", 0)
+    climb = 0 if min(max(vertical + a.climb, -1), 1) == vertical else a.climb
+    return next(b.index for b in ACTIONS if (b.bank, b.accel, b.climb) == (bank, accel, climb))
 
 
 def _subject(ctx: Ctx, m: re.Match) -> dict | None:
@@ -362,12 +364,15 @@ def _near(value: float, said: str, half_unit: float) -> bool:
 
 def _limits_ok(asked: int, flown: int, said: str) -> bool:
     a, f = ACTIONS[asked], ACTIONS[flown]
-    differs = (("bank", a.bank != f.bank), ("speed", a.accel != f.accel))
+    differs = (
+        ("bank", a.bank != f.bank), ("speed", a.accel != f.accel), ("vertical", a.climb != f.climb)
+    )  # fmt: skip
     parts = [p for p, differ in differs if differ]
     expected = {
         ("bank",): "the bank command is at its limit",
         ("speed",): "the speed is at its limit",
         ("bank", "speed"): "the bank command and the speed are at their limits",
+        ("vertical",): "the vertical command is at its limit",
     }
     return expected.get(tuple(parts)) == said
 
@@ -808,6 +813,13 @@ def fast_runs(tmp: Path) -> list[Run]:
             tmp / "crossing",
         ),  # fmt: skip
         fly_recorded(scenario("head_on", avoidance=sims), "mcts", tmp / "head-on"),
+        # the vertical action set: climbs and descends, clamped when already under way
+        fly_recorded(
+            scenario("manoeuvring", seed=1, intruders={"count": 40},
+                     avoidance={"actions": "vertical", "max_steps": 40, **sims}),
+            "mcts",
+            tmp / "vertical",
+        ),  # fmt: skip
         fly_recorded(
             scenario("head_on", avoidance={"max_steps": 30, "mcts": {"depth": 3}}),
             "exhaustive",
@@ -887,6 +899,10 @@ def test_audit_at_scale(tmp_path):
             sc = scenario("manoeuvring", seed=seed, intruders={"count": count},
                           avoidance={"max_steps": 120})  # fmt: skip
             runs.append(fly_recorded(sc, "mcts", tmp_path / f"m{count}-{seed}"))
+    for seed in range(3):  # the vertical action set
+        sc = scenario("manoeuvring", seed=seed, intruders={"count": 40},
+                      avoidance={"actions": "vertical", "max_steps": 120})  # fmt: skip
+        runs.append(fly_recorded(sc, "mcts", tmp_path / f"vertical-{seed}"))
     for name in ("crossing_swarm", "head_on"):
         for seed in range(3):
             sc = scenario(name, seed=seed, avoidance={"max_steps": 120})

@@ -290,6 +290,7 @@ def decision_record(
             "speed": own.speed,
             "heading": own.heading,
             "bank": own.bank,
+            "vertical": own.vertical,  # the vertical command (+1 climbing, -1 descending)
         },
         # What the planner believed (SPEC §4): the track and how sure it was of it.
         "intruders": [
