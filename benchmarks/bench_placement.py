@@ -141,6 +141,8 @@ def main(argv: list[str] | None = None) -> None:
     a.add_argument("--layouts", type=int, default=50)
     a.add_argument("--part", type=int, default=0)
     a.add_argument("--parts", type=int, default=1)
+    w = sub.add_parser("timing", help="wall time of the d3qn planner (run on a quiet machine)")
+    w.add_argument("--layouts", type=int, default=5, help="per cell")
     r = sub.add_parser("report")
     r.add_argument("--plot", type=Path, default=None)
     r.add_argument("--json", type=Path, default=None)
@@ -156,6 +158,8 @@ def main(argv: list[str] | None = None) -> None:
         optima(args.minutes, args.layouts, args.part, args.parts)
     elif args.command == "evaluate":
         evaluate(args.models, args.layouts, args.part, args.parts)
+    elif args.command == "timing":
+        timing(args.layouts)
     elif args.command == "ablate":
         ablate(args.layouts, args.part, args.parts)
     else:
@@ -253,6 +257,24 @@ def ablate(layouts: int, part: int = 0, parts: int = 1) -> None:
             f.write(json.dumps(out) + "\n")
         if (n + 1) % 100 == 0:
             print(f"{n + 1}/{len(rows)} problems", flush=True)
+
+
+def timing(layouts: int) -> None:
+    """Wall time of the d3qn planner per layout, the first ``layouts`` of every cell (no exact
+    optimum needed): run it on a quiet machine; ``evaluate`` reports CPU time."""
+    net, _ = universal.load(universal.shipped_path("d3qn"))
+    policy = universal.NumpyPolicy(net)
+    walls = []
+    for access, environment, k, kind in cells():
+        for i in range(layouts):
+            users = problem(access, environment, k, kind, i)
+            env = ServiceEnv.from_scenario(problem_scenario(users, access, environment))
+            t0 = time.perf_counter()
+            universal.plan(policy, env)
+            walls.append(1e3 * (time.perf_counter() - t0))
+    w = np.array(walls)
+    print(f"d3qn planner wall time over {len(w)} layouts ({layouts} per cell): mean "
+          f"{w.mean():.1f} ms, 95th pct {np.percentile(w, 95):.1f} ms, max {w.max():.1f} ms")
 
 
 def summarise(rows: list[dict], results: list[dict]) -> dict[tuple, dict[str, float]]:
