@@ -19,7 +19,15 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from uavxai.avoidance.model import COLLISION, GOAL, NONE, OUT_OF_BOUNDS, Track
+from uavxai.avoidance.model import (
+    COLLISION,
+    GOAL,
+    NONE,
+    OUT_OF_BOUNDS,
+    Track,
+    bank_command,
+    vertical_command,
+)
 from uavxai.avoidance.types import ChildStats, Meeting, Ownship, PlannerConfig, SearchTree
 from uavxai.vocabulary import ACTIONS
 
@@ -175,13 +183,10 @@ def flies(action: int, own: Ownship, config: PlannerConfig) -> int | None:
     descending) keeps it."""
     a = ACTIONS[action]
     bank, accel, climb = a.bank, a.accel, a.climb
-    if climb and min(max(own.vertical + climb, -1), 1) == own.vertical:
+    if climb and vertical_command(own.vertical, action) == own.vertical:
         climb = 0
-    if bank:
-        lim = config.bank_limit_rad
-        cmd = min(max(own.bank + bank * config.bank_step_rad, -lim), lim)
-        if abs(cmd - own.bank) < 1e-9:
-            bank = 0
+    if bank and abs(float(bank_command(own.bank, action, config)) - own.bank) < 1e-9:
+        bank = 0
     if accel:
         commanded = config.accel_mps2 * config.action_hold_s
         lo, hi = min(config.speed_mps[0], own.speed), max(config.speed_mps[1], own.speed)
