@@ -110,6 +110,7 @@ class Episode:
         self.state = world.state()
         self.steps = 0
         self.min_separation_m = self.state.min_separation()
+        self.sample_separation_m = self.min_separation_m  # closest approach over the last sample
         self.decision_ms: list[float] = []
         self.sample_metrics: dict = {}  # per-sample values observers share (rates, users)
         self._overridden = False
@@ -171,6 +172,7 @@ class Episode:
             self.state = self.world.state()
             self.path.on_sample(self.state)
             sep = self.judge.separation(prev, self.state)
+            self.sample_separation_m = sep  # observers read it rather than judge again
             self.nmac = self.nmac or self.judge.nmac(prev, self.state)
             flown_min = min(flown_min, sep)
             self.min_separation_m = min(self.min_separation_m, sep)

@@ -95,10 +95,6 @@ class Trust(Observer):
     def __init__(self) -> None:
         self.errors: list[float] = []
         self._open: list[list[float]] = []  # [end time, predicted, flown so far]
-        self._prev: TrafficState | None = None
-
-    def on_start(self, ep: Episode) -> None:
-        self._prev = ep.state
 
     def on_decision(self, ep: Episode, event: DecisionEvent) -> None:
         d = event.decision
@@ -106,10 +102,9 @@ class Trust(Observer):
             self._open.append([event.t + d.branch_horizon_s, d.branch_min_separation_m, math.inf])
 
     def on_sample(self, ep: Episode, state: TrafficState) -> None:
-        prev, self._prev = self._prev, state
-        if not self._open or prev is None:
+        if not self._open:
             return
-        sep = ep.judge.separation(prev, state)  # the closest approach since the last sample
+        sep = ep.sample_separation_m  # the closest approach since the last sample
         for window in self._open:
             window[2] = min(window[2], sep)
         done = [w for w in self._open if state.t >= w[0] - 1e-9]
