@@ -325,6 +325,9 @@ class Avoidance(_Model):
     d_min_m: Annotated[float, Field(gt=0, le=10_000)] = 50.0
     goal_radius_m: Annotated[float, Field(gt=0, le=100_000)] = 50.0
     decision_period_s: Annotated[float, Field(gt=0, le=60)] = 1.0
+    # The planner's processing latency: its command, planned from the picture at t, reaches
+    # the autopilot at t + this (uavxai.sim.companion); 0 is the paper's instant decision.
+    decision_latency_s: Annotated[float, Field(ge=0, le=60)] = 0.0
     max_steps: Annotated[int, Field(ge=1, le=100_000)] = 400
     bank_limit_deg: Annotated[float, Field(gt=0, le=60)] = 30.0
     bank_step_deg: Annotated[float, Field(gt=0, le=60)] = 10.0
@@ -473,6 +476,14 @@ class Scenario(_Model):
             raise ValueError(
                 f"avoidance.decision_period_s = {period:g} s must be a whole number of "
                 f"trajectory samples (1 / dynamics.trajectory_hz = {1 / traj:g} s)"
+            )
+        latency = self.avoidance.decision_latency_s
+        lag = _whole_ticks(latency, tick) if latency > 0 else 0
+        if lag is None or lag % sample or not latency < period:
+            raise ValueError(
+                f"avoidance.decision_latency_s = {latency:g} s must be 0 or a whole number of "
+                f"trajectory samples (1 / dynamics.trajectory_hz = {1 / traj:g} s) shorter than "
+                f"avoidance.decision_period_s = {period:g} s"
             )
         timeout = self.bridge.command_timeout_s
         if not timeout > period:

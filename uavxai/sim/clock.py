@@ -33,6 +33,9 @@ class Clock:
     rate_hz: float  # integrator ticks per simulated second
     sample_ticks: int  # ticks between samples (trajectory rows, telemetry, judging)
     decision_ticks: int  # ticks between decisions, a multiple of sample_ticks
+    # ticks from a decision's picture to its command reaching the autopilot, a multiple of
+    # sample_ticks below decision_ticks (0: at once)
+    latency_ticks: int = 0
 
     @classmethod
     def from_scenario(cls, scenario: Scenario) -> Clock:
@@ -48,7 +51,15 @@ class Clock:
                 f"a whole number of trajectory samples (1 / {scenario.dynamics.trajectory_hz:g} "
                 "s); see docs/scenario.md."
             )
-        return cls(rate_hz=rate, sample_ticks=sample, decision_ticks=decision)
+        latency = scenario.avoidance.decision_latency_s
+        lag = whole_ticks(latency, tick, "avoidance.decision_latency_s") if latency > 0 else 0
+        if lag % sample or lag >= decision:
+            raise UserError(
+                f"avoidance.decision_latency_s = {latency:g} s must be a whole number of "
+                "trajectory samples shorter than avoidance.decision_period_s; see "
+                "docs/scenario.md."
+            )
+        return cls(rate_hz=rate, sample_ticks=sample, decision_ticks=decision, latency_ticks=lag)
 
     @property
     def dt(self) -> float:
@@ -61,3 +72,7 @@ class Clock:
     @property
     def samples_per_decision(self) -> int:
         return self.decision_ticks // self.sample_ticks
+
+    @property
+    def latency_samples(self) -> int:
+        return self.latency_ticks // self.sample_ticks

@@ -51,6 +51,7 @@ class DecisionEvent:
     intruders: list[Intruder]
     decision: Decision
     truth: TrafficState
+    applied_t: float | None = None  # when the command reached the autopilot (None: at t)
 
 
 @dataclass
@@ -114,12 +115,16 @@ class Episode:
         self.decision_ms: list[float] = []
         self.sample_metrics: dict = {}  # per-sample values observers share (rates, users)
         self._overridden = False
+        self._pending: tuple | None = None  # a decision on its way to the autopilot
+        self._planned: Decision | None = None  # its plan, when planned in-process
         self.nmac = False  # any near mid-air collision (the judge's cylinder) so far
         self.wall0 = time.perf_counter()
 
     # ---------------------------------------------------------------------------- phases
-    def decide(self) -> DecisionEvent:
-        """Plan from what the ownship knows now and send the command."""
+    def decide(self) -> DecisionEvent | None:
+        """Plan from what the ownship knows now and send the command; with a decision
+        latency the planner's command is only sent (and the event only raised) when it
+        reaches the autopilot, in :meth:`advance` (None here)."""
         state = self.state
         cmd = self.world.ownship_command()
         vertical = self.planner.config.vertical_of(cmd.get("alt_target_m"))
@@ -135,15 +140,40 @@ class Episode:
                 self.path.announce("operator override over, resuming the mission")
                 self.path.altitude(goal[2], state.t)
             decision = m.decide(self, own, intruders) if m is not None else None
+            if decision is None and self.clock.latency_ticks:
+                self._pending = (self.steps, state.t, own, intruders, state)
+                submit = getattr(self.planner, "submit", None)
+                if submit is not None:  # a companion: it plans while the world flies on
+                    submit(own, intruders, goal, step=self._leg_step())
+                else:  # in-process: plan now, apply later; the same decision either way
+                    self._planned = self.planner.plan(own, intruders, goal, step=self._leg_step())
+                self.steps += 1
+                return None
             if decision is None:  # the avoidance planner flies
                 decision = self.planner.plan(own, intruders, goal, step=self._leg_step())
                 self.path.send(decision, state.t)
-        self.decision_ms.append(decision.ms)
-        event = DecisionEvent(self.steps, state.t, own, intruders, decision, state)
         self.steps += 1
+        event = DecisionEvent(self.steps - 1, state.t, own, intruders, decision, state)
+        return self._decided(event)
+
+    def _decided(self, event: DecisionEvent) -> DecisionEvent:
+        self.decision_ms.append(event.decision.ms)
         for o in self.observers:
             o.on_decision(self, event)
         return event
+
+    def _arrive(self, send: bool) -> DecisionEvent:
+        """The pending decision reaches the autopilot now (``send``), or the episode ended
+        before it did: it is still recorded, as the planner made it."""
+        step, t, own, intruders, truth = self._pending
+        self._pending = None
+        if self._planned is not None:
+            decision, self._planned = self._planned, None
+        else:
+            decision = self.planner.result()
+        if send:
+            self.path.send(decision, self.state.t)
+        return self._decided(DecisionEvent(step, t, own, intruders, decision, truth, self.state.t))
 
     def _leg_step(self) -> int:
         """Decisions taken on the way to the current goal: the planner weighs its time-out
@@ -163,10 +193,13 @@ class Episode:
         decision.planner = f"{decision.planner} (advice, operator in command)"
         return decision
 
-    def advance(self, event: DecisionEvent) -> Outcome | None:
-        """Fly one decision period sample by sample, judging each; the outcome or None."""
+    def advance(self, event: DecisionEvent | None) -> Outcome | None:
+        """Fly one decision period sample by sample, judging each; the outcome or None.
+        A pending decision (``event`` None) is applied after the latency's samples."""
         flown_min, outcome = math.inf, None
-        for _ in range(self.clock.samples_per_decision):
+        for k in range(self.clock.samples_per_decision):
+            if self._pending is not None and k == self.clock.latency_samples:
+                event = self._arrive(send=True)
             prev = self.state
             self.world.step(self.clock.sample_ticks)
             self.state = self.world.state()
@@ -183,6 +216,8 @@ class Episode:
                 outcome = self.mission.outcome
             if outcome is not None:
                 break
+        if self._pending is not None:
+            event = self._arrive(send=False)
         for o in self.observers:
             o.on_period(self, event, flown_min)
         return outcome

@@ -71,6 +71,8 @@ class DecisionsJSONL(Observer):
         from uavxai.xai.explain import decision_record
 
         record = decision_record(event.t, event.own, event.intruders, event.decision)
+        if event.applied_t is not None:  # the planner's latency: when its command arrived
+            record["applied_t"] = round(event.applied_t, 3)
         truth = event.truth  # the same instant as it really was, beside the belief
         record["truth"] = [
             {"id": truth.ids[i], **_xyzv(truth.pos[i], truth.vel[i])} for i in range(1, truth.n)

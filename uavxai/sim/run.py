@@ -100,13 +100,16 @@ def run_episode(
     from uavxai.avoidance.planners import make_planner
     from uavxai.avoidance.types import PlannerConfig
     from uavxai.comms.channel import Channel
+    from uavxai.sim.companion import Companion
     from uavxai.sim.observers import TrajectoryCSV
 
     sc = scenario
     goal = episode_goal(sc, service.service_point)
-    planner = make_planner(
-        sc.avoidance.planner, PlannerConfig.from_scenario(sc), checkpoint=sc.avoidance.checkpoint
-    )
+    config, checkpoint = PlannerConfig.from_scenario(sc), sc.avoidance.checkpoint
+    if sc.avoidance.decision_latency_s > 0:  # it may think while the world flies: own core
+        planner = Companion(sc.avoidance.planner, config, checkpoint)
+    else:
+        planner = make_planner(sc.avoidance.planner, config, checkpoint=checkpoint)
     observers = [
         Throughput(Channel.from_scenario(sc, users=service.users), service.power_w),
         Energy(),
@@ -127,15 +130,19 @@ def run_episode(
         observers.append(Pacing(realtime))
     if progress is not None:
         observers.append(ProgressBar(progress, sc.name, sc.avoidance.max_steps))
-    result = fly(
-        sc,
-        planner,
-        goal,
-        dynamics="jsbsim",
-        path=mavlink_path(sc, mavlink if mavlink is not None else sc.bridge.mavlink),
-        observers=observers,
-        mission=mission,
-    )
+    try:
+        result = fly(
+            sc,
+            planner,
+            goal,
+            dynamics="jsbsim",
+            path=mavlink_path(sc, mavlink if mavlink is not None else sc.bridge.mavlink),
+            observers=observers,
+            mission=mission,
+        )
+    finally:
+        if isinstance(planner, Companion):
+            planner.close()
     summary = result.summary
     summary.update(service.to_summary())
     summary["goal_is_service_point"] = sc.ownship.goal is None

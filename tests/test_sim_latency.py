@@ -1,0 +1,152 @@
+"""A planner with a processing latency, and the companion process it may run in.
+
+`avoidance.decision_latency_s`: the command planned from the picture at t reaches the
+autopilot at t + latency. `uavxai run` then plans on a companion process (its own core);
+`uavxai evaluate` plans in-process; both fly the same episode.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from pathlib import Path
+
+import pytest
+import yaml
+
+from uavxai.avoidance.planners import make_planner
+from uavxai.avoidance.types import Intruder, Ownship, PlannerConfig
+from uavxai.cli import main
+from uavxai.errors import UserError
+from uavxai.scenario import default_scenario
+from uavxai.sim.build import fly
+from uavxai.sim.clock import Clock
+from uavxai.sim.companion import Companion
+from uavxai.sim.episode import Observer
+
+LAT = {
+    "name": "latency-eq",
+    "seed": 5,
+    "intruders": {"count": 8},
+    "comms": {"fading": "none"},
+    "service": {"planner": "grid", "steps": 10, "platform": "hover"},
+    "avoidance": {"max_steps": 40, "decision_latency_s": 0.5},
+    "mission": {"service_s": 0},
+    "log": {"rerun": False},
+}
+
+
+def test_run_on_a_companion_and_evaluate_in_process_fly_the_same_episode(tmp_path: Path) -> None:
+    """With a latency, `run` plans on a companion process and sends MAVLink bytes; evaluate
+    plans in-process and commands directly: same outcome, steps and separation (1 mm), and
+    every command is applied half a second after the picture it was planned from."""
+    path = tmp_path / "lat.yaml"
+    path.write_text(yaml.safe_dump(LAT))
+    assert main(["run", str(path), "--out", str(tmp_path / "run")]) == 0
+    assert main(
+        ["evaluate", str(path), "--methods", "mcts", "--intruders", "8", "--episodes", "1",
+         "--dynamics", "jsbsim", "--out", str(tmp_path / "ev")]
+    ) == 0  # fmt: skip
+    run = json.loads((tmp_path / "run" / "summary.json").read_text())
+    lines = (tmp_path / "ev" / "episodes.csv").read_text().splitlines()
+    ev = dict(zip(lines[0].split(","), lines[1].split(","), strict=True))
+    assert run["bridge"]["commands"] >= run["steps"]  # really through MAVLink
+    assert (ev["outcome"], int(ev["steps"])) == (run["outcome"], run["steps"])
+    assert float(ev["min_separation_m"]) == pytest.approx(run["min_separation_m"], abs=1e-3)
+    records = [json.loads(x) for x in (tmp_path / "run" / "decisions.jsonl").open()]
+    assert len(records) == run["steps"]
+    for r in records:
+        assert r["applied_t"] == pytest.approx(r["t"] + 0.5, abs=1e-6)
+
+
+class _BankAt(Observer):
+    """The ownship's bank command at every sample, and each decision's picture time."""
+
+    def __init__(self) -> None:
+        self.bank: list[tuple[float, float]] = []
+        self.decided: list[tuple[float, float]] = []
+
+    def on_sample(self, ep, state) -> None:
+        self.bank.append((state.t, ep.world.ownship_command()["bank_cmd_rad"]))
+
+    def on_decision(self, ep, event) -> None:
+        self.decided.append((event.t, event.decision.bank_cmd_rad))
+
+
+def _fly_kinematic(latency: float) -> _BankAt:
+    sc = default_scenario(
+        "lat-k",
+        seed=2,
+        intruders={"count": 12, "behaviour": "random_turns"},
+        ownship={"goal": [1000, 1000, 120]},
+        avoidance={"max_steps": 25, "decision_latency_s": latency},
+    )
+    seen = _BankAt()
+    fly(sc, make_planner("mcts", PlannerConfig.from_scenario(sc)), (1000, 1000, 120),
+        dynamics="kinematic", observers=[seen])  # fmt: skip
+    return seen
+
+
+def test_the_command_reaches_the_autopilot_after_the_latency() -> None:
+    """Up to t + latency the autopilot still flies the previous command; after it the new
+    one. The first decision (from the same picture) is the same either way."""
+    lagged, prompt = _fly_kinematic(0.5), _fly_kinematic(0.0)
+    assert lagged.decided[0] == prompt.decided[0]
+    changes = 0
+    for (t, cmd), (t_next, _) in zip(lagged.decided, lagged.decided[1:], strict=False):
+        # samples are taken after each step: the one at t + 0.5 was flown before it arrived
+        before = [b for s, b in lagged.bank if t < s < t + 0.5 + 1e-9]
+        after = [b for s, b in lagged.bank if t + 0.5 + 1e-9 < s < t_next + 1e-9]
+        assert after and all(b == pytest.approx(cmd) for b in after)
+        if before and not math.isclose(before[0], cmd):
+            changes += 1  # the old command was still flying
+    assert changes >= 1  # the test saw at least one command change arrive late
+
+
+def test_companion_plans_what_the_planner_plans_in_process() -> None:
+    config = PlannerConfig()
+    own = Ownship(1000, 1000, 120, 20, 0.0)
+    intruders = [Intruder(1, 1000, 1400, 120, 0, -20, 0), Intruder(2, 1300, 1200, 125, -15, 0, 0)]
+    local = make_planner("mcts", config)
+    local.reset(7)
+    with Companion("mcts", config) as remote:
+        remote.reset(7)
+        assert remote._proc.pid != os.getpid()  # noqa: SLF001 - it is another process
+        for step in range(3):
+            a = local.plan(own, intruders, (1000, 1900, 120), step=step)
+            remote.submit(own, intruders, (1000, 1900, 120), step=step)
+            b = remote.result()
+            assert (a.action, a.bank_cmd_rad, a.accel_mps2) == (
+                b.action,
+                b.bank_cmd_rad,
+                b.accel_mps2,
+            )
+            assert [c.q for c in a.children] == [c.q for c in b.children]
+            assert b.explanation == a.explanation
+
+
+def test_companion_reports_failures_by_name() -> None:
+    with pytest.raises(UserError, match="unknown avoidance planner 'nope'"):
+        Companion("nope", PlannerConfig()).reset(0)
+    with Companion("mcts", PlannerConfig()) as remote:
+        with pytest.raises(RuntimeError, match="failed to plan"):
+            remote.plan("not an ownship", [], (0, 0, 0))  # type: ignore[arg-type]
+        with pytest.raises(RuntimeError, match="nothing submitted"):
+            remote.result()
+        remote.reset(1)  # still serving after a failed request
+
+
+@pytest.mark.parametrize(
+    ("latency", "why"),
+    [(0.05, "whole number of trajectory samples"), (1.0, "shorter than"), (-0.1, "greater")],
+)
+def test_latency_must_be_whole_samples_below_the_period(latency: float, why: str) -> None:
+    with pytest.raises(UserError, match=why):
+        default_scenario("bad", avoidance={"decision_latency_s": latency})
+
+
+def test_clock_counts_the_latency_in_samples() -> None:
+    c = Clock.from_scenario(default_scenario("c", avoidance={"decision_latency_s": 0.3}))
+    assert (c.latency_ticks, c.latency_samples) == (36, 3)
+    assert Clock.from_scenario(default_scenario("c")).latency_samples == 0
