@@ -207,11 +207,17 @@ _NO_INTRUDERS.flags.writeable = False
 
 
 def turn_positions(
-    pos: np.ndarray, vel: np.ndarray, t: np.ndarray, turn_rate: np.ndarray | None = None
+    pos: np.ndarray,
+    vel: np.ndarray,
+    t: np.ndarray,
+    turn_rate: np.ndarray | None = None,
+    wind: tuple[float, float] = (0.0, 0.0),
 ) -> np.ndarray:
     """(T, N, 3) positions at times ``t`` (T,) of aircraft now at ``pos`` (N, 3) with
-    velocity ``vel`` (N, 3), turning at ``turn_rate`` (N,) rad/s clockwise (None: straight)
-    at constant speed and climb rate."""
+    ground velocity ``vel`` (N, 3), turning at ``turn_rate`` (N,) rad/s clockwise (None:
+    straight) at constant speed and climb rate. The turn is through the air mass, which the
+    steady ``wind`` (east, north, m/s) carries: the air-relative velocity rotates, the wind
+    drifts the circle over the ground (the tracker's frame, :mod:`uavxai.surveillance.tracker`)."""
     pos, vel = np.asarray(pos, dtype=float), np.asarray(vel, dtype=float)
     t = np.asarray(t, dtype=float)
     if turn_rate is None or not np.any(turn_rate):
@@ -220,8 +226,11 @@ def turn_positions(
     # v(s) = v0 e^{-i w s} (clockwise in the x + iy plane); its integral to t is
     # v0 t e^{-i w t / 2} sinc(w t / 2 pi), exact and smooth through w = 0.
     wt = w * t[:, None]
-    v0 = vel[:, 0] + 1j * vel[:, 1]
+    drift = complex(*wind)
+    v0 = vel[:, 0] + 1j * vel[:, 1] - drift  # through the air
     dxy = v0[None, :] * t[:, None] * np.exp(-0.5j * wt) * np.sinc(wt / (2.0 * np.pi))
+    if drift:
+        dxy = dxy + drift * t[:, None]
     out = np.empty((t.size, pos.shape[0], 3))
     out[:, :, 0] = pos[None, :, 0] + dxy.real
     out[:, :, 1] = pos[None, :, 1] + dxy.imag
@@ -275,13 +284,14 @@ def intruder_margin(
         return None
     limit = math.radians(config.intruder_bank_limit_deg)
     horizon = config.reach_horizon_s
+    air = np.asarray(vel, dtype=float) - np.array([*config.wind_mps, 0.0])
 
     def margin(t: np.ndarray) -> np.ndarray:
         out = np.zeros((t.size, n))
         if uncertain:
             out += k * np.sqrt(sm[None] ** 2 + (sv[None] * t[:, None]) ** 2)
-        if reach:
-            out += manoeuvre_spread(vel, turn_rate, np.minimum(t, horizon), limit)
+        if reach:  # turns differ through the air: the wind carries all of them alike
+            out += manoeuvre_spread(air, turn_rate, np.minimum(t, horizon), limit)
         return out
 
     return margin
@@ -460,7 +470,8 @@ class EncounterModel:
         t = t0 + (duration / n) * np.arange(n + 1)
         distance = self.reach(0.0, duration) + self.config.d_min_m if index else 0.0
         extra = None if margin is None else margin(t)
-        return Track.of(turn_positions(pos, vel, t, turn_rate), distance, extra)
+        wind = self.config.wind_mps
+        return Track.of(turn_positions(pos, vel, t, turn_rate, wind), distance, extra)
 
     def reach(self, speed: float, duration: float) -> float:
         """The farthest (3-D) an ownship at ``speed`` can get from its start in ``duration``."""

@@ -21,6 +21,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from uavxai.avoidance.types import Intruder
 from uavxai.bridges.framing import FrameReader
 from uavxai.bridges.protocol import MessagePacker, new_codec
+from uavxai.dynamics.environment import EnvironmentConfig
 from uavxai.dynamics.geodesy import LocalFrame
 from uavxai.dynamics.state import TrafficState
 from uavxai.scenario import Scenario
@@ -73,7 +74,8 @@ class Picture(Observer):
     def __init__(self, scenario: Scenario, forward: Callable[[bytes], None] | None = None):
         self.config = SurveillanceConfig.from_scenario(scenario)
         seed = int(np.random.SeedSequence(scenario.seed, spawn_key=(_STREAM,)).generate_state(1)[0])
-        self.surveillance = SurveillancePicture(self.config, seed)
+        wind = EnvironmentConfig.from_scenario(scenario).wind_enu[:2]  # tracked in the air mass
+        self.surveillance = SurveillancePicture(self.config, seed, wind_mps=wind)
         frame = LocalFrame.from_origin(scenario.world.origin)
         self.link = AdsbLink(frame, self.config, scenario.bridge.system_id, forward)
 

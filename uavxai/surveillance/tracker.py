@@ -16,6 +16,15 @@ their covariance growing, and are dropped once their last measurement is older t
 ``max_age_s``. The answer is a list of :class:`uavxai.avoidance.types.Intruder` with
 ``turn_rate``, ``sigma_m``, ``sigma_v`` and ``age_s`` filled in.
 
+In wind the filter runs in the frame of the air mass (``Tracker(wind_mps=...)``, the steady
+wind of ``environment.wind``): an aircraft turns at a constant rate through the air, so its
+air-relative velocity rotates uniformly while its ground track is a trochoid that no
+constant-turn model over the ground fits. Reports are moved into the air mass (position less
+the wind's drift since t = 0, velocity less the wind) and beliefs back (the drift and the wind
+added), so beliefs are over the ground as before, with ``turn_rate`` the air-relative one
+(the aircraft's heading rate, g tan(bank) / airspeed); the planner's model predicts the same
+way (:func:`uavxai.avoidance.model.turn_positions` with its wind).
+
 Why not filterpy: its EKF class would only hold the same matrices, its IMM works on linear
 filters, and the whole filter is a few numpy lines here.
 """
@@ -24,7 +33,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -216,16 +225,23 @@ class Track:
 
 
 class Tracker:
-    """All tracks, by intruder id."""
+    """All tracks, by intruder id; ``wind_mps`` (east, north): the steady wind, tracked in
+    the air mass's frame (module docstring)."""
 
-    def __init__(self, config: TrackerConfig | None = None) -> None:
+    def __init__(
+        self, config: TrackerConfig | None = None, wind_mps: tuple[float, float] = (0.0, 0.0)
+    ) -> None:
         self.config = config or TrackerConfig()
+        self.wind = np.array([float(wind_mps[0]), float(wind_mps[1]), 0.0])
+        self._windy = bool(np.any(self.wind))
         self.tracks: dict[str, Track] = {}
         self.ignored = 0  # reports older than their track (out of order)
         self.dropped: list[str] = []  # ids of tracks dropped as stale, in order
 
     def update(self, reports: Iterable[Report]) -> None:
         for r in sorted(reports, key=lambda r: r.t_measured):
+            if self._windy:
+                r = self._into_air(r)
             track = self.tracks.get(r.id)
             if track is None:
                 self.tracks[r.id] = Track(r, self.config)
@@ -242,7 +258,18 @@ class Tracker:
         """Every live track predicted to ``t`` (stale ones are dropped first), in id order
         of first appearance."""
         self.prune(t)
-        return [tr.belief(t) for tr in self.tracks.values()]
+        beliefs = [tr.belief(t) for tr in self.tracks.values()]
+        return [self._over_ground(b, t) for b in beliefs] if self._windy else beliefs
+
+    def _into_air(self, r: Report) -> Report:
+        """A report moved into the air mass: where it was less the drift since t = 0."""
+        vel = None if r.vel is None else np.asarray(r.vel, dtype=float) - self.wind
+        return replace(r, pos=np.asarray(r.pos, dtype=float) - self.wind * r.t_measured, vel=vel)
+
+    def _over_ground(self, b: Intruder, t: float) -> Intruder:
+        """A belief in the air mass back over the ground at ``t``."""
+        we, wn = float(self.wind[0]), float(self.wind[1])
+        return replace(b, x=b.x + we * t, y=b.y + wn * t, vx=b.vx + we, vy=b.vy + wn)
 
 
 def truth_beliefs(state: TrafficState) -> list[Intruder]:
@@ -281,10 +308,11 @@ class SurveillancePicture:
         config: SurveillanceConfig | None = None,
         seed: int = 0,
         tracker: TrackerConfig | None = None,
+        wind_mps: tuple[float, float] = (0.0, 0.0),
     ) -> None:
         self.config = config or SurveillanceConfig()
         self.surveillance = Surveillance(self.config, seed)
-        self.tracker = Tracker(tracker)
+        self.tracker = Tracker(tracker, wind_mps)
         self.last_reports: list[Report] = []
         self._t_observed: float | None = None
 
