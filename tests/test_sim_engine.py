@@ -171,3 +171,24 @@ def test_the_planner_believes_what_the_adsb_frames_on_the_link_carry(tmp_path: P
         on_link.add((ident, round(float(x), 2), round(float(y), 2)))
     assert set(decoded) <= on_link  # everything the planner decoded went out on the link
     assert len(received) >= len(decoded)
+
+
+def test_judge_nmac_shortcut_by_separation_never_changes_the_answer() -> None:
+    """The NMAC test skips the cylinder when the closest approach is beyond its corner; over
+    random sample pairs (many near the cylinder's edge) the answer is the full test's."""
+    from uavxai.dynamics.state import TrafficState
+
+    judge = Judge(default_scenario("n").world, 50.0, None, 50.0)
+    rng = np.random.default_rng(4)
+    ids = ("ownship", *(f"intruder-{i}" for i in range(1, 9)))
+    inside = 0
+    for _ in range(400):
+        p0 = rng.uniform(-200, 200, (9, 3))
+        p1 = p0 + rng.uniform(-30, 30, (9, 3))
+        z = np.zeros((9, 3))
+        a = TrafficState(0.0, ids, p0, z, z, np.ones(9))
+        b = TrafficState(0.1, ids, p1, z, z, np.ones(9))
+        full = judge.nmac(a, b)
+        assert judge.nmac(a, b, judge.separation(a, b)) == full
+        inside += full
+    assert 50 < inside < 350  # both answers were exercised

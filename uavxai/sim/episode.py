@@ -206,7 +206,7 @@ class Episode:
             self.path.on_sample(self.state)
             sep = self.judge.separation(prev, self.state)
             self.sample_separation_m = sep  # observers read it rather than judge again
-            self.nmac = self.nmac or self.judge.nmac(prev, self.state)
+            self.nmac = self.nmac or self.judge.nmac(prev, self.state, sep)
             flown_min = min(flown_min, sep)
             self.min_separation_m = min(self.min_separation_m, sep)
             for o in self.observers:

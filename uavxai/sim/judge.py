@@ -34,9 +34,16 @@ class Judge:
         self.goal_radius_m = goal_radius_m
         self.nmac_m = nmac_m
 
-    def nmac(self, prev: TrafficState, now: TrafficState) -> bool:
+    def nmac(
+        self, prev: TrafficState, now: TrafficState, separation_m: float | None = None
+    ) -> bool:
         """Did any intruder come inside the NMAC cylinder between two samples (both moving
-        linearly, :func:`uavxai.metrics.nmac`)?"""
+        linearly, :func:`uavxai.metrics.nmac`)? ``separation_m``, the closest approach over
+        the same samples (:meth:`separation`), if known: beyond the cylinder's corner nobody
+        can be inside it, and most samples end there without solving the cylinder."""
+        h, v = self.nmac_m
+        if separation_m is not None and separation_m > math.hypot(h, v):
+            return False
         if now.n < 2 or prev.ids != now.ids:
             prev = now  # a replaced row: judge the newcomer where it is
         own = np.stack([prev.pos[0], now.pos[0]])
