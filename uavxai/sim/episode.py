@@ -121,9 +121,7 @@ class Episode:
     def decide(self) -> DecisionEvent:
         """Plan from what the ownship knows now and send the command."""
         state = self.state
-        cmd = self.world.ownship_command()
-        vertical = self.planner.config.vertical_of(cmd.get("alt_target_m"))
-        own = ownship_view(state, cmd["bank_cmd_rad"], vertical)
+        own = self.ownship()
         intruders = self.picture(state)
         m = self.mission
         goal = m.goal if m is not None else self.goal
@@ -144,6 +142,13 @@ class Episode:
         for o in self.observers:
             o.on_decision(self, event)
         return event
+
+    def ownship(self) -> Ownship:
+        """The ownship as the planner sees it now (:func:`ownship_view` of the autopilot's
+        commands)."""
+        cmd = self.world.ownship_command()
+        vertical = self.planner.config.vertical_of(cmd.get("alt_target_m"))
+        return ownship_view(self.state, cmd["bank_cmd_rad"], vertical)
 
     def _leg_step(self) -> int:
         """Decisions taken on the way to the current goal: the planner weighs its time-out
