@@ -1,4 +1,4 @@
-"""Collision rates among manoeuvring traffic (issue 11), on the kinematic encounter model.
+"""Collision rates among manoeuvring traffic (issue 11), on the engine's kinematic world.
 
 Each episode: the default scenario's ownship start and goal, ``--intruders`` intruders drawn
 with the episode's seed, flying ``--behaviour`` (``random_turns``: a bank within +-30 deg held
@@ -18,15 +18,13 @@ worth 0).
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import time
 
 import numpy as np
 
-from uavxai.avoidance.episode import EncounterEnv, default_goal, episode_intruders
-from uavxai.avoidance.model import PHI, G, V
 from uavxai.avoidance.planners import make_planner
 from uavxai.avoidance.types import PlannerConfig
+from uavxai.learning.env import EncounterEnv, episode_intruders
 from uavxai.metrics import rate, risk_ratio
 from uavxai.scenario import default_scenario
 
@@ -38,16 +36,12 @@ def episode(method: str, scenario, seed: int, n: int) -> tuple[str, float, list[
     cfg = PlannerConfig.from_scenario(scenario, seed=seed, **over)
     planner = make_planner("mcts" if method == "mcts_paper" else method, cfg)
     planner.reset(seed)
-    goal = default_goal(scenario)
-    env = EncounterEnv(cfg, episode_intruders(scenario, seed, n), goal, scenario.ownship.start,
-                       scenario=scenario)  # fmt: skip
+    env = EncounterEnv(scenario, intruders=episode_intruders(scenario, seed, n))
     env.reset(seed=seed)
     min_sep, ms = np.inf, []
     while not env.outcome:
-        w = G * np.tan(env.traffic[:, PHI]) / env.traffic[:, V]
-        seen = [dataclasses.replace(i, turn_rate=float(r)) for i, r in zip(
-            env.intruders, w, strict=True)]  # fmt: skip
-        d = planner.plan(env.ownship, seen, goal, step=env.steps)
+        # the truth picture: every intruder's exact state and turn rate g tan(phi) / V
+        d = planner.plan(env.ownship, env.intruders, env.goal, step=env.steps)
         *_, info = env.step(d.action)
         ms.append(d.ms)
         min_sep = min(min_sep, info["min_separation_m"])
@@ -62,7 +56,7 @@ def main() -> None:
     ap.add_argument("--behaviour", default="random_turns")
     ap.add_argument("--methods", default="mcts,mcts_paper,mvp,none")
     args = ap.parse_args()
-    scenario = default_scenario(intruders={"behaviour": args.behaviour})
+    scenario = default_scenario(intruders={"behaviour": args.behaviour, "flow": "none"})
     seeds = range(args.first_seed, args.first_seed + args.episodes)
     methods = args.methods.split(",")
     results = {}

@@ -22,15 +22,16 @@ import time
 import numpy as np
 
 from uavxai.avoidance import PlannerConfig, make_planner
-from uavxai.avoidance.episode import EncounterEnv, default_goal, episode_intruders
 from uavxai.avoidance.types import Ownship
+from uavxai.learning.env import default_goal, episode_intruders
 from uavxai.scenario import default_scenario
 from uavxai.sim.build import run_kinematic as run_episode
+from uavxai.sim.kinematic import KinematicWorld
+from uavxai.surveillance.tracker import truth_beliefs
 
 
 def encounters(scenario, count: int, n_intruders: int) -> list[tuple[Ownship, list, tuple]]:
     """Seeded encounters: (ownship, intruders, goal)."""
-    cfg = PlannerConfig.from_scenario(scenario)
     goal = default_goal(scenario)
     out = []
     for seed in range(count):
@@ -43,9 +44,8 @@ def encounters(scenario, count: int, n_intruders: int) -> list[tuple[Ownship, li
             heading=float(rng.uniform(0, 2 * math.pi)),
             bank=math.radians(float(rng.choice([-20, -10, 0, 10, 20]))),
         )
-        env = EncounterEnv(cfg, episode_intruders(scenario, seed, n_intruders), goal, own)
-        env.reset(seed=seed)
-        out.append((own, env.intruders, goal))
+        with KinematicWorld(scenario, episode_intruders(scenario, seed, n_intruders)) as world:
+            out.append((own, truth_beliefs(world.state()), goal))
     return out
 
 

@@ -1,4 +1,5 @@
-"""The kinematic episode runner, its Gymnasium environment and the planner factory."""
+"""The kinematic episode runner, the engine as a Gymnasium environment and the planner
+factory."""
 
 from __future__ import annotations
 
@@ -9,10 +10,10 @@ import numpy as np
 import pytest
 
 from uavxai.avoidance import Ownship, PlannerConfig, make_planner
-from uavxai.avoidance.episode import EncounterEnv, default_goal
 from uavxai.avoidance.observation import observation_size, observe
 from uavxai.avoidance.planners import PLANNERS
 from uavxai.errors import UserError
+from uavxai.learning.env import EncounterEnv, default_goal
 from uavxai.scenario import IntruderSpec, default_scenario
 from uavxai.sim.build import run_kinematic as run_episode
 
@@ -61,9 +62,14 @@ def test_kinematic_predictions_match_what_is_flown():
     assert r.separation_error_m and max(r.separation_error_m) < 0.2
 
 
+def encounter(intruders, goal, start: Ownship, **avoidance) -> EncounterEnv:
+    """The engine's env on the default scenario, with these intruders, goal and start."""
+    sc = default_scenario("env-test", avoidance=avoidance)
+    return EncounterEnv(sc, intruders=intruders, goal=goal, start=start)
+
+
 def test_env_goal_reward_and_termination():
-    cfg = PlannerConfig()
-    env = EncounterEnv(cfg, [], (1000.0, 1100.0, 120.0), Ownship(1000, 1000, 120, 20, 0.0))
+    env = encounter([], (1000.0, 1100.0, 120.0), Ownship(1000, 1000, 120, 20, 0.0))
     obs, info = env.reset(seed=0)
     assert obs.shape == env.observation_space.shape and info["distance_m"] == pytest.approx(100)
     rewards, done = [], False
@@ -79,9 +85,7 @@ def test_env_goal_reward_and_termination():
 
 
 def test_env_time_out_is_a_truncation_worth_0_1():
-    env = EncounterEnv(
-        PlannerConfig(max_steps=3), [], (1900.0, 1900.0, 120.0), Ownship(100, 100, 120, 20, 0.8)
-    )
+    env = encounter([], (1900.0, 1900.0, 120.0), Ownship(100, 100, 120, 20, 0.8), max_steps=3)
     env.reset(seed=0)
     for _ in range(3):
         *_, reward, terminated, truncated, info = env.step(HOLD)
@@ -91,7 +95,7 @@ def test_env_time_out_is_a_truncation_worth_0_1():
 
 def test_env_collision_and_leaving_the_area():
     head_on = [IntruderSpec(x=1000, y=1150, h=120, heading_deg=180, speed_mps=20)]
-    env = EncounterEnv(PlannerConfig(), head_on, (1000, 1900, 120), Ownship(1000, 1000, 120, 20, 0))
+    env = encounter(head_on, (1000, 1900, 120), Ownship(1000, 1000, 120, 20, 0))
     env.reset(seed=0)
     for _ in range(5):
         _, reward, terminated, _, info = env.step(HOLD)
@@ -99,21 +103,20 @@ def test_env_collision_and_leaving_the_area():
             break
     assert info["outcome"] == "collision" and reward == 0.0
     assert info["min_separation_m"] < 50.0
-    env = EncounterEnv(PlannerConfig(), [], (1000, 1000, 120), Ownship(1990, 500, 120, 20, 1.57))
+    env = encounter([], (1000, 1000, 120), Ownship(1990, 500, 120, 20, 1.57))
     env.reset(seed=0)
     *_, reward, terminated, _, info = env.step(HOLD)
     assert terminated and info["outcome"] == "out_of_bounds" and reward == 0.0
 
 
-def test_turning_intruders_need_their_scenario():
+def test_turning_intruders_turn():
     turning = [IntruderSpec(x=500, y=500, h=120, heading_deg=0, speed_mps=20,
                             behaviour="random_turns")]  # fmt: skip
-    env = EncounterEnv(PlannerConfig(), turning, (1000, 1000, 120), Ownship(100, 100, 120, 20, 0))
-    with pytest.raises(UserError, match="scenario"):
-        env.reset(seed=0)
-    sc = small_scenario()
     env = EncounterEnv(
-        PlannerConfig(), turning, (1000, 1000, 120), Ownship(100, 100, 120, 20, 0), scenario=sc
+        small_scenario(),
+        intruders=turning,
+        goal=(1000, 1000, 120),
+        start=Ownship(100, 100, 120, 20, 0),
     )
     env.reset(seed=0)
     headings = []
@@ -205,7 +208,7 @@ def test_mcts_avoids_what_flying_straight_runs_into():
 def test_env_passes_the_gymnasium_checker():
     from gymnasium.utils.env_checker import check_env
 
-    env = EncounterEnv.from_scenario(small_scenario(), n_intruders=8)
+    env = EncounterEnv(small_scenario(), n_intruders=8)
     check_env(env, skip_render_check=True)
     a, _ = env.reset(seed=4)
     b, _ = env.reset(seed=4)

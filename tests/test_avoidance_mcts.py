@@ -10,9 +10,11 @@ import pytest
 
 from uavxai.avoidance import Intruder, MCTSPlanner, Ownship, PlannerConfig
 from uavxai.avoidance.direct import DirectPlanner
-from uavxai.avoidance.episode import EncounterEnv
 from uavxai.avoidance.model import TIMEOUT
-from uavxai.scenario import IntruderSpec
+from uavxai.learning.env import EncounterEnv
+from uavxai.scenario import IntruderSpec, default_scenario
+from uavxai.sim.kinematic import KinematicWorld
+from uavxai.surveillance.tracker import truth_beliefs
 
 NORTH = 0.0
 
@@ -31,11 +33,18 @@ ENCOUNTERS = {
     "overtaking": (Ownship(1000, 300, 120, 25, NORTH), [spec(1000, 420, 0, 13)]),
 }
 GOAL = (1000.0, 1800.0, 120.0)
+SCENARIO = default_scenario("mcts-test")
+
+
+def seen(specs: list[IntruderSpec]) -> list[Intruder]:
+    """The intruders as the engine's truth picture shows them at the start."""
+    with KinematicWorld(SCENARIO, intruders=specs) as world:
+        return truth_beliefs(world.state())
 
 
 def fly(planner, own: Ownship, intruders, steps: int) -> tuple[str, float]:
     """Closed loop on the kinematic model: (outcome or '', minimum separation)."""
-    env = EncounterEnv(planner.config, intruders, GOAL, own)
+    env = EncounterEnv(SCENARIO, intruders=intruders, goal=GOAL, start=own)
     env.reset(seed=0)
     min_sep = math.inf
     for _ in range(steps):
@@ -61,9 +70,7 @@ def test_mcts_avoids_what_flying_straight_hits(name):
 @pytest.mark.parametrize("name", list(ENCOUNTERS))
 def test_first_decision_turns_or_slows_away_and_says_why(name):
     own, specs = ENCOUNTERS[name]
-    intruders = EncounterEnv(PlannerConfig(), specs, GOAL, own)
-    intruders.reset(seed=0)
-    decision = MCTSPlanner(PlannerConfig(seed=2)).plan(own, intruders.intruders, GOAL)
+    decision = MCTSPlanner(PlannerConfig(seed=2)).plan(own, seen(specs), GOAL)
     by_action = {c.action: c for c in decision.children}
     hold = by_action[4]
     chosen = by_action[decision.action]
@@ -163,9 +170,7 @@ def test_decision_is_complete_and_serialisable():
 
 def test_collision_share_and_pruned_tree_agree_with_the_raw_tree():
     own, specs = ENCOUNTERS["head-on"]
-    env = EncounterEnv(PlannerConfig(), specs, GOAL, own)
-    env.reset(seed=0)
-    d = MCTSPlanner(PlannerConfig(seed=3)).plan(own, env.intruders, GOAL)
+    d = MCTSPlanner(PlannerConfig(seed=3)).plan(own, seen(specs), GOAL)
     tree = d.tree
     collided = np.zeros(9)
     for node in np.flatnonzero((tree.terminal == 2) & (tree.visits > 0)):

@@ -93,8 +93,8 @@ def test_registered_and_complete_decision():
 
 
 def test_mvp_avoids_a_head_on_in_closed_loop():
-    from uavxai.avoidance.episode import EncounterEnv
-    from uavxai.scenario import IntruderSpec
+    from uavxai.learning.env import EncounterEnv
+    from uavxai.scenario import IntruderSpec, default_scenario
 
     cfg = PlannerConfig()
     own = Ownship(1000.0, 400.0, 120.0, 20.0, 0.0)
@@ -102,7 +102,9 @@ def test_mvp_avoids_a_head_on_in_closed_loop():
     results = {}
     for name in ("none", "mvp"):
         planner = make_planner(name, cfg)
-        env = EncounterEnv(cfg, [spec], (1000.0, 1800.0, 120.0), own)
+        env = EncounterEnv(
+            default_scenario("mvp-test"), intruders=[spec], goal=(1000.0, 1800.0, 120.0), start=own
+        )
         env.reset(seed=0)
         min_sep = math.inf
         for _ in range(30):

@@ -266,10 +266,7 @@ def test_mcts_survives_random_turn_traffic():
     """30 seeded kinematic episodes among 20 random-turn intruders that the planner sees with
     their true turn rates: at most 1 collision (the constant-velocity planner of the paper
     collided in 28 of 100 such episodes; the new one in 1 of 100)."""
-    import dataclasses
-
-    from uavxai.avoidance.episode import EncounterEnv, default_goal, episode_intruders
-    from uavxai.avoidance.model import PHI, V
+    from uavxai.learning.env import EncounterEnv, episode_intruders
     from uavxai.scenario import default_scenario
 
     scenario = default_scenario(intruders={"behaviour": "random_turns"})
@@ -277,14 +274,10 @@ def test_mcts_survives_random_turn_traffic():
     for seed in range(30):
         cfg = PlannerConfig.from_scenario(scenario, seed=seed)
         planner = MCTSPlanner(cfg)
-        specs = episode_intruders(scenario, seed, 20)
-        goal = default_goal(scenario)
-        env = EncounterEnv(cfg, specs, goal, scenario.ownship.start, scenario=scenario)
+        env = EncounterEnv(scenario, intruders=episode_intruders(scenario, seed, 20))
         env.reset(seed=seed)
         while not env.outcome:
-            w = G * np.tan(env.traffic[:, PHI]) / env.traffic[:, V]
-            seen = [dataclasses.replace(i, turn_rate=float(r)) for i, r in zip(
-                env.intruders, w, strict=True)]  # fmt: skip
-            env.step(planner.plan(env.ownship, seen, goal, step=env.steps).action)
+            seen = env.intruders  # the truth picture: true turn rates, g tan(phi) / V
+            env.step(planner.plan(env.ownship, seen, env.goal, step=env.steps).action)
         collisions += env.outcome == "collision"
     assert collisions <= 1

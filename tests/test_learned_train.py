@@ -13,9 +13,11 @@ import numpy as np
 import pytest
 import torch
 
-from uavxai.avoidance.episode import EncounterEnv
 from uavxai.avoidance.learned import QNetwork, load_checkpoint, obs_dim, observe
-from uavxai.avoidance.train import (
+from uavxai.avoidance.types import N_ACTIONS
+from uavxai.errors import UserError
+from uavxai.learning.env import EncounterEnv
+from uavxai.learning.train import (
     CURVE_COLUMNS,
     Batch,
     Hyperparameters,
@@ -26,8 +28,6 @@ from uavxai.avoidance.train import (
     train,
     train_command,
 )
-from uavxai.avoidance.types import N_ACTIONS
-from uavxai.errors import UserError
 from uavxai.scenario import default_scenario
 
 
@@ -102,8 +102,8 @@ def test_conflict_grows_as_a_collision_course_closes_in() -> None:
 
 
 def _real_batch(n_obs_nearest: int, size: int, seed: int = 0) -> Batch:
-    """Transitions of random actions on the real encounter model."""
-    env = EncounterEnv.from_scenario(SCENARIO, 10, n_nearest=n_obs_nearest)
+    """Transitions of random actions on the engine's kinematic world."""
+    env = EncounterEnv(SCENARIO, n_intruders=10, n_nearest=n_obs_nearest)
     rng = np.random.default_rng(seed)
     hp = Hyperparameters()
     rows = []

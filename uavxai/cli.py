@@ -444,7 +444,7 @@ def cmd_train(args: argparse.Namespace) -> int:
 
         trainer = finetune_command if args.finetune else train_command
     else:
-        from uavxai.avoidance.train import train_command as trainer
+        from uavxai.learning.train import train_command as trainer
     report = trainer(sc, algo=args.algo, episodes=args.episodes, out=out)
     path = out / "train_report.json"
     path.write_text(json.dumps(report, indent=2, default=float) + "\n")

@@ -1,4 +1,4 @@
-"""Collision avoidance: the encounter model, MCTS and its baselines, and the episode runner.
+"""Collision avoidance: the encounter model, MCTS and its baselines (the planner API).
 
 The planner API (SPEC §7) works without JSBSim, MAVLink or rerun::
 

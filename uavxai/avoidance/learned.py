@@ -7,7 +7,7 @@ and velocity in the ownship's heading frame, zero-padded with a ``present`` flag
 those intruders' closest point of approach, so 3 or 40 intruders give the same vector.
 
 - **DQN**: one Q-network over the 9 actions, trained on the sum of the goal and safety rewards
-  (see :mod:`uavxai.avoidance.train`); acts greedily.
+  (see :mod:`uavxai.learning.train`); acts greedily.
 - **Safe-DQN** (after Wang et al. 2022, "Explainable and safe reinforcement learning for
   autonomous air mobility"): two Q-networks, one for the goal reward (progress, arrival) and
   one for the safety reward (separation loss, collision, leaving the area). It acts with the

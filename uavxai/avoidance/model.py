@@ -69,6 +69,12 @@ OUTCOME_NAMES = ("", "goal", "collision", "out_of_bounds", "timeout")
 # Paper eqs 13/14: goal 1, collision 0, time-out 0.1; leaving the map counts as a failure (0).
 TERMINAL_VALUE = (math.nan, 1.0, 0.0, 0.0, 0.1)
 
+
+def terminal_value(outcome: str) -> float:
+    """The value of an episode's end by its name (``Outcome`` value): eq 14's."""
+    return TERMINAL_VALUE[OUTCOME_NAMES.index(outcome)]
+
+
 # By action index, over the whole table (the vertical set's climb and descend included).
 _BANK_SIGN = np.array([a.bank for a in ACTIONS], dtype=float)
 _ACCEL_SIGN = np.array([a.accel for a in ACTIONS], dtype=float)

@@ -22,6 +22,7 @@ from uavxai.sim.judge import Judge
 from uavxai.sim.kinematic import KinematicWorld
 from uavxai.sim.mission import Mission, MissionConfig
 from uavxai.sim.picture import Picture
+from uavxai.surveillance.tracker import truth_beliefs
 
 
 def _jsbsim(scenario: Scenario, intruders, seed: int) -> Dynamics:
@@ -83,7 +84,6 @@ def fly(
         av = scenario.avoidance
         planner.reset(seed)
         command = path(world)
-        command.altitude(float(goal[2]), 0.0)  # the planner's model climbs to the goal's height
         picture = Picture(scenario, forward=command.relay)
         if hasattr(command, "bridge"):  # ground stations see the traffic the planner sees
             command.bridge.truth_adsb = picture.truth
@@ -91,19 +91,12 @@ def fly(
         max_steps = av.max_steps
         if mission is not None:  # there and back, plus the time on station
             max_steps = 2 * av.max_steps + math.ceil(mission.service_s / av.decision_period_s)
-        episode = Episode(
+        episode = start_episode(
+            scenario,
             world,
             planner,
             command,
-            Judge(
-                scenario.world,
-                av.d_min_m,
-                None if mission else goal,
-                av.goal_radius_m,
-                nmac_m=_nmac_cylinder(scenario),
-            ),
-            Clock.from_scenario(scenario),
-            goal=goal,
+            goal,
             max_steps=max_steps,
             observers=[picture, *([flying] if flying else []), *observers],
             picture=picture,
@@ -120,14 +113,35 @@ def fly(
             world.close()
 
 
-def _nmac_cylinder(scenario: Scenario) -> tuple[float, float]:
-    """The scenario's NMAC cylinder (``avoidance.nmac``), 500 ft x 100 ft by default."""
-    from uavxai.metrics import NMAC_HORIZONTAL_M, NMAC_VERTICAL_M
-
-    nmac = getattr(scenario.avoidance, "nmac", None)
-    return (
-        float(getattr(nmac, "horizontal_m", NMAC_HORIZONTAL_M)),
-        float(getattr(nmac, "vertical_m", NMAC_VERTICAL_M)),
+def start_episode(
+    scenario: Scenario,
+    world: Dynamics,
+    planner: Planner,
+    command: CommandPath,
+    goal: Sequence[float],
+    *,
+    max_steps: int,
+    observers: Sequence[Observer] = (),
+    picture=truth_beliefs,
+    mission: Mission | None = None,
+    label: dict | None = None,
+) -> Episode:
+    """An episode of ``world`` as every episode starts: the autopilot given the goal's
+    height, judged by the scenario's rules (:meth:`Judge.from_scenario`; a ``mission`` ends
+    by its own phases, not at the goal) on the scenario's clock."""
+    command.altitude(float(goal[2]), 0.0)  # the planner's model climbs to the goal's height
+    return Episode(
+        world,
+        planner,
+        command,
+        Judge.from_scenario(scenario, None if mission else goal),
+        Clock.from_scenario(scenario),
+        goal=goal,
+        max_steps=max_steps,
+        observers=observers,
+        picture=picture,
+        mission=mission,
+        label=label,
     )
 
 

@@ -126,9 +126,7 @@ class Episode:
         latency the planner's command is only sent (and the event only raised) when it
         reaches the autopilot, in :meth:`advance` (None here)."""
         state = self.state
-        cmd = self.world.ownship_command()
-        vertical = self.planner.config.vertical_of(cmd.get("alt_target_m"))
-        own = ownship_view(state, cmd["bank_cmd_rad"], vertical)
+        own = self.ownship()
         intruders = self.picture(state)
         m = self.mission
         goal = m.goal if m is not None else self.goal
@@ -174,6 +172,13 @@ class Episode:
         if send:
             self.path.send(decision, self.state.t)
         return self._decided(DecisionEvent(step, t, own, intruders, decision, truth, self.state.t))
+
+    def ownship(self) -> Ownship:
+        """The ownship as the planner sees it now (:func:`ownship_view` of the autopilot's
+        commands)."""
+        cmd = self.world.ownship_command()
+        vertical = self.planner.config.vertical_of(cmd.get("alt_target_m"))
+        return ownship_view(self.state, cmd["bank_cmd_rad"], vertical)
 
     def _leg_step(self) -> int:
         """Decisions taken on the way to the current goal: the planner weighs its time-out

@@ -15,7 +15,7 @@ import numpy as np
 from uavxai.dynamics.state import TrafficState
 from uavxai.geometry import closest_approach
 from uavxai.metrics import NMAC_HORIZONTAL_M, NMAC_VERTICAL_M, nmac
-from uavxai.scenario import World
+from uavxai.scenario import Scenario, World
 from uavxai.vocabulary import Outcome
 
 
@@ -33,6 +33,15 @@ class Judge:
         self.goal = None if goal is None else np.asarray(goal, dtype=float)
         self.goal_radius_m = goal_radius_m
         self.nmac_m = nmac_m
+
+    @classmethod
+    def from_scenario(cls, scenario: Scenario, goal: Sequence[float] | None) -> Judge:
+        """The scenario's rules: its flight area, ``avoidance.d_min_m`` and ``goal_radius_m``,
+        and its NMAC cylinder (``avoidance.nmac``, 500 ft x 100 ft by default); ``goal`` None:
+        no goal ends the episode (a mission's)."""
+        av = scenario.avoidance
+        nmac_m = (float(av.nmac.horizontal_m), float(av.nmac.vertical_m))
+        return cls(scenario.world, av.d_min_m, goal, av.goal_radius_m, nmac_m=nmac_m)
 
     def nmac(
         self, prev: TrafficState, now: TrafficState, separation_m: float | None = None
