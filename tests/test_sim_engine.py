@@ -2,14 +2,12 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
+from engine_runs import run_and_evaluate
 
-from uavxai.cli import main
 from uavxai.errors import UserError
 from uavxai.scenario import default_scenario
 from uavxai.sim.build import fly, run_kinematic
@@ -34,17 +32,7 @@ EQ = {
 def test_run_and_evaluate_fly_the_same_episode(tmp_path: Path) -> None:
     """`uavxai run` (MAVLink bytes through the bridge) and `uavxai evaluate --dynamics jsbsim`
     (direct to the autopilot): same outcome, steps and minimum separation to 1 mm."""
-    path = tmp_path / "eq.yaml"
-    path.write_text(yaml.safe_dump(EQ))
-    assert main(["run", str(path), "--out", str(tmp_path / "run")]) == 0
-    assert main(
-        ["evaluate", str(path), "--methods", "mcts", "--intruders", "8", "--episodes", "1",
-         "--dynamics", "jsbsim", "--out", str(tmp_path / "ev")]
-    ) == 0  # fmt: skip
-    run = json.loads((tmp_path / "run" / "summary.json").read_text())
-    row = (tmp_path / "ev" / "episodes.csv").read_text().splitlines()[1].split(",")
-    header = (tmp_path / "ev" / "episodes.csv").read_text().splitlines()[0].split(",")
-    ev = dict(zip(header, row, strict=True))
+    run, ev = run_and_evaluate(tmp_path, EQ)
     assert run["bridge"]["commands"] >= 2 * run["steps"]  # really through MAVLink
     assert (ev["outcome"], int(ev["steps"])) == (run["outcome"], run["steps"])
     assert float(ev["min_separation_m"]) == pytest.approx(run["min_separation_m"], abs=1e-3)

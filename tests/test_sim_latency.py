@@ -13,11 +13,10 @@ import os
 from pathlib import Path
 
 import pytest
-import yaml
+from engine_runs import run_and_evaluate
 
 from uavxai.avoidance.planners import make_planner
 from uavxai.avoidance.types import Intruder, Ownship, PlannerConfig
-from uavxai.cli import main
 from uavxai.errors import UserError
 from uavxai.scenario import default_scenario
 from uavxai.sim.build import fly
@@ -41,16 +40,7 @@ def test_run_on_a_companion_and_evaluate_in_process_fly_the_same_episode(tmp_pat
     """With a latency, `run` plans on a companion process and sends MAVLink bytes; evaluate
     plans in-process and commands directly: same outcome, steps and separation (1 mm), and
     every command is applied half a second after the picture it was planned from."""
-    path = tmp_path / "lat.yaml"
-    path.write_text(yaml.safe_dump(LAT))
-    assert main(["run", str(path), "--out", str(tmp_path / "run")]) == 0
-    assert main(
-        ["evaluate", str(path), "--methods", "mcts", "--intruders", "8", "--episodes", "1",
-         "--dynamics", "jsbsim", "--out", str(tmp_path / "ev")]
-    ) == 0  # fmt: skip
-    run = json.loads((tmp_path / "run" / "summary.json").read_text())
-    lines = (tmp_path / "ev" / "episodes.csv").read_text().splitlines()
-    ev = dict(zip(lines[0].split(","), lines[1].split(","), strict=True))
+    run, ev = run_and_evaluate(tmp_path, LAT)
     assert run["bridge"]["commands"] >= run["steps"]  # really through MAVLink
     assert (ev["outcome"], int(ev["steps"])) == (run["outcome"], run["steps"])
     assert float(ev["min_separation_m"]) == pytest.approx(run["min_separation_m"], abs=1e-3)
