@@ -115,8 +115,9 @@ class Episode:
         self.decision_ms: list[float] = []
         self.sample_metrics: dict = {}  # per-sample values observers share (rates, users)
         self._overridden = False
-        self._pending: tuple | None = None  # a decision on its way to the autopilot
-        self._planned: Decision | None = None  # its plan, when planned in-process
+        # a decision on its way to the autopilot: its step, picture and, planned in-process,
+        # the decision itself (None: the companion is still planning it)
+        self._pending: tuple | None = None
         self.nmac = False  # any near mid-air collision (the judge's cylinder) so far
         self.wall0 = time.perf_counter()
 
@@ -139,12 +140,13 @@ class Episode:
                 self.path.altitude(goal[2], state.t)
             decision = m.decide(self, own, intruders) if m is not None else None
             if decision is None and self.clock.latency_ticks:
-                self._pending = (self.steps, state.t, own, intruders, state)
                 submit = getattr(self.planner, "submit", None)
                 if submit is not None:  # a companion: it plans while the world flies on
                     submit(own, intruders, goal, step=self._leg_step())
+                    planned = None
                 else:  # in-process: plan now, apply later; the same decision either way
-                    self._planned = self.planner.plan(own, intruders, goal, step=self._leg_step())
+                    planned = self.planner.plan(own, intruders, goal, step=self._leg_step())
+                self._pending = (self.steps, state.t, own, intruders, state, planned)
                 self.steps += 1
                 return None
             if decision is None:  # the avoidance planner flies
@@ -163,12 +165,9 @@ class Episode:
     def _arrive(self, send: bool) -> DecisionEvent:
         """The pending decision reaches the autopilot now (``send``), or the episode ended
         before it did: it is still recorded, as the planner made it."""
-        step, t, own, intruders, truth = self._pending
+        step, t, own, intruders, truth, planned = self._pending
         self._pending = None
-        if self._planned is not None:
-            decision, self._planned = self._planned, None
-        else:
-            decision = self.planner.result()
+        decision = planned if planned is not None else self.planner.result()
         if send:
             self.path.send(decision, self.state.t)
         return self._decided(DecisionEvent(step, t, own, intruders, decision, truth, self.state.t))
