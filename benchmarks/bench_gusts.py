@@ -16,34 +16,19 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
+from pathlib import Path
 
 import numpy as np
 
 from uavxai.avoidance.model import turn_positions
-from uavxai.dynamics.aircraft import FT, Aircraft
-from uavxai.dynamics.geodesy import LocalFrame
+from uavxai.dynamics.aircraft import FT
+from uavxai.dynamics.orbit import G
 
-FRAME = LocalFrame(34.1230, 108.8370, 400.0)
-DT = 1.0 / 120.0
-G = 9.80665
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # test fixtures
+from test_dynamics_environment import FRAME, flown  # noqa: E402
+
 BANKS = [(10.0, math.radians(30)), (25.0, 0.0), (35.0, math.radians(-30)), (50.0, 0.0)]
-
-
-def fly(turbulence: str, seed: int, seconds: float = 60.0) -> np.ndarray:
-    """Raw states at 10 Hz of an aircraft started level at 20 m/s, flying BANKS."""
-    a = Aircraft("uav_fw", FRAME, DT, seed=7)
-    a.set_environment((0.0, 0.0), turbulence, seed)
-    if not a.start(1000.0, 1000.0, 120.0, 0.0, 20.0):
-        raise RuntimeError("the aircraft did not start")
-    banks, rows = list(BANKS), []
-    for k in range(round(seconds / DT)):
-        while banks and banks[0][0] <= k * DT:
-            a.command(bank_cmd_rad=banks.pop(0)[1])
-        a.run()
-        if k % 12 == 11:
-            rows.append(a.raw_state())
-    a.close()
-    return np.array(rows)
 
 
 def errors(rows: np.ndarray, ahead_s: int) -> list[float]:
@@ -65,7 +50,9 @@ def main() -> None:
     args = ap.parse_args()
     print("severity   2 s ahead: median / p95 (m)   4 s ahead: median / p95 (m)")
     for severity in ("none", "light", "moderate", "severe"):
-        runs = [fly(severity, seed) for seed in range(args.seeds)]
+        runs = [
+            flown(0.0, (0.0, 0.0), severity, seed, banks=list(BANKS)) for seed in range(args.seeds)
+        ]
         cells = []
         for ahead in (2, 4):
             e = [x for rows in runs for x in errors(rows, ahead)]
