@@ -16,17 +16,23 @@ from rerun.chunk import RrdReader
 
 from uavxai.recording import entities as ent
 from uavxai.recording.aircraft_model import attitude_quaternions
-from uavxai.recording.recorder import FILE_FLUSH_S, RunRecorder
+from uavxai.recording.recorder import FILE_FLUSH_S, RecorderProcess, RunRecorder
 
 N_INTRUDERS = 3
 INTRUDER_IDS = [f"intruder-{i + 1}" for i in range(N_INTRUDERS)]
 
 
-def record(path: Path | None, duration_s: float = 4.9, decision_every: int = 10, seed: int = 0):
+def record(
+    path: Path | None,
+    duration_s: float = 4.9,
+    decision_every: int = 10,
+    seed: int = 0,
+    recorder=RunRecorder,
+):
     """50 frames at 10 Hz and a decision (with metrics) every second: 5 decisions."""
     states = list(synthetic.traffic(N_INTRUDERS, duration_s, seed=seed))
     decisions, metrics = [], []
-    rec = RunRecorder(path, recording_id=f"test-{seed}")
+    rec = recorder(path, recording_id=f"test-{seed}")
     rec.log_setup(
         bounds=synthetic.BOUNDS,
         users=synthetic.users(4),
@@ -191,6 +197,24 @@ def test_long_run_is_flushed_in_pieces_without_losing_frames(tmp_path):
     _, own = column(chunks["/world/ownship/trail"], "LineStrips3D:strips")
     for before, after in zip(own, own[1:], strict=False):
         np.testing.assert_allclose(after[0][0], before[0][-1])
+
+
+def test_a_recorder_process_writes_the_same_recording(tmp_path, recording):
+    """`uavxai run` records on its own process (RecorderProcess): the same calls give the
+    same entities, rows and values as recording in-process."""
+    _, here, *_ = recording
+    path = tmp_path / "process.rrd"
+    record(path, recorder=RecorderProcess)
+    there = chunks_by_path(path)
+    assert set(there) == set(here)
+    for entity in here:
+        for chunk in here[entity]:
+            if chunk.is_static:
+                continue
+            for name in chunk.to_record_batch().schema.names:
+                if name.startswith("rerun.controls") or ":" not in name:
+                    continue  # row ids and the index columns: compared through the values
+                assert column(there[entity], name) == column(here[entity], name), (entity, name)
 
 
 def test_two_recorders_in_one_process_stay_apart(tmp_path):

@@ -133,7 +133,7 @@ def test_the_planner_believes_what_the_adsb_frames_on_the_link_carry(tmp_path: P
 
     class Grab(Observer):
         def on_sample(self, ep, state) -> None:
-            link = ep.picture.link
+            link = ep.picture.receiver
             decoded.extend((r.id, round(r.pos[0], 2), round(r.pos[1], 2)) for r in link.decoded)
             link.decoded = []
 
@@ -151,7 +151,7 @@ def test_the_planner_believes_what_the_adsb_frames_on_the_link_carry(tmp_path: P
         for m in mav.parse_buffer(data) or []:
             if m.get_type() == "ADSB_VEHICLE":
                 received.append(m)
-    frame = Picture(sc).link.frame
+    frame = Picture(sc).frame
     on_link = set()
     for m in received:
         x, y, _ = frame.to_local(m.lat / 1e7, m.lon / 1e7, m.altitude / 1000.0)

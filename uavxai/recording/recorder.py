@@ -10,6 +10,7 @@ Each recorder owns its own ``rr.RecordingStream``, so several in one process sta
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 import os
@@ -185,6 +186,9 @@ class RunRecorder:
         mesh = _mesh(INTRUDER_COLOR)
         for path in aircraft_paths(("ownship", *intruder_ids))[1:]:
             log(path, mesh, static=True)
+
+    def ready(self) -> None:
+        """Nothing to wait for in-process (see :meth:`RecorderProcess.ready`)."""
 
     def log_traffic(self, state: TrafficState) -> None:
         """One frame of all aircraft; cheap (a copy), the sending happens in batches."""
@@ -374,3 +378,27 @@ def _closest_on_plan(decision: Decision, intruder_ids: list[str]) -> str | None:
     if isinstance(who, (int, np.integer)) and 0 <= who < len(intruder_ids):
         return intruder_ids[int(who)]
     return str(who)
+
+
+class RecorderProcess:
+    """A :class:`RunRecorder` in its own process, with the same ``log_*`` methods (sent
+    without waiting, in order): ``uavxai run`` records off the simulation's core, whose
+    time goes to JSBSim. The recording is the same; ``close()`` returns when it is written
+    (and raises what failed there)."""
+
+    def __init__(self, *args: object, **kwargs: object) -> None:
+        from uavxai.worker import Worker
+
+        self._worker = Worker(RunRecorder, *args, name="rerun recorder", **kwargs)
+
+    def __getattr__(self, name: str):
+        if name.startswith("log_"):
+            return functools.partial(self._worker.post, name)
+        raise AttributeError(name)
+
+    def ready(self) -> None:
+        """Wait until the process has started and done what was asked so far."""
+        self._worker.call("")
+
+    def close(self) -> None:
+        self._worker.close("close")

@@ -84,7 +84,8 @@ def fly(
         av = scenario.avoidance
         planner.reset(seed)
         command = path(world)
-        picture = Picture(scenario, forward=command.relay)
+        # a companion planner decodes and tracks the traffic on its own core, too
+        picture = Picture(scenario, command.relay, getattr(planner, "receiver", None))
         if hasattr(command, "bridge"):  # ground stations see the traffic the planner sees
             command.bridge.truth_adsb = picture.truth
         flying = Mission(mission, command.announce) if mission is not None else None

@@ -232,6 +232,7 @@ class Episode:
         try:
             for o in self.observers:
                 o.on_start(self)
+            self.wall0 = time.perf_counter()  # the flight starts now: set-up is not counted
             try:
                 while self.steps < self.max_steps:
                     ended = self.advance(self.decide())

@@ -158,6 +158,7 @@ class Rerun(Observer):
     def on_start(self, ep: Episode) -> None:
         self._ids = list(ep.state.ids[1:])
         self.recorder.log_setup(intruder_ids=self._ids, goal=np.asarray(ep.goal), **self._setup)
+        self.recorder.ready()  # a recorder process has started (set-up, not flight, time)
 
     def on_decision(self, ep: Episode, event: DecisionEvent) -> None:
         from uavxai.recording.mission_log import tracks_of

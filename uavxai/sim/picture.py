@@ -3,7 +3,8 @@
 Every sample the surveillance model (``surveillance:``) produces the reports due then: ADS-B
 from cooperative intruders (rate, NACp/NACv noise, latency, dropouts) and the onboard
 sensor's detections of the others. The ADS-B reports are packed as MAVLink ADSB_VEHICLE
-frames and decoded back, as a companion computer receiving them would; in ``uavxai run``
+frames and decoded back, as a companion computer receiving them would (:class:`Receiver`:
+on the companion process beside the planner when ``uavxai run`` has one); in ``uavxai run``
 the same frames also go out on the bridge's link, so a ground station shows the traffic the
 planner sees and a real receiver could replace the simulated one. Both command paths pack and
 decode alike, so a seed gives the same beliefs, to the bit, through either. The tracker
@@ -26,58 +27,72 @@ from uavxai.dynamics.geodesy import LocalFrame
 from uavxai.dynamics.state import TrafficState
 from uavxai.scenario import Scenario
 from uavxai.sim.episode import Episode, Observer
-from uavxai.surveillance.adsb import Report, SurveillanceConfig, adsb_message, report_from_adsb
-from uavxai.surveillance.tracker import SurveillancePicture, truth_beliefs
+from uavxai.surveillance.adsb import (
+    Report,
+    Surveillance,
+    SurveillanceConfig,
+    adsb_message,
+    report_from_adsb,
+)
+from uavxai.surveillance.tracker import Tracker, truth_beliefs
 
 _STREAM = 0x53555256  # spawn key of the surveillance noise, apart from traffic and JSBSim
 
 
-class AdsbLink:
-    """ADS-B reports -> ADSB_VEHICLE frames -> decoded reports (what a receiver hands over).
+class Receiver:
+    """The companion computer's side of surveillance: the ADSB_VEHICLE frames it receives,
+    decoded back to reports, and the onboard sensor's detections, fed to the tracker.
 
-    ``forward`` gets every packed frame too (the bridge's link to ground stations). ADS-B is
-    not authenticated in the air either, so these frames are never signed.
+    It runs where the planner runs: in the simulation's process, or on the companion
+    process with the planner (:class:`uavxai.sim.companion.Companion`), which then decodes
+    and tracks on its own core; it gets the same frames in the same order either way.
+    """
+
+    def __init__(self, scenario: Scenario) -> None:
+        self.config = SurveillanceConfig.from_scenario(scenario)
+        self.frame = LocalFrame.from_origin(scenario.world.origin)
+        wind = EnvironmentConfig.from_scenario(scenario).wind_enu[:2]  # tracked in the air mass
+        self.tracker = Tracker(wind_mps=wind)
+        self._reader = FrameReader(new_codec(None, 255, 0), stream=False)
+        self.decoded: list[Report] = []  # the last batch of ADS-B reports, as decoded here
+
+    def receive(self, frames: bytes, onboard: Sequence[Report], t: float) -> None:
+        """The frames and detections delivered at ``t``, into the tracker."""
+        parsed = self._reader.push(frames).messages if frames else []
+        self.decoded = [
+            report_from_adsb(m, self.frame, t, self.config)
+            for m in parsed
+            if m.get_type() == "ADSB_VEHICLE"
+        ]
+        self.tracker.update([*self.decoded, *onboard])
+
+    def beliefs(self, t: float) -> list[Intruder]:
+        return self.tracker.beliefs(t)
+
+
+class Picture(Observer):
+    """The planner's picture of the traffic (an episode's ``picture``), fed every sample.
+
+    The simulation's side measures (ADS-B from the cooperative intruders, the onboard
+    sensor's detections) and packs the ADS-B reports as ADSB_VEHICLE frames (``forward``
+    gets them too: the bridge's link to ground stations; ADS-B is not authenticated in the
+    air either, so they are never signed); the ``receiver`` (a :class:`Receiver`, here or on
+    the companion) decodes and tracks.
     """
 
     def __init__(
         self,
-        frame: LocalFrame,
-        config: SurveillanceConfig,
-        system_id: int = 1,
+        scenario: Scenario,
         forward: Callable[[bytes], None] | None = None,
+        receiver: Receiver | None = None,
     ) -> None:
-        self.frame = frame
-        self.config = config
-        self._packer = MessagePacker(system_id, mavlink.MAV_COMP_ID_ADSB)
-        self._reader = FrameReader(new_codec(None, 255, 0), stream=False)
-        self._forward = forward
-        self.decoded: list[Report] = []  # the last batch, as the planner's side decoded it
-
-    def __call__(self, reports: Sequence[Report], t: float) -> list[Report]:
-        if not reports:
-            return []
-        data = b"".join(self._packer.pack(adsb_message(r, self.frame)) for r in reports)
-        if self._forward is not None:
-            self._forward(data)
-        parsed = self._reader.push(data)
-        self.decoded = [
-            report_from_adsb(m, self.frame, t, self.config)
-            for m in parsed.messages
-            if m.get_type() == "ADSB_VEHICLE"
-        ]
-        return self.decoded
-
-
-class Picture(Observer):
-    """The planner's picture of the traffic (an episode's ``picture``), fed every sample."""
-
-    def __init__(self, scenario: Scenario, forward: Callable[[bytes], None] | None = None):
         self.config = SurveillanceConfig.from_scenario(scenario)
         seed = int(np.random.SeedSequence(scenario.seed, spawn_key=(_STREAM,)).generate_state(1)[0])
-        wind = EnvironmentConfig.from_scenario(scenario).wind_enu[:2]  # tracked in the air mass
-        self.surveillance = SurveillancePicture(self.config, seed, wind_mps=wind)
-        frame = LocalFrame.from_origin(scenario.world.origin)
-        self.link = AdsbLink(frame, self.config, scenario.bridge.system_id, forward)
+        self.surveillance = Surveillance(self.config, seed)
+        self.frame = LocalFrame.from_origin(scenario.world.origin)
+        self._packer = MessagePacker(scenario.bridge.system_id, mavlink.MAV_COMP_ID_ADSB)
+        self._forward = forward
+        self.receiver = receiver if receiver is not None else Receiver(scenario)
 
     @property
     def truth(self) -> bool:
@@ -89,12 +104,17 @@ class Picture(Observer):
     def on_sample(self, ep: Episode, state: TrafficState) -> None:
         if self.truth:
             return
-        reports = self.surveillance.sample(state)
-        adsb = [r for r in reports if r.source == "adsb"]
-        onboard = [r for r in reports if r.source != "adsb"]
-        self.surveillance.ingest(self.link(adsb, state.t) + onboard)
+        reports = self.surveillance.observe(state)
+        if not reports:
+            return
+        frames = b"".join(
+            self._packer.pack(adsb_message(r, self.frame)) for r in reports if r.source == "adsb"
+        )
+        if frames and self._forward is not None:
+            self._forward(frames)
+        self.receiver.receive(frames, [r for r in reports if r.source != "adsb"], state.t)
 
     def __call__(self, state: TrafficState) -> list[Intruder]:
         if self.truth:
             return truth_beliefs(state)
-        return self.surveillance.beliefs(state.t)
+        return self.receiver.beliefs(state.t)

@@ -107,7 +107,7 @@ def run_episode(
     goal = episode_goal(sc, service.service_point)
     config, checkpoint = PlannerConfig.from_scenario(sc), sc.avoidance.checkpoint
     if sc.avoidance.decision_latency_s > 0:  # it may think while the world flies: own core
-        planner = Companion(sc.avoidance.planner, config, checkpoint)
+        planner = Companion(sc.avoidance.planner, config, checkpoint, scenario=sc)
     else:
         planner = make_planner(sc.avoidance.planner, config, checkpoint=checkpoint)
     observers = [
@@ -165,9 +165,9 @@ def _replanner(sc: Scenario):
 
 
 def _rerun(sc: Scenario, service, path: Path, spawn: bool) -> Rerun:
-    from uavxai.recording.recorder import RunRecorder
+    from uavxai.recording.recorder import RecorderProcess
 
-    recorder = RunRecorder(
+    recorder = RecorderProcess(
         path,
         spawn=spawn,
         recording_name="uavxai",
