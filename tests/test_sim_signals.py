@@ -15,21 +15,38 @@ import pytest
 from uavxai.paths import scenarios_dir
 
 
-@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
-def test_a_signal_leaves_whole_files_and_an_interrupted_summary(tmp_path: Path, sig) -> None:
+@pytest.mark.parametrize(
+    ("sig", "latency"),
+    [(signal.SIGTERM, 0.0), (signal.SIGINT, 0.0), (signal.SIGINT, 0.5)],
+    ids=["sigterm", "sigint", "ctrl-c-to-the-group-with-a-companion"],
+)
+def test_a_signal_leaves_whole_files_and_an_interrupted_summary(
+    tmp_path: Path, sig, latency: float
+) -> None:
+    """With a latency, Ctrl-C reaches the whole process group as from a terminal: the
+    companion and the recorder process too, which leave it to the run to close them."""
+    import yaml
+
     out = tmp_path / "run"
+    scenario = yaml.safe_load((scenarios_dir() / "head_on.yaml").read_text())
+    scenario.setdefault("avoidance", {})["decision_latency_s"] = latency
+    path = tmp_path / "head_on.yaml"
+    path.write_text(yaml.safe_dump(scenario))
     env = {**os.environ, "JSBSIM_DEBUG": "0"}
     proc = subprocess.Popen(
-        [sys.executable, "-m", "uavxai", "run", str(scenarios_dir() / "head_on.yaml"),
-         "--out", str(out), "--realtime", "4"],
+        [sys.executable, "-m", "uavxai", "run", str(path), "--out", str(out), "--realtime", "4"],
         env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        start_new_session=True,
     )  # fmt: skip
     deadline = time.monotonic() + 120
     while not (out / "decisions.jsonl").exists() or (out / "decisions.jsonl").stat().st_size == 0:
         assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
         time.sleep(0.2)
     time.sleep(2.0)
-    proc.send_signal(sig)
+    if latency > 0:
+        os.killpg(proc.pid, sig)
+    else:
+        proc.send_signal(sig)
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 130, err
     assert "Traceback" not in err and "interrupted" in err
