@@ -210,3 +210,36 @@ def test_planner_model_predicts_the_jsbsim_flight_in_wind(bank_deg):
     with_wind, without = errors
     assert with_wind < 8.0, errors
     assert without > 80.0, errors  # the check can tell a model that ignores the wind
+
+
+def test_planner_model_carries_the_ownship_in_its_gusts():
+    """In moderate turbulence the gust of the moment (ground velocity less air velocity,
+    2-4 m/s) carries the aircraft for many seconds. The planner's model, carried by the air
+    the ownship measures (ownship_air), predicts each second of a turning flight 2 s ahead
+    to about a metre; flying airspeed and heading alone it is several metres off."""
+    from uavxai.avoidance.model import EncounterModel, Track, ownship_air, ownship_state
+    from uavxai.avoidance.types import Ownship, PlannerConfig
+    from uavxai.vocabulary import HOLD
+
+    banks = [(10.0, math.radians(30)), (25.0, 0.0), (35.0, math.radians(-30)), (50.0, 0.0)]
+    cfg = PlannerConfig(x_bounds=(-1e5, 1e5), y_bounds=(-1e5, 1e5))
+    errors: dict[bool, list[float]] = {True: [], False: []}
+    for seed in (2, 3):
+        r = flown(0.0, (0.0, 0.0), "moderate", seed, banks=list(banks))
+        pos = np.array([FRAME.to_local(row[0], row[1], row[2] * FT) for row in r])
+        for i in range(9, len(r) - 21, 10):  # row i is t = (i + 1) / 10 s; 2 s later: i + 20
+            t = (i + 1) * 0.1
+            bank = [b for tb, b in [(0.0, 0.0), *banks] if tb <= t][-1]
+            row = r[i]
+            own = Ownship(*pos[i], row[9] * FT, row[8], bank=bank, phi=row[6],
+                          ground_velocity=(row[3] * FT, row[4] * FT))  # fmt: skip
+            for carried in (True, False):
+                model = EncounterModel(cfg)
+                if carried:
+                    model.carry_ownship(ownship_air(own, cfg))
+                empty = Track.of(np.zeros((model.substeps(2.0) + 1, 0, 3)))
+                goal = np.array([1e9, 1e9, pos[i][2]])
+                seg = model.fly(ownship_state(own)[None], np.array([HOLD]), goal, 2.0, empty)
+                errors[carried].append(math.dist(seg.end[0][:2], pos[i + 20][:2]))
+    assert np.median(errors[True]) < 2.0, np.median(errors[True])
+    assert np.median(errors[False]) > 3.5, np.median(errors[False])  # the test can tell
