@@ -15,6 +15,7 @@ from uavxai.avoidance.model import (
     EncounterModel,
     G,
     Track,
+    ownship_air,
     ownship_state,
     place_children,
 )
@@ -112,6 +113,44 @@ def test_speed_limits_and_altitude_rate():
     assert seg.end[0, 2] == pytest.approx(110.0)  # 4 s at 2.5 m/s towards 100 m
     slow = fly_one(model, Ownship(1000, 1000, 120, 13.0, 0.0), SLOWER, (1000, 1900, 120), 4.0)
     assert slow.end[0, 3] == pytest.approx(12.0)
+
+
+def test_ownship_air_is_the_steady_wind_plus_the_gust():
+    """Ground velocity less air velocity: exactly the steady wind where the ground velocity is
+    air velocity plus that wind (the kinematic world, also after many turns of heading), the
+    gust on top of it otherwise, and the wind alone when the ground velocity is unknown."""
+    cfg = PlannerConfig(wind_mps=(3.0, -2.0))
+    psi = 0.3 + 40 * math.pi  # an unwrapped heading, as the kinematic world integrates it
+    ground = (20 * math.sin(psi) + 3.0, 20 * math.cos(psi) - 2.0)
+    heading = psi % (2 * math.pi)  # what the ownship's attitude reports
+    assert ownship_air(Ownship(0, 0, 120, 20, heading, ground_velocity=ground), cfg) == (3.0, -2.0)
+    assert ownship_air(Ownship(0, 0, 120, 20, heading), cfg) == (3.0, -2.0)
+    gusty = (ground[0] + 1.5, ground[1] - 0.7)
+    air = ownship_air(Ownship(0, 0, 120, 20, heading, ground_velocity=gusty), cfg)
+    assert air == pytest.approx((4.5, -2.7), abs=1e-9)
+
+
+def test_the_ownship_drifts_with_its_air_and_the_intruders_keep_the_wind():
+    """carry_ownship moves the ownship's paths by the air's motion, and with them what it
+    meets; the intruders' tracks (over the ground already) stay where they were."""
+    cfg = PlannerConfig(wind_mps=(1.0, 0.0))
+    still, carried = EncounterModel(cfg), EncounterModel(cfg)
+    carried.carry_ownship((3.0, -1.0))  # a 2 m/s east, 1 m/s south gust on the wind
+    own = Ownship(1000, 1000, 120, 20, 0.0)
+    a = fly_one(still, own, HOLD, (1000, 1900, 120), 4.0)
+    b = fly_one(carried, own, HOLD, (1000, 1900, 120), 4.0)
+    assert b.end[0, :2] - a.end[0, :2] == pytest.approx([8.0, -4.0])  # the gust for 4 s
+    pos, vel = np.array([[1000.0, 1300.0, 120.0]]), np.array([[5.0, -10.0, 0.0]])
+    assert np.array_equal(still.predict(pos, vel, 4.0).pos, carried.predict(pos, vel, 4.0).pos)
+    # an intruder hovering 49.5 m above a point 9 m east, 4 m south of the still-air path's
+    # end: missed in still air by 50.3 m (d_min 50 m), met at 49.5 m by the ownship its gust
+    # carries there
+    wait = [[a.end[0, 0] + 9.0, a.end[0, 1] - 4.0, 120.0 + 49.5]]
+    goal, hover = (1000, 1900, 120), [[0.0, 0.0, 0.0]]
+    missed = fly_one(still, own, HOLD, goal, 4.0, pos=wait, vel=hover, exact=True)
+    assert missed.event[0] == NONE and 50.0 < missed.min_sep[0] < 50.5
+    hit = fly_one(carried, own, HOLD, goal, 4.0, pos=wait, vel=hover)
+    assert hit.event[0] == COLLISION
 
 
 def test_leaving_the_area_and_reaching_the_goal_are_events():

@@ -211,6 +211,35 @@ def test_reachable_children_tell_one_story():
     assert d.explanation
 
 
+def test_the_planner_flies_its_ownship_in_the_air_it_measures():
+    """A ground velocity that is air velocity plus the steady wind changes no decision (the
+    kinematic world's ownship); one with a gust in it moves the planned path by that gust."""
+    rng = np.random.default_rng(5)
+    heading = math.radians(30.0)
+    intruders = [
+        Intruder(i + 1, *rng.uniform(700, 1300, 2), 120.0, *rng.uniform(-15, 15, 2))
+        for i in range(12)
+    ]
+    goal = (1500.0, 1500.0, 120.0)
+    cfg = PlannerConfig(wind_mps=(2.0, -1.0), seed=3)
+    air = (18.0 * math.sin(heading), 18.0 * math.cos(heading))
+
+    def plan(ground):
+        own = Ownship(1000.0, 1000.0, 120.0, 18.0, heading, ground_velocity=ground)
+        return MCTSPlanner(cfg).plan(own, intruders, goal)
+
+    unknown = plan(None)
+    still = plan((air[0] + 2.0, air[1] - 1.0))
+    assert still.action == unknown.action and np.array_equal(still.plan, unknown.plan)
+    assert [c.q for c in still.children] == [c.q for c in unknown.children]
+    gusty = plan((air[0] + 2.0 + 3.0, air[1] - 1.0))  # a 3 m/s gust towards the east
+    assert gusty.action == unknown.action  # the same first action, carried 3 m/s east
+    n = round(cfg.action_hold_s / cfg.substep_s)
+    shift = gusty.plan[1 : n + 1] - unknown.plan[1 : n + 1]
+    assert shift[:, 0] == pytest.approx(3.0 * cfg.substep_s * np.arange(1, n + 1))
+    assert shift[:, 1:] == pytest.approx(0.0, abs=1e-9)
+
+
 def test_a_later_collision_is_worth_more_when_every_line_collides():
     cfg = PlannerConfig(depth=2, simulations=200, seed=0)
     model = EncounterModel(cfg)

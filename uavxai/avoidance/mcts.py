@@ -47,6 +47,7 @@ from uavxai.avoidance.model import (
     accel_command,
     bank_command,
     intruder_margin,
+    ownship_air,
     ownship_state,
     place_children,
     vertical_command,
@@ -173,6 +174,7 @@ class TreePlanner:
         check_plan_inputs(own, intruders, goal)
         cfg, model = self.config, self.model
         goal_xyz = np.asarray(goal, dtype=float)
+        model.carry_ownship(ownship_air(own, cfg))  # before predicting: it sets their index
         tracks = predict_levels(model, intruders, cfg.depth, cfg.action_hold_s)
         time_left_s = (cfg.max_steps - step) * cfg.decision_period_s
         tree = self.search(ownship_state(own), goal_xyz, tracks, time_left_s)

@@ -36,6 +36,11 @@ class Ownship:
     # The current vertical command (vertical action set): +1 climbing, -1 descending, 0 at
     # the leg's height (PlannerConfig.vertical_of reads it off the autopilot's height target)
     vertical: int = 0
+    # The ground velocity (east, north) m/s as the ownship's navigation measures it. Less the
+    # air velocity (speed along heading) it is the motion of the air it flies in: the steady
+    # wind plus the gust of the moment (see uavxai.avoidance.model.ownship_air). None: not
+    # known, the planner's steady wind only.
+    ground_velocity: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -478,7 +483,7 @@ def check_plan_inputs(own: Ownship, intruders: Sequence[Intruder], goal: Goal) -
     ownship, a goal that is not (x, y, h)."""
     if len(goal) != 3 or not all(math.isfinite(float(g)) for g in goal):
         raise UserError(f"goal must be three finite numbers (x, y, h) in metres, got {goal!r}")
-    values = (own.x, own.y, own.h, own.speed, own.heading, own.bank)
+    values = (own.x, own.y, own.h, own.speed, own.heading, own.bank, *(own.ground_velocity or ()))
     if not all(math.isfinite(v) for v in values) or (
         own.phi is not None and not math.isfinite(own.phi)
     ):

@@ -135,6 +135,12 @@ class Aircraft:
             f["ic/ve-fps"] = (speed_mps * math.sin(heading_rad) + wind_e) / FT
             f["ic/vd-fps"] = 0.0
         f[ENGAGED] = 0.0
+        # The trim is of the steady state, in the steady wind: with the turbulence on it
+        # chases the gusts and mostly fails (most aircraft of a moderate-turbulence run started
+        # untrimmed), and a failed trim can leave the propeller, and with it the whole state,
+        # NaN. The gusts start once the aircraft is trimmed.
+        turbulence = f[TURB_TYPE]
+        f[TURB_TYPE] = 0
         f.run_ic()
         f["fcs/throttle-cmd-norm"] = _SPIN_UP_THROTTLE
         for _ in range(round(_SPIN_UP_S / self.dt)):
@@ -150,6 +156,7 @@ class Aircraft:
                 speed_mps,
                 h,
             )
+        f[TURB_TYPE] = turbulence
         f.set_sim_time(0.0)
         self.command(
             bank_cmd_rad=0.0, accel_cmd_mps2=0.0, speed_target_mps=speed_mps, alt_target_m=h

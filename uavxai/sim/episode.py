@@ -26,8 +26,8 @@ from uavxai.vocabulary import Outcome
 
 
 def ownship_view(state: TrafficState, bank_cmd: float, vertical: int = 0) -> Ownship:
-    """The ownship as the planner sees it: its own navigation state, bank command and
-    vertical command (the vertical action set's)."""
+    """The ownship as the planner sees it: its own navigation state (with its ground
+    velocity), bank command and vertical command (the vertical action set's)."""
     return Ownship(
         x=float(state.pos[0, 0]),
         y=float(state.pos[0, 1]),
@@ -37,6 +37,7 @@ def ownship_view(state: TrafficState, bank_cmd: float, vertical: int = 0) -> Own
         bank=float(bank_cmd),
         phi=float(state.att[0, 0]),
         vertical=int(vertical),
+        ground_velocity=(float(state.vel[0, 0]), float(state.vel[0, 1])),
     )
 
 
