@@ -6,8 +6,10 @@ constant-turn prediction from the aircraft's exact state (position, velocity, th
 its bank) is compared with where it really was 2 s and 4 s later: the median is what the gusts
 add (in calm air the only error is the autopilot's roll transitions, near zero at the median),
 the 95th percentile includes those transitions. This is the error the planner's model makes in
-turbulence, which it does not model (docs/results: a planning margin of this size did not
-remove the grazing collisions in JSBSim).
+turbulence: like this prediction it carries the ownship with the gust of the moment (its
+ground velocity less its air velocity) and the intruders on their ground tracks, but it cannot
+know the gusts to come (docs/results: a planning margin of this size did not remove the
+grazing collisions in JSBSim).
 
     .venv/bin/python benchmarks/bench_gusts.py [--seeds 5]
 """
