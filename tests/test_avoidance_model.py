@@ -118,8 +118,9 @@ def test_speed_limits_and_altitude_rate():
 def test_ownship_air_is_the_steady_wind_plus_the_gust():
     """Ground velocity less air velocity: exactly the steady wind where the ground velocity is
     air velocity plus that wind (the kinematic world, also after many turns of heading), the
-    gust on top of it otherwise, and the wind alone when the ground velocity is unknown."""
-    cfg = PlannerConfig(wind_mps=(3.0, -2.0))
+    gust on top of it otherwise (in turbulent air), and the wind alone when the ground velocity
+    is unknown or the air is steady (then the difference is sideslip and climb, not air)."""
+    cfg = PlannerConfig(wind_mps=(3.0, -2.0), gusts=True)
     psi = 0.3 + 40 * math.pi  # an unwrapped heading, as the kinematic world integrates it
     ground = (20 * math.sin(psi) + 3.0, 20 * math.cos(psi) - 2.0)
     heading = psi % (2 * math.pi)  # what the ownship's attitude reports
@@ -128,6 +129,9 @@ def test_ownship_air_is_the_steady_wind_plus_the_gust():
     gusty = (ground[0] + 1.5, ground[1] - 0.7)
     air = ownship_air(Ownship(0, 0, 120, 20, heading, ground_velocity=gusty), cfg)
     assert air == pytest.approx((4.5, -2.7), abs=1e-9)
+    steady = PlannerConfig(wind_mps=(3.0, -2.0))
+    own = Ownship(0, 0, 120, 20, heading, ground_velocity=gusty)
+    assert ownship_air(own, steady) == (3.0, -2.0)
 
 
 def test_the_ownship_drifts_with_its_air_and_the_intruders_keep_the_wind():

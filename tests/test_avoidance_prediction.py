@@ -213,7 +213,8 @@ def test_reachable_children_tell_one_story():
 
 def test_the_planner_flies_its_ownship_in_the_air_it_measures():
     """A ground velocity that is air velocity plus the steady wind changes no decision (the
-    kinematic world's ownship); one with a gust in it moves the planned path by that gust."""
+    kinematic world's ownship); one with a gust in it moves the planned path by that gust, in
+    turbulent air (``gusts``); in steady air the planner keeps to the steady wind."""
     rng = np.random.default_rng(5)
     heading = math.radians(30.0)
     intruders = [
@@ -221,12 +222,12 @@ def test_the_planner_flies_its_ownship_in_the_air_it_measures():
         for i in range(12)
     ]
     goal = (1500.0, 1500.0, 120.0)
-    cfg = PlannerConfig(wind_mps=(2.0, -1.0), seed=3)
+    cfg = PlannerConfig(wind_mps=(2.0, -1.0), seed=3, gusts=True)
     air = (18.0 * math.sin(heading), 18.0 * math.cos(heading))
 
-    def plan(ground):
+    def plan(ground, config=cfg):
         own = Ownship(1000.0, 1000.0, 120.0, 18.0, heading, ground_velocity=ground)
-        return MCTSPlanner(cfg).plan(own, intruders, goal)
+        return MCTSPlanner(config).plan(own, intruders, goal)
 
     unknown = plan(None)
     still = plan((air[0] + 2.0, air[1] - 1.0))
@@ -238,6 +239,8 @@ def test_the_planner_flies_its_ownship_in_the_air_it_measures():
     shift = gusty.plan[1 : n + 1] - unknown.plan[1 : n + 1]
     assert shift[:, 0] == pytest.approx(3.0 * cfg.substep_s * np.arange(1, n + 1))
     assert shift[:, 1:] == pytest.approx(0.0, abs=1e-9)
+    steady = plan((air[0] + 2.0 + 3.0, air[1] - 1.0), PlannerConfig(wind_mps=(2.0, -1.0), seed=3))
+    assert np.array_equal(steady.plan, unknown.plan)  # steady air: the drift is not the air's
 
 
 def test_a_later_collision_is_worth_more_when_every_line_collides():

@@ -222,7 +222,7 @@ def test_planner_model_carries_the_ownship_in_its_gusts():
     from uavxai.vocabulary import HOLD
 
     banks = [(10.0, math.radians(30)), (25.0, 0.0), (35.0, math.radians(-30)), (50.0, 0.0)]
-    cfg = PlannerConfig(x_bounds=(-1e5, 1e5), y_bounds=(-1e5, 1e5))
+    cfg = PlannerConfig(x_bounds=(-1e5, 1e5), y_bounds=(-1e5, 1e5), gusts=True)
     errors: dict[bool, list[float]] = {True: [], False: []}
     for seed in (2, 3):
         r = flown(0.0, (0.0, 0.0), "moderate", seed, banks=list(banks))

@@ -104,10 +104,10 @@ def ownship_air(own: Ownship, config: PlannerConfig) -> tuple[float, float]:
     so the gust now carries the ownship over the search horizon as the wind does; without it
     the ownship is predicted from its air velocity and drifts off by the gust's 2-4 m/s, while
     the intruders, predicted from their ground tracks, carry theirs. The steady wind
-    (``config.wind_mps``) when the ground velocity is not known or differs from it by less
-    than :data:`GUST_RESOLUTION_MPS`."""
+    (``config.wind_mps``) when the air is steady (``config.gusts`` off), the ground velocity
+    is not known, or it differs from it by less than :data:`GUST_RESOLUTION_MPS`."""
     wind = tuple(float(w) for w in config.wind_mps)
-    if own.ground_velocity is None:
+    if own.ground_velocity is None or not config.gusts:
         return wind
     air = (own.speed * math.sin(own.heading), own.speed * math.cos(own.heading))
     gust = [

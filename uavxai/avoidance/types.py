@@ -107,6 +107,11 @@ class PlannerConfig:
     # model flies airspeed and heading through it, so its paths are over the ground, where
     # the intruders' tracks are (scenario `environment.wind`).
     wind_mps: tuple[float, float] = (0.0, 0.0)
+    # Whether the air is turbulent (scenario `environment.turbulence` not "none"): then the
+    # model also carries the ownship with the gust it measures (avoidance.model.ownship_air).
+    # In steady air the measured drift is only where the model's air velocity (airspeed
+    # along the heading) differs from the aircraft's (sideslip, climb), not moving air.
+    gusts: bool = False
     # The action set (uavxai.vocabulary.ACTION_SETS): "paper" the nine, "vertical" adds climb
     # and descend, which step a persistent vertical command; climbing (descending) the
     # autopilot's height target is this far below the flight area's ceiling (above its
@@ -196,6 +201,7 @@ class PlannerConfig:
             "actions": a.actions,
             "seed": scenario.seed,
             "wind_mps": EnvironmentConfig.from_scenario(scenario).wind_enu[:2],
+            "gusts": EnvironmentConfig.from_scenario(scenario).turbulence != "none",
         }
         fields.update(overrides)
         return cls(**fields)  # type: ignore[arg-type]
