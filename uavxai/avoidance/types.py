@@ -181,6 +181,8 @@ class PlannerConfig:
         """The planner settings of a scenario: its `avoidance` section, world bounds and seed."""
         from uavxai.dynamics.environment import EnvironmentConfig  # jsbsim only when asked
 
+        env = EnvironmentConfig.from_scenario(scenario)
+
         a, w = scenario.avoidance, scenario.world
         fields = {
             "x_bounds": tuple(w.x),
@@ -200,8 +202,8 @@ class PlannerConfig:
             "action_hold_s": a.mcts.action_hold_s,
             "actions": a.actions,
             "seed": scenario.seed,
-            "wind_mps": EnvironmentConfig.from_scenario(scenario).wind_enu[:2],
-            "gusts": EnvironmentConfig.from_scenario(scenario).turbulence != "none",
+            "wind_mps": env.wind_enu[:2],
+            "gusts": env.turbulence != "none",
         }
         fields.update(overrides)
         return cls(**fields)  # type: ignore[arg-type]

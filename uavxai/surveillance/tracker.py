@@ -313,7 +313,6 @@ class SurveillancePicture:
         self.config = config or SurveillanceConfig()
         self.surveillance = Surveillance(self.config, seed)
         self.tracker = Tracker(tracker, wind_mps)
-        self.last_reports: list[Report] = []
         self._t_observed: float | None = None
 
     def sample(self, state: TrafficState) -> list[Report]:
@@ -325,9 +324,7 @@ class SurveillancePicture:
         self._t_observed = state.t
         if self.config.model == "truth":
             return []
-        reports = self.surveillance.observe(state)
-        self.last_reports = reports
-        return reports
+        return self.surveillance.observe(state)
 
     def ingest(self, reports: Iterable[Report]) -> None:
         """Feed reports to the tracker (e.g. decoded from ADSB_VEHICLE by the bridge)."""
