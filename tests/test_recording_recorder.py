@@ -246,3 +246,39 @@ def test_non_finite_metrics_become_gaps(tmp_path):
         rec.log_metrics(0.1, min_separation_m=80.0)
     _, values = column(chunks_by_path(path)["/metrics/min_separation_m"], "Scalars:scalars")
     assert math.isnan(values[0][0]) and values[1][0] == 80.0
+
+
+def test_log_sample_derives_the_metrics_from_the_sample(tmp_path):
+    """One call per sample: the traffic, and the metrics the recorder computes from it: the
+    sum rate at the ownship with the run's link (NaN without one), the separation, the bank
+    and the airspeed."""
+    from uavxai.comms.channel import Channel
+    from uavxai.scenario import default_scenario
+
+    users = synthetic.users(4)
+    channel = Channel.from_scenario(default_scenario("rec"), users=users)
+    power = np.full(4, 0.25)
+    states = list(synthetic.traffic(N_INTRUDERS, 1.0, seed=2))
+    for link, name in ((channel, power), "link"), (None, "none"):
+        rec = RunRecorder(tmp_path / f"{name}.rrd")
+        rec.log_setup(synthetic.BOUNDS, users, None, None, INTRUDER_IDS, synthetic.GOAL, link=link)
+        for s in states:
+            rec.log_sample(s, decision_ms=12.0)
+        rec.close()
+        chunks = chunks_by_path(tmp_path / f"{name}.rrd")
+        _, own = column(chunks["/world/ownship"], "Transform3D:translation")
+        assert len(own) == len(states)
+        got = {
+            m: [v[0] for v in column(chunks[f"/{ent.metric_path(m)}"], "Scalars:scalars")[1]]
+            for m in ent.METRIC_NAMES
+        }
+        rates = [float(channel.sum_rate_bps(s.pos[0], power)) for s in states]
+        if link is None:
+            assert all(math.isnan(v) for v in got["sum_rate_bps"])
+        else:
+            np.testing.assert_allclose(got["sum_rate_bps"], rates, rtol=1e-6)
+            assert len(set(rates)) > 1  # the ownship moved: the rates are per sample
+        np.testing.assert_allclose(got["min_separation_m"], [s.min_separation() for s in states])
+        np.testing.assert_allclose(got["bank_deg"], [math.degrees(s.att[0, 0]) for s in states])
+        np.testing.assert_allclose(got["airspeed_mps"], [s.airspeed[0] for s in states])
+        assert got["decision_ms"] == [12.0] * len(states)

@@ -89,6 +89,45 @@ def test_an_output_is_an_observer_and_sees_every_event() -> None:
     assert r.summary["counted"] and r.summary["outcome"] == "timeout"
 
 
+class _Positions(Observer):
+    """The ownship's position at every sample; Ctrl-C after ``stop_after`` samples."""
+
+    def __init__(self, stop_after: int | None = None) -> None:
+        self.pos: list[np.ndarray] = []
+        self.stop_after = stop_after
+
+    def on_sample(self, ep, state) -> None:
+        self.pos.append(state.pos[0].copy())
+        if len(self.pos) == self.stop_after:
+            raise KeyboardInterrupt
+
+
+@pytest.mark.parametrize("stop_after", [None, 15])
+def test_throughput_integrates_every_sample_flown(stop_after: int | None) -> None:
+    """The in-flight throughput evaluates the channel a period at a time: it still counts
+    every sample, in an episode cut short in the middle of a period too."""
+    from uavxai.avoidance.planners import make_planner
+    from uavxai.avoidance.types import PlannerConfig
+    from uavxai.comms.channel import Channel
+    from uavxai.sim.observers import Throughput
+
+    sc = default_scenario("tput", seed=4, avoidance={"max_steps": 4}, comms={"fading": "none"})
+    users = np.array([[200.0, 300.0, 0.0], [900.0, 400.0, 0.0], [500.0, 1200.0, 0.0]])
+    channel = Channel.from_scenario(sc, users=users)
+    power = channel.equal_power()
+    seen, tput = _Positions(stop_after), Throughput(channel, power)
+    planner = make_planner("none", PlannerConfig.from_scenario(sc))
+    # the throughput first: it has seen a sample when the other observer interrupts
+    r = fly(
+        sc, planner, (1900, 1900, 120), dynamics="kinematic", intruders=[], observers=[tput, seen]
+    )
+    assert len(seen.pos) == (40 if stop_after is None else 15)
+    assert r.outcome is (Outcome.TIMEOUT if stop_after is None else Outcome.INTERRUPTED)
+    rates = [float(channel.sum_rate_bps(p, power)) for p in seen.pos]
+    assert r.summary["throughput_in_flight_bits"] == pytest.approx(sum(rates) * 0.1, rel=1e-12)
+    assert len(set(rates)) > 1  # the ownship moved: each sample has its own rate
+
+
 def test_kinematic_world_flies_the_commanded_turn() -> None:
     """A 30 deg bank at 20 m/s turns at g tan(phi) / V once the roll has settled."""
     sc = default_scenario("turn")

@@ -152,7 +152,7 @@ def test_the_companion_decodes_and_tracks_as_the_simulation_would() -> None:
     sc = default_scenario("rx", seed=3, intruders={"count": 6})
     world = KinematicWorld(sc, seed=sc.seed)
     here = Picture(sc)
-    with Companion("none", PlannerConfig(), scenario=sc) as companion:
+    with Companion("mcts", PlannerConfig(), scenario=sc) as companion:
         there = Picture(sc, receiver=companion.receiver)
         assert there.receiver is companion.receiver
         seen = 0
@@ -166,3 +166,14 @@ def test_the_companion_decodes_and_tracks_as_the_simulation_would() -> None:
                 assert there(state) == beliefs
                 seen = max(seen, len(beliefs))
         assert seen >= 5  # the intruders really were tracked, over there as here
+        # Planning from its own picture (no round trip for the beliefs) plans from the same
+        # beliefs and gives them back with the decision.
+        own, goal = Ownship(*state.pos[0], 20.0, 0.0), (1000.0, 1000.0, 120.0)
+        companion.reset(4)
+        companion.submit_onboard(own, state.t, goal, step=3)
+        decision = companion.result()
+        assert companion.beliefs == here(state)
+        local = make_planner("mcts", PlannerConfig())
+        local.reset(4)
+        expected = local.plan(own, here(state), goal, step=3)
+        assert [c.q for c in decision.children] == [c.q for c in expected.children]

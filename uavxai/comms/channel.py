@@ -187,6 +187,10 @@ class Channel:
         rate = self.user_bandwidth_hz() * np.log2(1.0 + gamma)
         return LinkReport(gain=g, sinr=gamma, rate_bps=rate, objective=self.objective(rate))
 
+    def sum_rate_bps(self, uav: np.ndarray, power_w: np.ndarray) -> np.ndarray:
+        """The sum rate (6) from ``uav`` (3,) or positions (..., 3), without fading."""
+        return self.evaluate(uav, power_w).sum_rate_bps
+
     def equal_power(self) -> np.ndarray:
         return np.full(self.k, self.p_max_w / self.k)
 

@@ -24,6 +24,7 @@ import numpy as np
 import rerun as rr
 
 from uavxai.avoidance.types import Decision
+from uavxai.comms.channel import Channel
 from uavxai.dynamics.geodesy import LocalFrame
 from uavxai.dynamics.state import TrafficState
 from uavxai.recording import entities as ent
@@ -60,6 +61,7 @@ class RunRecorder:
         self._mission = MissionLog(self._stream)
         self._metrics: dict[str, list[tuple[float, int, float]]] = defaultdict(list)
         self._decision = 0
+        self._link: tuple[Channel, np.ndarray] | None = None  # see log_setup
         self._last_flush_t = -math.inf
         self._last_t = -math.inf  # the latest sim time seen, where the run ends on close
         self._closed = False
@@ -133,8 +135,12 @@ class RunRecorder:
         intruder_ids: list[str],
         goal: np.ndarray,
         origin: LocalFrame | object | None = None,
+        link: tuple[Channel, np.ndarray] | None = None,
     ) -> None:
         """The static scene: flight area, users, service point and its search, goal, models.
+
+        ``link`` (the channel and the service plan's powers) gives :meth:`log_sample` the
+        sum rate at the ownship's position, computed here, off the simulation's core.
 
         ``origin`` (a LocalFrame, or the scenario's ``world.origin``) turns on the map view:
         aircraft, users, orbit and service points are then also logged as GeoPoints. Users and
@@ -143,6 +149,7 @@ class RunRecorder:
         """
         if not self.enabled:
             return
+        self._link = link
         if origin is not None:
             frame = origin if isinstance(origin, LocalFrame) else LocalFrame.from_origin(origin)
             self._mission.frame = frame
@@ -284,6 +291,26 @@ class RunRecorder:
         stream.log(ent.EXPLANATION, rr.TextLog(f"#{k}: {decision.explanation}", level="INFO"))
         if decision.counterfactual:
             stream.log(ent.EXPLANATION, rr.TextLog(decision.counterfactual, level="DEBUG"))
+
+    def log_sample(self, state: TrafficState, decision_ms: float = math.nan) -> None:
+        """One sample of a run in one call: the traffic (:meth:`log_traffic`) and the metrics
+        it gives (SPEC §5: the sum rate at the ownship's position with the ``link`` of
+        :meth:`log_setup`, NaN without one; the separation, capped at 10 km; the ownship's
+        bank and airspeed) with the last decision's planning time."""
+        if not self.enabled:
+            return
+        self.log_traffic(state)
+        rate = math.nan
+        if self._link is not None:
+            rate = float(self._link[0].sum_rate_bps(state.pos[0], self._link[1]))
+        self.log_metrics(
+            state.t,
+            sum_rate_bps=rate,
+            min_separation_m=min(state.min_separation(), 1e4),
+            bank_deg=math.degrees(float(state.att[0, 0])),
+            airspeed_mps=float(state.airspeed[0]),
+            decision_ms=decision_ms,
+        )
 
     def log_metrics(self, t: float, **scalars: float) -> None:
         """Scalars at sim time ``t``, each to ``metrics/<name>``; inf/nan are kept as gaps."""

@@ -50,6 +50,13 @@ class Onboard:
     def receive(self, *args) -> None:
         self.receiver.receive(*args)
 
+    def plan_onboard(
+        self, own: Ownship, t: float, goal: Goal, *, step: int = 0
+    ) -> tuple[list[Intruder], Decision]:
+        """Plan from this receiver's beliefs at ``t``; both come back."""
+        intruders = self.receiver.beliefs(t)
+        return intruders, self.planner.plan(own, intruders, goal, step=step)
+
     def beliefs(self, t: float) -> list[Intruder]:
         return self.receiver.beliefs(t)
 
@@ -91,6 +98,8 @@ class Companion:
         path = None if checkpoint is None else str(checkpoint)
         self._worker = Worker(Onboard, name, config, path, scenario, name=f"planner '{name}'")
         self.receiver = _RemoteReceiver(self._worker) if scenario is not None else None
+        self.beliefs: list[Intruder] = []  # the picture of the last submit_onboard
+        self._onboard = False
 
     @property
     def pid(self) -> int | None:
@@ -113,9 +122,20 @@ class Companion:
         """Start planning; :meth:`result` returns the decision."""
         self._worker.submit("plan", own, list(intruders), tuple(goal), step=step)
 
+    def submit_onboard(self, own: Ownship, t: float, goal: Goal, *, step: int = 0) -> None:
+        """Start planning from the companion's own picture of the traffic at ``t`` (its
+        :attr:`receiver`'s beliefs, as :meth:`submit` would be given them, without the round
+        trip); :meth:`result` returns the decision and :attr:`beliefs` the picture."""
+        self._worker.submit("plan_onboard", own, t, tuple(goal), step=step)
+        self._onboard = True
+
     def result(self) -> Decision:
         """The decision of the last :meth:`submit`, waiting for it if the search is not done."""
-        return self._worker.result()
+        value = self._worker.result()
+        if self._onboard:
+            self._onboard = False
+            self.beliefs, value = value
+        return value
 
     def close(self) -> None:
         self._worker.close()

@@ -24,6 +24,8 @@ from uavxai.sim.judge import Judge
 from uavxai.surveillance.tracker import truth_beliefs
 from uavxai.vocabulary import Outcome
 
+_ONBOARD = object()  # a pending decision's picture, still on the companion that planned it
+
 
 def ownship_view(state: TrafficState, bank_cmd: float, vertical: int = 0) -> Ownship:
     """The ownship as the planner sees it: its own navigation state (with its ground
@@ -129,9 +131,11 @@ class Episode:
         reaches the autopilot, in :meth:`advance` (None here)."""
         state = self.state
         own = self.ownship()
-        intruders = self.picture(state)
         m = self.mission
         goal = m.goal if m is not None else self.goal
+        if self._plan_onboard(state, own, goal):
+            return None
+        intruders = self.picture(state)
         if self.path.operator_in_command(state.t):
             decision = self._advise(own, intruders, goal)
         else:
@@ -157,6 +161,26 @@ class Episode:
         event = DecisionEvent(self.steps - 1, state.t, own, intruders, decision, state)
         return self._decided(event)
 
+    def _plan_onboard(self, state: TrafficState, own: Ownship, goal) -> bool:
+        """A companion that also tracks the traffic plans from its own picture of it: one
+        round trip fewer per decision, the same beliefs (they come back with the decision,
+        :meth:`_arrive`). Only where nothing else needs the picture before the planner."""
+        onboard = getattr(self.planner, "receiver", None)
+        if (
+            onboard is None
+            or self.mission is not None
+            or not self.clock.latency_ticks
+            or getattr(self.picture, "receiver", None) is not onboard
+            or getattr(self.picture, "truth", True)
+            or self._overridden
+            or self.path.operator_in_command(state.t)
+        ):
+            return False
+        self.planner.submit_onboard(own, state.t, goal, step=self._leg_step())
+        self._pending = (self.steps, state.t, own, _ONBOARD, state, None)
+        self.steps += 1
+        return True
+
     def _decided(self, event: DecisionEvent) -> DecisionEvent:
         self.decision_ms.append(event.decision.ms)
         for o in self.observers:
@@ -169,6 +193,8 @@ class Episode:
         step, t, own, intruders, truth, planned = self._pending
         self._pending = None
         decision = planned if planned is not None else self.planner.result()
+        if intruders is _ONBOARD:
+            intruders = self.planner.beliefs  # what the companion planned from
         if send:
             self.path.send(decision, self.state.t)
         return self._decided(DecisionEvent(step, t, own, intruders, decision, truth, self.state.t))

@@ -124,24 +124,34 @@ class Trust(Observer):
 
 
 class Throughput(Observer):
-    """The sum rate the service allocation gives from where the UAV flies, on the mean channel
-    (no fading: the curve shows geometry), integrated over the flight; evaluated in blocks."""
+    """In-flight throughput: the sum rate at the ownship's position (the service plan's
+    users and powers) integrated over the flight. Positions are kept per sample and the
+    channel evaluated once per decision period, vectorised over them."""
 
     def __init__(self, channel, power_w: np.ndarray) -> None:
         self.channel = channel
         self.power_w = np.asarray(power_w, dtype=float)
         self.bits = 0.0
-
-    def sum_rate(self, positions: np.ndarray) -> np.ndarray:
-        return np.asarray(self.channel.evaluate(positions, self.power_w).sum_rate_bps)
+        self._pending: list[np.ndarray] = []  # ownship positions not yet evaluated
+        self._sample_s = 0.0
 
     def on_sample(self, ep: Episode, state: TrafficState) -> None:
-        rate = float(self.sum_rate(state.pos[0]))
-        ep.sample_metrics["sum_rate_bps"] = rate
-        self.bits += rate * ep.clock.sample_s
+        self._pending.append(state.pos[0].copy())
+        self._sample_s = ep.clock.sample_s
+
+    def on_period(self, ep: Episode, event: DecisionEvent, flown_min_m: float) -> None:
+        self._evaluate()
 
     def on_end(self, ep: Episode, summary: dict) -> None:
+        self._evaluate()  # an interrupted period
         summary["throughput_in_flight_bits"] = self.bits
+
+    def _evaluate(self) -> None:
+        if self._pending:
+            rates = self.channel.sum_rate_bps(np.array(self._pending), self.power_w)
+            for rate in rates.tolist():  # summed in sample order, as the flight went
+                self.bits += rate * self._sample_s
+            self._pending.clear()
 
 
 class Rerun(Observer):
@@ -169,7 +179,7 @@ class Rerun(Observer):
 
     def on_sample(self, ep: Episode, state: TrafficState) -> None:
         rec, m, t = self.recorder, ep.mission, state.t
-        rec.log_traffic(state)
+        rec.log_sample(state, self._ms)  # the traffic and the metrics derived from it
         if "users_xyz" in ep.sample_metrics:
             qos = ep.sample_metrics.get("qos_bps", 0.0)
             rates = ep.sample_metrics["user_rates_bps"]
@@ -182,14 +192,6 @@ class Rerun(Observer):
                 _, *xyz = m.service_points[self._points]
                 rec.log_service_point(t, np.asarray(xyz))
                 self._points += 1
-        self.recorder.log_metrics(
-            state.t,
-            sum_rate_bps=ep.sample_metrics.get("sum_rate_bps", math.nan),
-            min_separation_m=min(state.min_separation(), 1e4),
-            bank_deg=math.degrees(float(state.att[0, 0])),
-            airspeed_mps=float(state.airspeed[0]),
-            decision_ms=self._ms,
-        )
 
     def close(self) -> None:
         self.recorder.close()

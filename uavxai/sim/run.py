@@ -110,8 +110,9 @@ def run_episode(
         planner = Companion(sc.avoidance.planner, config, checkpoint, scenario=sc)
     else:
         planner = make_planner(sc.avoidance.planner, config, checkpoint=checkpoint)
+    channel = Channel.from_scenario(sc, users=service.users)
     observers = [
-        Throughput(Channel.from_scenario(sc, users=service.users), service.power_w),
+        Throughput(channel, service.power_w),
         Energy(),
         Trust(),
         TrajectoryCSV(out / "trajectory.csv"),
@@ -119,13 +120,12 @@ def run_episode(
     ]
     mission = mission_of(sc, goal)
     if mission is not None:
-        observers.append(
-            Service(sc, observers[0].channel, service.power_w, out, replan=_replanner(sc))
-        )
+        observers.append(Service(sc, channel, service.power_w, out, replan=_replanner(sc)))
     record = sc.log.rerun if record is None else record
     if record or spawn or rerun_file is not None:
         # --spawn records to the file too: a viewer problem never loses the run's recording
-        observers.append(_rerun(sc, service, rerun_file or out / "run.rrd", spawn))
+        link = (channel, service.power_w)  # the recorder's metrics/sum_rate_bps
+        observers.append(_rerun(sc, service, rerun_file or out / "run.rrd", spawn, link))
     if realtime:
         observers.append(Pacing(realtime))
     if progress is not None:
@@ -164,7 +164,7 @@ def _replanner(sc: Scenario):
     return replan
 
 
-def _rerun(sc: Scenario, service, path: Path, spawn: bool) -> Rerun:
+def _rerun(sc: Scenario, service, path: Path, spawn: bool, link: tuple) -> Rerun:
     from uavxai.recording.recorder import RecorderProcess
 
     recorder = RecorderProcess(
@@ -179,6 +179,7 @@ def _rerun(sc: Scenario, service, path: Path, spawn: bool) -> Rerun:
         "service_point": service.service_point,
         "search_path": service.visited,
         "origin": sc.world.origin,
+        "link": link,
     }
     return Rerun(recorder, setup)
 
