@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from uavxai.avoidance.types import PlannerConfig
 from uavxai.dynamics.world import JSBSimWorld
 from uavxai.scenario import Scenario, default_scenario
 
@@ -82,6 +83,43 @@ def fly(
         command=dict(command),
         failure=failure,
     )
+
+
+CLIMB_TIMES = (1.0, 2.0, 4.0, 8.0)  # s after the vertical command
+
+
+def climb_scenario(speed: float, turbulence: str, seed: int) -> Scenario:
+    """The ownship alone with the vertical action set, at ``speed``, in ``turbulence``."""
+    start = {"x": 1000, "y": 1000, "h": 150, "heading_deg": 0, "speed_mps": speed}
+    return default_scenario(
+        "climb-probe",
+        seed=seed,
+        intruders={"count": 0},
+        ownship={"start": start},
+        environment={"turbulence": turbulence},
+        avoidance={"actions": "vertical"},
+    )
+
+
+def height_gained(scenario: Scenario, bank_deg: float, vertical: int) -> list[float]:
+    """Height change at CLIMB_TIMES after the vertical command ``vertical`` (+1 climb, -1
+    descend), from level flight or a held bank of ``bank_deg``, at the start's speed target."""
+    cfg = PlannerConfig.from_scenario(scenario)
+    world = JSBSimWorld(scenario)
+    try:
+        speed = scenario.ownship.start.speed_mps
+        world.command_ownship(bank_cmd_rad=math.radians(bank_deg), speed_target_mps=speed)
+        world.advance(6.0)
+        h0 = world.state().pos[0, 2]
+        world.command_ownship(alt_target_m=cfg.height_target(vertical, h0))
+        out, t = [], 0.0
+        for t_next in CLIMB_TIMES:
+            world.advance(t_next - t)
+            t = t_next
+            out.append(float(world.state().pos[0, 2] - h0))
+    finally:
+        world.close()
+    return out
 
 
 # ------------------------------------------------------------------------------ measures

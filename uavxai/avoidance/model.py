@@ -9,7 +9,8 @@ roll-rate limit; the turn is coordinated, ``psi_dot = g tan(phi) / V``; the spee
 the commanded acceleration within the speed limits; the altitude moves towards the action's
 height target (:meth:`PlannerConfig.height_target`: the goal's altitude for the paper's nine,
 the ceiling or floor less a margin for the vertical set's climb and descend; what the JSBSim
-autopilot is given) at the bounded climb rate. Everything is in closed form over a grid of
+autopilot is given) at the bounded climb rate, which the autopilot's speed priority cuts
+at low speed (:func:`climb_rate`). Everything is in closed form over a grid of
 sub-steps, so a segment costs a fixed number of numpy calls. The speed and heading are the
 air's (airspeed, heading: what the aircraft's own instruments give); the steady wind the
 planner knows (``PlannerConfig.wind_mps``) carries the air mass, and so every flown path, over
@@ -127,6 +128,13 @@ def bank_command(current_cmd, action, cfg: PlannerConfig):
 
 def accel_command(action, cfg: PlannerConfig):
     return _ACCEL_SIGN[action] * cfg.accel_mps2
+
+
+def climb_rate(speed, cfg: PlannerConfig):
+    """The fastest the ownship climbs at airspeed ``speed`` (array or number): the climb-rate
+    limit, cut by the autopilot's speed priority (``PlannerConfig.climb_speed_band_mps``)."""
+    lo, hi = (cfg.speed_mps[0] + b for b in cfg.climb_speed_band_mps)
+    return cfg.climb_rate_mps * np.clip((np.asarray(speed) - lo) / (hi - lo), 0.0, 1.0)
 
 
 def vertical_command(current, action):
@@ -377,6 +385,8 @@ class _BodyMotion:
     template: np.ndarray | None = None  # (B, 7) end states with V, PHI, PHI_CMD filled in
     z_end: np.ndarray | None = None  # (B,) the last column of z
     rows: tuple = ()  # per row (z_end, dpsi, v_end, phi_end, phi_cmd) as Python numbers
+    rise: np.ndarray | None = None  # (B, n+1) the most it can have climbed by each instant
+    rise_end: tuple[float, ...] = ()  # per row, the last column of rise
 
 
 @dataclass(slots=True)
@@ -628,16 +638,18 @@ class EncounterModel:
             body = self._memo[key] = self._body(v_, phi_, cmd_, self.actions, duration, n)
         origin = complex(x, y)
         rot = complex(math.cos(psi), -math.sin(psi))
-        climb = cfg.climb_rate_mps * duration
+        sink = cfg.climb_rate_mps * duration
         vcmd = self._level
         if self.vertical:  # each vertical command has its height target
             vc = int(state[VCMD]) if len(state) > VCMD else 0
             vcmd = tuple(min(max(vc + c, -1), 1) for c in self._climbs)
             target = {m: cfg.height_target(m, goal[2]) for m in set(vcmd)}
-            h_of = {m: h + min(max(t - h, -climb), climb) for m, t in target.items()}
-            h_ends = tuple(h_of[m] for m in vcmd)
+            heights = [target[m] for m in vcmd]
         else:
-            h_ends = (h + min(max(goal[2] - h, -climb), climb),) * self.actions.size
+            heights = [goal[2]] * self.actions.size
+        h_ends = tuple(
+            h + min(max(t - h, -sink), rise) for t, rise in zip(heights, body.rise_end, strict=True)
+        )
         drift = self.drift(duration, n)
         placed = Children(origin + drift[-1], rot, h_ends, psi, body, vcmd)
 
@@ -651,11 +663,8 @@ class EncounterModel:
         xy = origin + body.z * rot + drift
         if h_lo == h_hi:
             hs = np.full((1, n + 1), h)
-        elif self.vertical:
-            targets = np.array([target[m] for m in vcmd])[:, None]
-            hs = h + np.clip(targets - h, *self._climb_window(duration, n))
         else:
-            hs = h + np.clip(goal[2] - h, *self._climb_window(duration, n))[None]
+            hs = h + np.clip(np.array(heights)[:, None] - h, self._sink(duration, n), body.rise)
         own_step = self._own_step(body, duration / n)
         seen = _Intruders.of(track, near)
         return placed, self._events(None, xy, hs, goal, seen, box, duration / n, own_step, False)
@@ -670,9 +679,11 @@ class EncounterModel:
         n = self.substeps(duration)
         hold = np.full(len(states), 4)  # hold bank, hold speed: the command is bank_cmd itself
         body = self._body(states[:, V], states[:, PHI], bank_cmd, hold, duration, n)
-        xy = (states[:, X, None] + 1j * states[:, Y, None]) + body.z * np.exp(
-            -1j * states[:, PSI, None]
-        ) + self.drift(duration, n)
+        xy = (
+            (states[:, X, None] + 1j * states[:, Y, None])
+            + body.z * np.exp(-1j * states[:, PSI, None])
+            + self.drift(duration, n)
+        )
         end = self._end(xy[:, -1], states[:, H], states[:, PSI], body)
         pos = np.stack([xy.real.T, xy.imag.T, np.broadcast_to(states[:, H], xy.T.shape)], axis=-1)
         return pos, end
@@ -689,7 +700,7 @@ class EncounterModel:
             vc = states[:, VCMD] if states.shape[1] > VCMD else 0
             vcmd = vertical_command(vc, actions)
             target = self.height_targets(vcmd, goal[2])[:, None]
-        hs = h0 + np.clip(target - h0, *self._climb_window(duration, n))
+        hs = h0 + np.clip(target - h0, self._sink(duration, n), body.rise)
         end = self._end(xy[:, -1], hs[:, -1], states[:, PSI], body)
         end[:, VCMD] = vcmd
         # The cylinder: centred on the samples' box, radius to the farthest, half-height.
@@ -718,9 +729,9 @@ class EncounterModel:
         """Longest 3-D straight piece of the ownship's sampled path (over the ground)."""
         return math.hypot(body.step_max + abs(self._wind) * dt, self.config.climb_rate_mps * dt)
 
-    def _climb_window(self, duration: float, n: int) -> tuple[np.ndarray, np.ndarray]:
-        climb = self.config.climb_rate_mps * (duration / n) * np.arange(n + 1)
-        return -climb, climb
+    def _sink(self, duration: float, n: int) -> np.ndarray:
+        """(n+1,) the most the ownship can have sunk by each sub-step instant (negative)."""
+        return -self.config.climb_rate_mps * (duration / n) * np.arange(n + 1)
 
     def _near_goal(self, box: _Cylinder, goal: np.ndarray) -> bool:
         """Could a path inside ``box`` come within the goal radius?"""
@@ -769,6 +780,8 @@ class EncounterModel:
             np.abs(dphi[:, 0]) <= roll_reach, phi_cmd, phi0 + np.sign(dphi[:, 0]) * roll_reach
         )
         v_end = np.clip(v0 + accel * duration, vmin, vmax)
+        rise = np.zeros((len(v0), n + 1))  # the climb at each sub-step's midpoint speed
+        np.cumsum(climb_rate(v_m, cfg) * dt, axis=1, out=rise[:, 1:])
         lo = complex(z.real.min(), z.imag.min())
         hi = complex(z.real.max(), z.imag.max())
         ball = 0.5 * (lo + hi)
@@ -795,6 +808,8 @@ class EncounterModel:
                     strict=True,
                 )
             ),
+            rise=rise,
+            rise_end=tuple(rise[:, -1].tolist()),
         )
 
     def _end(self, xy_end, h_end, psi, body: _BodyMotion) -> np.ndarray:

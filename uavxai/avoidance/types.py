@@ -60,6 +60,23 @@ class Intruder:
 
 INTRUDER_MODELS = ("cv", "ct", "reachable")
 
+# The uav_fw autopilot's speed priority (ap/climb-rate-max-mps: 2 x (airspeed - (minimum
+# speed - 1 m/s)), clipped to the climb-rate limit 2.5 m/s): no climb demanded 1 m/s below its
+# minimum speed, the full rate 0.25 m/s above it; relative to the minimum speed.
+CLIMB_SPEED_BAND_MPS = (-1.0, 0.25)
+
+
+def climb_speed_band(gust_sigma_mps: float) -> tuple[float, float]:
+    """The speeds (relative to the minimum) between which the ownship's climb rate grows from
+    0 to the limit, in air whose gusts along the path have intensity ``gust_sigma_mps``: the
+    autopilot reads its speed priority off the airspeed of the moment, which the gusts swing
+    by that sigma, so its full rate is sure only one sigma above its band (measured, a lone
+    uav_fw in moderate turbulence, climb of 4 s / 8 s at speed targets 12 and 13 m/s: median
+    3.4 / 7.1 m and 6.8 / 15.6 m against 4.5 / 12.1 and 7.9 / 18.5 m in calm air;
+    benchmarks/bench_climb.py)."""
+    lo, hi = CLIMB_SPEED_BAND_MPS
+    return lo, hi + gust_sigma_mps
+
 
 @dataclass(frozen=True)
 class PlannerConfig:
@@ -84,6 +101,13 @@ class PlannerConfig:
     # The JSBSim autopilot holds the altitude target it is given (the goal's altitude) and
     # climbs or descends towards it no faster than this.
     climb_rate_mps: float = 2.5
+    # Speed before height, as the autopilot flies it (ap/climb-rate-max-mps in
+    # aircraft/uav_fw/Systems/uav_fw_autopilot.xml): it demands no climb at airspeeds below
+    # speed_mps[0] + climb_speed_band_mps[0], the full climb rate from speed_mps[0] +
+    # climb_speed_band_mps[1], linearly between; the model climbs no faster at its speed.
+    # Sinking is not limited by speed. from_scenario raises the top of the band in turbulent
+    # air, where the airspeed the autopilot reads swings with the gusts (climb_speed_band).
+    climb_speed_band_mps: tuple[float, float] = CLIMB_SPEED_BAND_MPS
     # Longest sub-step of the encounter model. Collision checks are exact along each
     # sub-step's chord, so this only bounds how far the chord strays from the true arc
     # (at 20 m/s and 30 deg bank, 0.5 s gives 0.2 m).
@@ -139,7 +163,7 @@ class PlannerConfig:
                 "PlannerConfig.late_collision_value must be below the time-out's value 0.1, "
                 f"got {self.late_collision_value}."
             )
-        for name in ("x_bounds", "y_bounds", "h_bounds", "speed_mps"):
+        for name in ("x_bounds", "y_bounds", "h_bounds", "speed_mps", "climb_speed_band_mps"):
             lo, hi = getattr(self, name)
             if not lo < hi:
                 raise UserError(f"PlannerConfig.{name} must be (min, max) with min < max.")
@@ -204,6 +228,7 @@ class PlannerConfig:
             "seed": scenario.seed,
             "wind_mps": env.wind_enu[:2],
             "gusts": env.turbulence != "none",
+            "climb_speed_band_mps": climb_speed_band(env.gust_airspeed_sigma_mps()),
         }
         fields.update(overrides)
         return cls(**fields)  # type: ignore[arg-type]

@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from uavxai.dynamics.aircraft import TURBULENCE, wind_ne_from
+from uavxai.dynamics.aircraft import FT, KT, TURBULENCE, wind_ne_from
 from uavxai.errors import UserError
 
 
@@ -52,6 +52,14 @@ class EnvironmentConfig:
         to get the ground velocity."""
         north, east = self.wind_ne
         return east, north, 0.0
+
+    def gust_airspeed_sigma_mps(self, h_m: float = 120.0) -> float:
+        """The intensity of the gusts along the flight path, sigma_u (m/s), at ``h_m`` above
+        ground: MIL-F-8785C's low-altitude 0.1 W20 / (0.177 + 0.000823 h_ft)^0.4 for this
+        severity's wind at 20 ft (moderate: 2.0 m/s at 120 m); 0 in steady air. JSBSim's
+        gusts over an elevated origin are somewhat stronger (see aircraft.py)."""
+        w20 = TURBULENCE[self.turbulence][1] * KT
+        return 0.1 * w20 / (0.177 + 0.000823 * h_m / FT) ** 0.4
 
     @property
     def calm(self) -> bool:
