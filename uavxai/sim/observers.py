@@ -135,9 +135,11 @@ class Throughput(Observer):
         self._pending: list[np.ndarray] = []  # ownship positions not yet evaluated
         self._sample_s = 0.0
 
+    def on_start(self, ep: Episode) -> None:
+        self._sample_s = ep.clock.sample_s
+
     def on_sample(self, ep: Episode, state: TrafficState) -> None:
         self._pending.append(state.pos[0].copy())
-        self._sample_s = ep.clock.sample_s
 
     def on_period(self, ep: Episode, event: DecisionEvent, flown_min_m: float) -> None:
         self._evaluate()
