@@ -177,6 +177,27 @@ def test_file_carries_the_default_blueprint(recording):
     assert len(RrdReader(path).blueprints()) == 1
 
 
+def test_blueprint_keeps_the_ownship_path_and_the_intruders_recent_trails(recording):
+    """Read back from the file: the 3D view shows the ownship's whole trail up to the time
+    cursor and only the intruders' last INTRUDER_TRAIL_S (whole histories of persistent
+    traffic fill the box with lines)."""
+    from uavxai.recording.blueprint import INTRUDER_TRAIL_S
+
+    path, *_ = recording
+    reader = RrdReader(path)
+    ranges = {}
+    for chunk in reader.stream(store=reader.blueprints()[0]).to_chunks():
+        batch = chunk.to_record_batch()
+        if "VisibleTimeRanges:ranges" in batch.schema.names:
+            for rows in batch.column("VisibleTimeRanges:ranges").to_pylist():
+                ranges[chunk.entity_path] = {r["timeline"]: r["range"] for r in rows}
+    own = next(v for k, v in ranges.items() if k.endswith("/world/ownship/trail/visualizers"))
+    other = next(v for k, v in ranges.items() if k.endswith("/world/intruders/trails/visualizers"))
+    assert own == {t: {"start": None, "end": 0} for t in (ent.SIM_TIME, ent.DECISION)}
+    assert other[ent.SIM_TIME] == {"start": -round(INTRUDER_TRAIL_S * 1e9), "end": 0}
+    assert other[ent.DECISION] == {"start": -INTRUDER_TRAIL_S, "end": 0}
+
+
 def test_rerun_verifies_the_file(recording, tmp_path):
     path, *_ = recording
     binary = Path(rerun_cli.__file__).parent / "rerun"

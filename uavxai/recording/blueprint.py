@@ -26,13 +26,26 @@ _METRIC_TITLES = {
 }
 
 
-def _history_so_far() -> rrb.VisibleTimeRanges:
-    """Everything from the start of the run up to the time cursor, on both timelines."""
-    start, end = rrb.TimeRangeBoundary.infinite(), rrb.TimeRangeBoundary.cursor_relative()
+# How far back the intruders' trails reach in the 3D view. Their whole history fills a dense
+# or persistent-traffic run's box with a web of lines (hundreds of aircraft over a mission);
+# the last 30 s show where each is heading, which is what a user reads the view for. The
+# ownship's trail keeps the whole flight.
+INTRUDER_TRAIL_S = 30
+
+
+def _history(seconds: int | None = None) -> rrb.VisibleTimeRanges:
+    """Up to the time cursor, on both timelines: from the start of the run, or only the last
+    ``seconds`` (on the decision timeline as many decisions: 1 s apart by default)."""
+    end = rrb.TimeRangeBoundary.cursor_relative()
+    if seconds is None:
+        sim_start = decision_start = rrb.TimeRangeBoundary.infinite()
+    else:
+        sim_start = rrb.TimeRangeBoundary.cursor_relative(seconds=-float(seconds))
+        decision_start = rrb.TimeRangeBoundary.cursor_relative(seq=-int(seconds))
     return rrb.VisibleTimeRanges(
         [
-            rrb.VisibleTimeRange(ent.SIM_TIME, start=start, end=end),
-            rrb.VisibleTimeRange(ent.DECISION, start=start, end=end),
+            rrb.VisibleTimeRange(ent.SIM_TIME, start=sim_start, end=end),
+            rrb.VisibleTimeRange(ent.DECISION, start=decision_start, end=end),
         ]
     )
 
@@ -51,15 +64,15 @@ def _eye(bounds: dict[str, tuple[float, float]]) -> rrb.EyeControls3D:
 
 
 def _scene(bounds: dict[str, tuple[float, float]] | None) -> rrb.Spatial3DView:
-    def trails() -> list:
-        return [rr.LineStrips3D.from_fields().visualizer(), _history_so_far()]
+    def trails(seconds: int | None = None) -> list:
+        return [rr.LineStrips3D.from_fields().visualizer(), _history(seconds)]
 
     return rrb.Spatial3DView(
         name="world",
         origin=ent.WORLD,
         # 100 m cells: the default 1 m grid is solid grey at the scale of a flight area.
         line_grid=rrb.LineGrid3D(visible=True, spacing=100.0),
-        overrides={ent.OWNSHIP_TRAIL: trails(), ent.INTRUDER_TRAILS: trails()},
+        overrides={ent.OWNSHIP_TRAIL: trails(), ent.INTRUDER_TRAILS: trails(INTRUDER_TRAIL_S)},
         eye_controls=_eye(bounds) if bounds is not None else None,
     )
 
