@@ -218,9 +218,15 @@ def test_ray_local_gives_the_same_rows(local_rows: list[dict]) -> None:
 
 @pytest.mark.slow
 def test_mcts_beats_the_learned_baselines_on_collisions() -> None:
-    """The paper's claim on a reduced campaign: 40 episodes at 20 and 40 intruders."""
+    """The paper's claim on a reduced campaign: 40 episodes at 20 and 40 intruders. MCTS
+    collides no more often than either learned planner at each density, and less often
+    over the campaign. (Not "less often at each density": at 20 straight intruders none of
+    the three collides in 40 episodes, where no planner can be shown better than another.)"""
     rows = run_campaign(SCENARIO, ["mcts", "dqn", "safe_dqn"], [20, 40], 40, workers=2)
     rate = {(r["method"], r["intruders"]): r["collision_rate"] for r in summarise(rows)}
-    for n in (20, 40):
-        assert rate[("mcts", n)] < rate[("dqn", n)], (n, rate)
-        assert rate[("mcts", n)] < rate[("safe_dqn", n)], (n, rate)
+    for baseline in ("dqn", "safe_dqn"):
+        for n in (20, 40):
+            assert rate[("mcts", n)] <= rate[(baseline, n)], (n, rate)
+        assert sum(rate[("mcts", n)] for n in (20, 40)) < sum(
+            rate[(baseline, n)] for n in (20, 40)
+        ), rate

@@ -214,10 +214,40 @@ def test_flying_into_the_ground_is_reported() -> None:
         assert w.state().pos[0, 2] < 1.0
 
 
+def _lose_control(w: JSBSimWorld, row: int) -> None:
+    w.aircraft[row].fdm["ap/engaged"] = 0.0
+    w.aircraft[row].fdm["fcs/aileron-cmd-norm"] = 1.0  # full aileron, no autopilot
+
+
 def test_loss_of_control_is_reported() -> None:
-    with JSBSimWorld(_scenario(count=1)) as w:
-        w.aircraft[1].fdm["ap/engaged"] = 0.0
-        w.aircraft[1].fdm["fcs/aileron-cmd-norm"] = 1.0  # full aileron, no autopilot
+    sc = default_scenario("world-test", intruders={"count": 1, "flow": "none"})
+    with JSBSimWorld(sc) as w:
+        _lose_control(w, 1)
         w.advance(10.0)
         assert w.failure() is not None
         assert w.failure().startswith("intruder-1 left the flight envelope")
+
+
+def test_an_intruder_lost_with_persistent_traffic_is_replaced_and_the_flight_goes_on() -> None:
+    """The ownship's run does not end because an intruder crashed: as one that left the
+    area, it gives way to a newcomer at the edge at once, and nobody sees the wreck."""
+    with JSBSimWorld(_scenario(count=2)) as w:
+        _lose_control(w, 1)
+        for _ in range(100):
+            w.step(round(0.1 / w.dt))
+            s = w.state()
+            assert w.failure() is None
+            if w.lost_intruders:
+                break
+        assert len(w.lost_intruders) == 1
+        assert w.lost_intruders[0].startswith("intruder-1 left the flight envelope")
+        assert s.ids == ("ownship", "intruder-3", "intruder-2")
+        assert abs(s.att[1, 0]) < 0.1 and 15.0 <= s.airspeed[1] <= 30.0  # trimmed, level
+        x, y = s.pos[1, :2]
+        assert (
+            min(abs(x - v) for v in w.scenario.world.x) < 1
+            or min(abs(y - v) for v in w.scenario.world.y) < 1
+        )  # at the edge
+        assert math.hypot(x - s.pos[0, 0], y - s.pos[0, 1]) >= 999.0  # clear of the ownship
+        w.advance(5.0)
+        assert w.failure() is None and w.state().t == pytest.approx(s.t + 5.0)

@@ -36,6 +36,8 @@ def entry_clearance(x_bounds: tuple[float, float], y_bounds: tuple[float, float]
     some perimeter point is at least that far: an entry can always be drawn)."""
     half = 0.5 * min(x_bounds[1] - x_bounds[0], y_bounds[1] - y_bounds[0])
     return min(ENTRY_CLEARANCE_M, 0.999 * half)
+
+
 _FLOW_STREAM = 0x464C4F  # "FLO": spawn key apart from the run's other random streams
 
 
@@ -183,7 +185,18 @@ class TrafficFlow:
         min_distance_m: float = 0.0,
     ) -> list[Entry]:
         """One newcomer per row of ``pos`` (intruders only, (N, >= 2)) that left the box,
-        in row order; ``Entry.replaces`` is that row (0-based into ``pos``).
+        in row order; ``Entry.replaces`` is that row (0-based into ``pos``). ``keep_clear``
+        and ``min_distance_m`` as in :meth:`enter`."""
+        return self.enter(np.flatnonzero(self.left(pos)), keep_clear, min_distance_m)
+
+    def enter(
+        self,
+        rows: np.ndarray | list[int],
+        keep_clear: np.ndarray | None = None,
+        min_distance_m: float = 0.0,
+    ) -> list[Entry]:
+        """One newcomer for each of ``rows`` (0-based intruder rows: ones that left, or an
+        intruder lost in a crash), in that order.
 
         ``keep_clear`` (M, >= 2) are points (the ownship) that no newcomer may appear within
         ``min_distance_m`` of, horizontally: an aircraft materialising next to the ownship
@@ -191,7 +204,7 @@ class TrafficFlow:
         1000 times; a UserError if the whole edge is too close)."""
         clear = None if keep_clear is None else np.asarray(keep_clear, dtype=float)[:, :2]
         out = []
-        for i in np.flatnonzero(self.left(pos)):
+        for i in rows:
             for _attempt in range(1000):
                 e = self.entry(replaces=int(i))
                 if (

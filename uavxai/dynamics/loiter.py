@@ -112,6 +112,7 @@ class ScheduledWorld(LoiterAutopilot):
         s = self.state()
         if self._stopped(s) or s.n < 2:
             return
+        s = self.state()  # the check may have replaced a lost intruder
         if self._flow is not None:
             entries = self._flow.replace(
                 s.pos[1:], keep_clear=s.pos[:1], min_distance_m=self._clearance

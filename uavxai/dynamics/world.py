@@ -74,6 +74,7 @@ class JSBSimWorld(ScheduledWorld):
         self._init_schedule(scenario, self.seed, len(self.intruders))
         self._cached: TrafficState | None = None
         self._failure: str | None = None
+        self.lost_intruders: list[str] = []  # intruders that failed and were replaced, why
 
         self.aircraft: list[Aircraft] = []
         self._runs: list[Callable[[], bool]] = []
@@ -236,15 +237,34 @@ class JSBSimWorld(ScheduledWorld):
         return self._failure
 
     def _check(self, s: TrafficState) -> bool:
-        """Latch the first failure found in ``s``; True if the run has failed."""
-        if self._failure is None and not _all_healthy(s):
-            for i, who in enumerate(s.ids):
-                reason = _diagnose(who, s.pos[i], s.att[i], s.airspeed[i])
-                if reason:
-                    self._failure = f"{reason} at t = {s.t:.2f} s"
-                    log.info("run ends: %s", self._failure)
-                    break
-        return self._failure is not None
+        """Latch the first failure found in ``s``; True if the run has failed.
+
+        An intruder that fails (stalls into the ground, leaves its envelope) is lost, not the
+        end of the run, when traffic persists: a newcomer enters at the edge in its place at
+        once, as for one that flew out of the area (``lost_intruders`` says who and why). The
+        ownship's failure, or any without persistent traffic, ends the run."""
+        if self._failure is not None or _all_healthy(s):
+            return self._failure is not None
+        lost = []
+        for i, who in enumerate(s.ids):
+            reason = _diagnose(who, s.pos[i], s.att[i], s.airspeed[i])
+            if reason and i > 0 and self._flow is not None:
+                lost.append(i - 1)
+                self.lost_intruders.append(f"{reason} at t = {s.t:.2f} s")
+                log.info("intruder lost: %s; a newcomer enters instead", reason)
+            elif reason:
+                self._failure = f"{reason} at t = {s.t:.2f} s"
+                log.info("run ends: %s", self._failure)
+                return True
+        if lost:
+            keep_clear = s.pos[:1]
+            self._replace(self._flow.enter(lost, keep_clear, min_distance_m=self._clearance))
+        return False
+
+    def step(self, n: int = 1) -> None:
+        super().step(n)
+        if self._flow is not None:  # the state handed out next has no lost intruder in it
+            self._check(self.state())
 
     def close(self) -> None:
         for a in self.aircraft:

@@ -292,6 +292,9 @@ class Episode:
         }
         if failure:
             summary["failure"] = failure
+        lost = getattr(self.world, "lost_intruders", None)
+        if lost:  # intruders that failed in flight and were replaced (JSBSim)
+            summary["intruders_lost"] = list(lost)
         counters = self.path.close()
         if counters is not None:
             summary["bridge"] = counters
