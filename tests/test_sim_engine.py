@@ -171,6 +171,9 @@ def test_the_planner_believes_what_the_adsb_frames_on_the_link_carry(tmp_path: P
     decoded: list = []
 
     class Grab(Observer):
+        def on_start(self, ep) -> None:
+            ep.picture.receiver.decoded = []  # heard before t = 0, not sent (the pre-roll)
+
         def on_sample(self, ep, state) -> None:
             link = ep.picture.receiver
             decoded.extend((r.id, round(r.pos[0], 2), round(r.pos[1], 2)) for r in link.decoded)

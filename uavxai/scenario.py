@@ -422,6 +422,7 @@ class Surveillance(_Model):
     dropout: Annotated[float, Field(ge=0, lt=1)] = 0.05
     noncooperative: Probability = 0.0
     sensor: Sensor | None = Sensor()  # null: no onboard sensor
+    preroll_s: Annotated[float, Field(ge=0, le=600)] = 10.0  # listening before t = 0
 
 
 # -------------------------------------------------------------------------------------- mission

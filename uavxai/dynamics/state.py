@@ -7,7 +7,7 @@ clockwise from north. Row 0 is always the ownship; rows 1..N are ``intruder-1`` 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -35,6 +35,11 @@ class TrafficState:
     @property
     def ground_speed(self) -> np.ndarray:
         return np.hypot(self.vel[:, 0], self.vel[:, 1])
+
+    def flown_straight(self, t: float) -> TrafficState:
+        """Every aircraft moved along its present velocity, in a straight line, to time ``t``
+        (earlier or later); attitudes and airspeeds as they are."""
+        return replace(self, t=float(t), pos=self.pos + self.vel * (float(t) - self.t))
 
     def min_separation(self) -> float:
         """Smallest 3-D distance from the ownship to any intruder (inf with no intruders)."""

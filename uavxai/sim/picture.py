@@ -9,11 +9,13 @@ the same frames also go out on the bridge's link, so a ground station shows the 
 planner sees and a real receiver could replace the simulated one. Both command paths pack and
 decode alike, so a seed gives the same beliefs, to the bit, through either. The tracker
 (constant-turn EKF per intruder) turns reports into beliefs; ``model: truth`` gives the
-planner every intruder's exact state (the paper's setting).
+planner every intruder's exact state (the paper's setting). The receiver was on before the
+episode (``surveillance.preroll_s``, :meth:`Picture.listen`), so the first picture is not empty.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 
 import numpy as np
@@ -26,6 +28,7 @@ from uavxai.dynamics.environment import EnvironmentConfig
 from uavxai.dynamics.geodesy import LocalFrame
 from uavxai.dynamics.state import TrafficState
 from uavxai.scenario import Scenario
+from uavxai.sim.clock import Clock
 from uavxai.sim.episode import Episode, Observer
 from uavxai.surveillance.adsb import (
     Report,
@@ -99,19 +102,45 @@ class Picture(Observer):
         return self.config.model == "truth"
 
     def on_start(self, ep: Episode) -> None:
+        self.listen(ep.state, ep.clock)
         self.on_sample(ep, ep.state)
 
-    def on_sample(self, ep: Episode, state: TrafficState) -> None:
+    def listen(self, state: TrafficState, clock: Clock) -> None:
+        """The receiver was on before the episode: it hears the traffic of ``state`` (t = 0)
+        for ``surveillance.preroll_s`` before it, sample by sample on the episode's clock.
+
+        We know where every aircraft is and how fast it flies at t = 0, not how it turned
+        before, so each (the ownship too, for the onboard sensor's range and field of view)
+        is flown back in a straight line along its velocity. The reports go through the same
+        surveillance, frames and receiver as in flight, so their phases, noise and delivery
+        carry on into t >= 0 as if the episode had started earlier. Once a decision period
+        the receiver's picture is read, as the planner reads it in flight, so a track that
+        falls silent drops on the same rule. Nothing goes to the ground stations: they would
+        be shown the flown-back positions, stale and not flown by anyone, in one burst at t = 0.
+        """
         if self.truth:
             return
+        n = math.floor(self.config.preroll_s / clock.sample_s + 1e-9)
+        for k in range(n, 0, -1):
+            past = state.flown_straight(state.t - k * clock.sample_s)
+            self._hear(past, None)
+            if k % clock.samples_per_decision == 0:
+                self.receiver.beliefs(past.t)
+
+    def on_sample(self, ep: Episode, state: TrafficState) -> None:
+        if not self.truth:
+            self._hear(state, self._forward)
+
+    def _hear(self, state: TrafficState, forward: Callable[[bytes], None] | None) -> None:
+        """The reports due at ``state.t``, as frames to ``forward`` (if any) and the receiver."""
         reports = self.surveillance.observe(state)
         if not reports:
             return
         frames = b"".join(
             self._packer.pack(adsb_message(r, self.frame)) for r in reports if r.source == "adsb"
         )
-        if frames and self._forward is not None:
-            self._forward(frames)
+        if frames and forward is not None:
+            forward(frames)
         self.receiver.receive(frames, [r for r in reports if r.source != "adsb"], state.t)
 
     def __call__(self, state: TrafficState) -> list[Intruder]:

@@ -103,6 +103,9 @@ class SurveillanceConfig:
     dropout: float = 0.05
     noncooperative: float = 0.0
     sensor: SensorConfig | None = field(default_factory=SensorConfig)
+    # how long the receiver has been listening before the episode's t = 0 (the episode's
+    # picture, uavxai.sim.picture.Picture, hears the traffic flown back over that window)
+    preroll_s: float = 10.0
 
     def __post_init__(self) -> None:
         if self.model not in MODELS:
@@ -119,6 +122,8 @@ class SurveillanceConfig:
             raise UserError(
                 f"surveillance.noncooperative must be in [0, 1], got {self.noncooperative}"
             )
+        if not self.preroll_s >= 0:
+            raise UserError(f"surveillance.preroll_s must be >= 0, got {self.preroll_s}")
 
     @classmethod
     def from_scenario(cls, scenario: object) -> SurveillanceConfig:
@@ -145,6 +150,7 @@ class SurveillanceConfig:
             dropout=float(getattr(s, "dropout", defaults.dropout)),
             noncooperative=float(getattr(s, "noncooperative", defaults.noncooperative)),
             sensor=sensor,
+            preroll_s=float(getattr(s, "preroll_s", defaults.preroll_s)),
         )
 
     @property
