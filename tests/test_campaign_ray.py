@@ -18,6 +18,13 @@ def test_evaluate_on_a_started_ray_head(tmp_path: Path) -> None:
     pytest.importorskip("ray")
     ray_bin = shutil.which("ray") or str(Path(sys.executable).parent / "ray")
     env = {**os.environ, "RAY_USAGE_STATS_ENABLED": "0", "HOME": str(tmp_path)}
+    # Ray 2.60 starts heads with token authentication on: the token goes where a user's would
+    # (~/.ray/auth_token, here under the test's home), for the head and the driver alike.
+    token = subprocess.run(
+        [ray_bin, "get-auth-token", "--generate"], env=env, capture_output=True, text=True,
+        timeout=120,
+    )  # fmt: skip
+    assert token.returncode == 0, token.stderr[-2000:]
     start = subprocess.run(
         [ray_bin, "start", "--head", "--num-cpus", "2", "--include-dashboard=false",
          "--disable-usage-stats"],
