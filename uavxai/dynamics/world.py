@@ -75,6 +75,7 @@ class JSBSimWorld(ScheduledWorld):
         self._cached: TrafficState | None = None
         self._failure: str | None = None
         self.lost_intruders: list[str] = []  # intruders that failed and were replaced, why
+        self._checked: TrafficState | None = None  # the last state _check tested
 
         self.aircraft: list[Aircraft] = []
         self._runs: list[Callable[[], bool]] = []
@@ -243,8 +244,11 @@ class JSBSimWorld(ScheduledWorld):
         end of the run, when traffic persists: a newcomer enters at the edge in its place at
         once, as for one that flew out of the area (``lost_intruders`` says who and why). The
         ownship's failure, or any without persistent traffic, ends the run."""
-        if self._failure is not None or _all_healthy(s):
+        if self._failure is not None or s is self._checked:
             return self._failure is not None
+        self._checked = s  # step() and failure() both ask of the same sample: test it once
+        if _all_healthy(s):
+            return False
         lost = []
         for i, who in enumerate(s.ids):
             reason = _diagnose(who, s.pos[i], s.att[i], s.airspeed[i])

@@ -31,6 +31,7 @@ class Dynamics(Protocol):
     """What the engine needs of a world (JSBSimWorld, KinematicWorld)."""
 
     dt: float
+    lost_intruders: list[str]  # intruders that failed in flight and were replaced, why
 
     def step(self, n: int = 1) -> None: ...
     def state(self) -> TrafficState: ...

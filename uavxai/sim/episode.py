@@ -292,9 +292,8 @@ class Episode:
         }
         if failure:
             summary["failure"] = failure
-        lost = getattr(self.world, "lost_intruders", None)
-        if lost:  # intruders that failed in flight and were replaced (JSBSim)
-            summary["intruders_lost"] = list(lost)
+        if self.world.lost_intruders:  # failed in flight and replaced (JSBSim)
+            summary["intruders_lost"] = list(self.world.lost_intruders)
         counters = self.path.close()
         if counters is not None:
             summary["bridge"] = counters

@@ -195,6 +195,10 @@ class KinematicWorld(ScheduledWorld):
     def failure(self) -> str | None:
         return None
 
+    @property
+    def lost_intruders(self) -> list[str]:
+        return []  # the closed-form model's intruders cannot fail
+
     def close(self) -> None:
         self._pilots = []
 
