@@ -7,12 +7,12 @@ In one process, alternating so both see the same machine load:
   simulated time, nothing else.
 Prints both real-time factors (the run's as it reports it: the episode loop, set-up not
 counted) and their ratio (goal: run >= 0.8 of the bare world), and the time spent in the
-planner's search. The run is measured twice: with the planner in the simulation's process
-(`avoidance.decision_latency_s: 0`, the paper's instant decision: the world waits for every
-search) and on a companion process with a processing latency (`--latency`, default 0.5 s:
-the planner searches on the second core while the world flies on, as on a UAV whose
-companion computer plans beside the autopilot). `--profile FILE` writes a cProfile of one
-run for `python -m pstats FILE`.
+planner's search. `uavxai run` always plans on a companion process (its own core). The run is
+measured twice: without a decision latency (`avoidance.decision_latency_s: 0`, the default
+and the paper's instant decision: the ownship waits for every search, while the world flies
+the intruders through the period meanwhile) and with one (`--latency`, default 0.5 s: the
+search overlaps everyone's flight, as on a UAV whose companion computer plans beside the
+autopilot). `--profile FILE` writes a cProfile of one run for `python -m pstats FILE`.
 
     .venv/bin/python benchmarks/bench_run.py [--intruders 20] [--steps 60] [--repeats 3] \
         [--latency 0.5]
@@ -73,10 +73,10 @@ def main() -> None:
             avoidance={"max_steps": args.steps, "decision_latency_s": latency},
         )
 
-    runs = {"in-process planner (latency 0)": scenario(0.0)}
+    runs = {"no latency (default)": scenario(0.0)}
     if args.latency > 0:
-        runs[f"companion planner (latency {args.latency:g} s)"] = scenario(args.latency)
-    service = plan_service(runs["in-process planner (latency 0)"])
+        runs[f"latency {args.latency:g} s"] = scenario(args.latency)
+    service = plan_service(runs["no latency (default)"])
     sink = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     sink.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 22)
     sink.bind(("127.0.0.1", 0))
@@ -90,9 +90,9 @@ def main() -> None:
             loop = sim_s / summary["sim_realtime_factor"]  # the episode loop, set-up excluded
             planner = summary["decision_ms"]["mean"] * summary["steps"] / 1000.0
             best[label] = min(best[label], (loop, planner, wall - loop))
-        best_bare = min(best_bare, timed_bare(runs["in-process planner (latency 0)"], sim_s))
+        best_bare = min(best_bare, timed_bare(runs["no latency (default)"], sim_s))
     if args.profile:
-        sc = runs["in-process planner (latency 0)"]
+        sc = runs["no latency (default)"]
         cProfile.runctx(
             "timed_run(sc, service, port)", globals(), locals(), filename=str(args.profile)
         )
@@ -106,7 +106,7 @@ def main() -> None:
         print(
             f"  uavxai run, {label:<28}{loop:6.2f} s  {rtf:6.1f}x real time  "
             f"ratio run / bare {rtf / rtf_bare:.2f} (goal >= 0.8)\n"
-            f"      planner {planner:.2f} s of search (on its own core with a companion); "
+            f"      planner {planner:.2f} s of search (on the companion's core); "
             f"set-up (aircraft loading, trim, files) {setup:.2f} s, not counted"
         )
 

@@ -12,6 +12,7 @@ import math
 import os
 from pathlib import Path
 
+import numpy as np
 import pytest
 from engine_runs import run_and_evaluate
 
@@ -177,3 +178,42 @@ def test_the_companion_decodes_and_tracks_as_the_simulation_would() -> None:
         local.reset(4)
         expected = local.plan(own, here(state), goal, step=3)
         assert [c.q for c in decision.children] == [c.q for c in expected.children]
+
+
+class _Ahead(Observer):
+    """How far the intruders fly ahead at each decision, and every sample's state."""
+
+    def __init__(self) -> None:
+        self.ahead: list[int] = []
+        self.states: list = []
+
+    def on_decision(self, ep, event) -> None:
+        self.ahead.append(ep.world.ahead_ticks)
+
+    def on_sample(self, ep, state) -> None:
+        self.states.append(state)
+
+
+def test_without_latency_the_intruders_fly_ahead_while_the_companion_searches() -> None:
+    """The paper's instant decision on a companion: the world flies the intruders through
+    the period while the search runs, and the flight is the in-process one to the bit."""
+    sc = default_scenario(
+        "ahead",
+        seed=4,
+        intruders={"count": 8, "behaviour": "random_turns"},
+        environment={"turbulence": "moderate"},
+        ownship={"goal": [1000, 1000, 120]},
+        avoidance={"max_steps": 15},
+    )
+    config, goal = PlannerConfig.from_scenario(sc), (1000, 1000, 120)
+    remote, local = _Ahead(), _Ahead()
+    with Companion("mcts", config, scenario=sc) as planner:
+        fly(sc, planner, goal, dynamics="jsbsim", observers=[remote])
+    fly(sc, make_planner("mcts", config), goal, dynamics="jsbsim", observers=[local])
+    assert remote.ahead == [120] * len(remote.ahead) and len(remote.ahead) == 15
+    assert local.ahead == [0] * 15  # in-process: nothing to overlap, lockstep
+    assert len(remote.states) == len(local.states) == 150
+    for a, b in zip(remote.states, local.states, strict=True):
+        assert a.ids == b.ids
+        np.testing.assert_array_equal(a.pos, b.pos)
+        np.testing.assert_array_equal(a.vel, b.vel)

@@ -75,6 +75,12 @@ class ScheduledWorld(LoiterAutopilot):
     def t(self) -> float:
         return self._steps * self.dt
 
+    def lookahead(self, ticks: int, every: int) -> int:
+        """Fly the intruders ahead of the ownship while its next command is decided
+        elsewhere; the ticks flown ahead. Here none: a world that flies a period in closed
+        form (the kinematic one) has nothing to gain (JSBSimWorld overrides it)."""
+        return 0
+
     def advance(self, seconds: float) -> None:
         self.step(round(seconds / self.dt))
 

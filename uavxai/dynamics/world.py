@@ -1,5 +1,7 @@
 """The multi-aircraft world: the ownship and every intruder as separate JSBSim executives,
-stepped in lockstep at the scenario's rate, with the intruders' pilots at about 1 Hz.
+stepped in lockstep at the scenario's rate, with the intruders' pilots at about 1 Hz (or the
+intruders flown ahead through a decision period while the ownship's command is searched for,
+:meth:`JSBSimWorld.lookahead`: the same flight to the bit).
 
 The inner loop is nothing but ``FGFDMExec.run()`` calls; states are read only when asked
 for (the pipeline does so at about 10 Hz). A run that diverges is never an exception: the
@@ -76,6 +78,12 @@ class JSBSimWorld(ScheduledWorld):
         self._failure: str | None = None
         self.lost_intruders: list[str] = []  # intruders that failed and were replaced, why
         self._checked: TrafficState | None = None  # the last state _check tested
+        # Lookahead: the intruders flown ahead of the ownship by this many ticks, their states
+        # at the kept ticks, and a JSBSim error met ahead (it ends the run when the ownship
+        # gets there, as it would have in lockstep).
+        self._ahead = 0
+        self._kept: dict[int, np.ndarray] = {}
+        self._ahead_error: jsbsim.BaseError | None = None
 
         self.aircraft: list[Aircraft] = []
         self._runs: list[Callable[[], bool]] = []
@@ -145,9 +153,22 @@ class JSBSimWorld(ScheduledWorld):
         return [a.trimmed for a in self.aircraft]
 
     def _integrate(self, ticks: int) -> bool:
-        """Run every aircraft ``ticks`` integration steps in lockstep; False if JSBSim gave up."""
+        """Run every aircraft ``ticks`` integration steps in lockstep (the ownship alone while
+        the intruders are ahead of it); False if JSBSim gave up."""
         runs = self._runs
         try:
+            if self._ahead:
+                alone = min(ticks, self._ahead)
+                own = runs[0]
+                for _ in range(alone):
+                    own()
+                self._ahead -= alone
+                ticks -= alone
+                if not self._ahead:
+                    self._kept = {}
+            if ticks and self._ahead_error is not None:
+                runs[0]()  # the ownship's tick comes first in lockstep, then the error
+                raise self._ahead_error
             for _ in range(ticks):
                 for run in runs:
                     run()
@@ -156,6 +177,49 @@ class JSBSimWorld(ScheduledWorld):
             log.warning("%s at t = %.2f s", self._failure, self.t)
             return False
         return True
+
+    def lookahead(self, ticks: int, every: int) -> int:
+        """Fly the intruders up to ``ticks`` ahead of the ownship, keeping their states every
+        ``every`` ticks; :meth:`step` then flies the ownship alone up to them. Returns the
+        ticks flown ahead.
+
+        Why: at a decision the ownship's next command is being searched for (on the
+        companion's core), while nothing the intruders do until their pilots' next instant
+        depends on the ownship, so they fly meanwhile and the search costs the world no time.
+        The flight is the same to the bit as in lockstep (independent JSBSim executives, each
+        with its own seeded generator). The lookahead stops at the next pilot instant (its
+        leavers are replaced clear of the ownship) and where an intruder leaves its envelope
+        (it is replaced where the ownship meets it, in lockstep). States may then be read only
+        at the kept ticks: multiples of ``every`` and of the loiter law's period."""
+        if self._ahead or self._halted() or self.n < 2 or ticks < 1:
+            return 0
+        start = self._steps
+        ticks = min(int(ticks), self._pilot_period - start % self._pilot_period)
+        keep = math.gcd(int(every), self._guidance_period)
+        runs, rows = self._runs[1:], self.aircraft[1:]
+        self._kept = {start: np.array([a.raw_state() for a in rows])}
+        done = 0
+        try:
+            while done < ticks:
+                for run in runs:
+                    run()
+                done += 1
+                if (start + done) % keep == 0 or done == ticks:
+                    raw = np.array([a.raw_state() for a in rows])
+                    self._kept[start + done] = raw
+                    if not _raw_healthy(raw):
+                        break
+        except jsbsim.BaseError as exc:
+            self._ahead_error = exc
+        self._ahead = done
+        if not done:
+            self._kept = {}
+        return done
+
+    @property
+    def ahead_ticks(self) -> int:
+        """How many ticks the intruders fly ahead of the ownship now (:meth:`lookahead`)."""
+        return self._ahead
 
     def _halted(self) -> bool:
         return self._failure is not None
@@ -169,6 +233,8 @@ class JSBSimWorld(ScheduledWorld):
 
     def _replace(self, entries: list[Entry]) -> None:
         """Intruders that left the area make way for newcomers entering at the edge."""
+        if self._ahead:  # cannot happen: leavers are replaced at pilot instants, level
+            raise RuntimeError("an intruder replaced while the intruders fly ahead")
         env = EnvironmentConfig.from_scenario(self.scenario)
         ids = list(self.ids)
         for e in entries:
@@ -186,7 +252,18 @@ class JSBSimWorld(ScheduledWorld):
     def state(self) -> TrafficState:
         """All aircraft now, SI, local ENU (see :class:`TrafficState`)."""
         if self._cached is None:
-            raw = np.array([a.raw_state() for a in self.aircraft])
+            if self._ahead:  # the ownship now, the intruders as they were at this tick
+                kept = self._kept.get(self._steps)
+                if kept is None:
+                    raise RuntimeError(
+                        f"state at tick {self._steps} asked for while the intruders fly "
+                        f"ahead: only the kept ticks {sorted(self._kept)} can be read"
+                    )
+                raw = np.empty((self.n, kept.shape[1]))
+                raw[0] = self.aircraft[0].raw_state()
+                raw[1:] = kept
+            else:
+                raw = np.array([a.raw_state() for a in self.aircraft])
             pos = np.empty((len(raw), 3))
             pos[:, 0], pos[:, 1], _ = self.frame.to_local(raw[:, 0], raw[:, 1], 0.0)
             pos[:, 2] = raw[:, 2] * FT
@@ -286,15 +363,25 @@ class JSBSimWorld(ScheduledWorld):
 def _all_healthy(s: TrafficState) -> bool:
     """Every aircraft inside the envelope, in one vectorised test (the common case: then
     nobody needs :func:`_diagnose`)."""
+    return _within_envelope(s.pos, s.att, s.airspeed)
+
+
+def _raw_healthy(raw: np.ndarray) -> bool:
+    """:func:`_all_healthy` of raw states (JSBSim units, STATE_PROPERTIES)."""
+    return _within_envelope(raw[:, :3] * (1.0, 1.0, FT), raw[:, 6:9], raw[:, 9] * FT)
+
+
+def _within_envelope(pos: np.ndarray, att: np.ndarray, airspeed: np.ndarray) -> bool:
     lo, hi = ENVELOPE_AIRSPEED_MPS
     with np.errstate(invalid="ignore"):  # NaN compares False, which is what we want
-        return bool(
-            np.all(s.pos[:, 2] >= GROUND_M)
-            and np.all((s.airspeed >= lo) & (s.airspeed <= hi))
-            and np.all(np.abs(s.att[:, 0]) <= ENVELOPE_BANK_RAD)
-            and np.all(np.abs(s.att[:, 1]) <= ENVELOPE_PITCH_RAD)
-            and np.all(np.isfinite(s.pos))
+        inside = (
+            (pos[:, 2] >= GROUND_M)
+            & (airspeed >= lo)
+            & (airspeed <= hi)
+            & (np.abs(att[:, 0]) <= ENVELOPE_BANK_RAD)
+            & (np.abs(att[:, 1]) <= ENVELOPE_PITCH_RAD)
         )
+    return bool(inside.all() and np.isfinite(pos).all())  # two reductions, not five: per sample
 
 
 def _diagnose(who: str, pos: np.ndarray, att: np.ndarray, airspeed: float) -> str | None:

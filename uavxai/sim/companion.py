@@ -7,15 +7,19 @@ the episode engine takes the picture at t, and applies the command at t + latenc
 (:class:`uavxai.sim.episode.Episode`). Because the command is not needed before then, the
 planner can think while the world flies on, and :class:`Companion` runs it in a separate
 process so that JSBSim (which holds the GIL while it integrates) and the search use both
-cores. The ADS-B receiver and the tracker run there too (:class:`Onboard`), as on the UAV:
-the simulation sends the ADSB_VEHICLE frames as they arrive and the companion decodes and
-tracks them on its own core; the beliefs come back at each decision.
+cores. Without a latency (the paper's instant decision) the ownship must wait for the
+command, but the intruders need not: the world flies them through the period ahead while
+the companion searches (:meth:`uavxai.dynamics.world.JSBSimWorld.lookahead`, the same
+flight to the bit). The ADS-B receiver and the tracker run there too (:class:`Onboard`), as
+on the UAV: the simulation sends the ADSB_VEHICLE frames as they arrive and the companion
+decodes and tracks them on its own core; the beliefs come back at each decision.
 
 What is flown does not depend on where the planner runs: the picture is fixed at t, the
 planner and the tracker are seeded and fed the same requests in the same order, and the
 engine waits for the answer at t + latency however long the search took. ``uavxai run``
-uses a companion when the latency is above 0; ``uavxai evaluate`` plans in-process (its
-episodes already fill the cores), and both fly the same episode (tests/test_sim_latency.py).
+always plans on a companion; ``uavxai evaluate`` plans in-process (its episodes already fill
+the cores), and both fly the same episode (tests/test_sim_latency.py,
+tests/test_sim_engine.py).
 """
 
 from __future__ import annotations

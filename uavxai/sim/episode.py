@@ -134,7 +134,10 @@ class Episode:
         m = self.mission
         goal = m.goal if m is not None else self.goal
         if self._plan_onboard(state, own, goal):
-            return None
+            self._fly_intruders_ahead()  # while the companion searches
+            if self.clock.latency_ticks:
+                return None
+            return self._arrive(send=True, latency=False)
         intruders = self.picture(state)
         if self.path.operator_in_command(state.t):
             decision = self._advise(own, intruders, goal)
@@ -148,6 +151,7 @@ class Episode:
                 submit = getattr(self.planner, "submit", None)
                 if submit is not None:  # a companion: it plans while the world flies on
                     submit(own, intruders, goal, step=self._leg_step())
+                    self._fly_intruders_ahead()
                     planned = None
                 else:  # in-process: plan now, apply later; the same decision either way
                     planned = self.planner.plan(own, intruders, goal, step=self._leg_step())
@@ -155,7 +159,7 @@ class Episode:
                 self.steps += 1
                 return None
             if decision is None:  # the avoidance planner flies
-                decision = self.planner.plan(own, intruders, goal, step=self._leg_step())
+                decision = self._search(own, intruders, goal)
                 self.path.send(decision, state.t)
         self.steps += 1
         event = DecisionEvent(self.steps - 1, state.t, own, intruders, decision, state)
@@ -169,7 +173,6 @@ class Episode:
         if (
             onboard is None
             or self.mission is not None
-            or not self.clock.latency_ticks
             or getattr(self.picture, "receiver", None) is not onboard
             or getattr(self.picture, "truth", True)
             or self._overridden
@@ -181,15 +184,31 @@ class Episode:
         self.steps += 1
         return True
 
+    def _search(self, own: Ownship, intruders: list[Intruder], goal) -> Decision:
+        """The planner's decision now. A companion searches on its own core while the world
+        flies the intruders through the period ahead."""
+        submit = getattr(self.planner, "submit", None)
+        if submit is None:
+            return self.planner.plan(own, intruders, goal, step=self._leg_step())
+        submit(own, intruders, goal, step=self._leg_step())
+        self._fly_intruders_ahead()
+        return self.planner.result()
+
+    def _fly_intruders_ahead(self) -> None:
+        """Nothing the intruders do before the next decision depends on the command being
+        searched for: the world may fly them meanwhile (JSBSim; the same flight to the bit)."""
+        self.world.lookahead(self.clock.decision_ticks, self.clock.sample_ticks)
+
     def _decided(self, event: DecisionEvent) -> DecisionEvent:
         self.decision_ms.append(event.decision.ms)
         for o in self.observers:
             o.on_decision(self, event)
         return event
 
-    def _arrive(self, send: bool) -> DecisionEvent:
+    def _arrive(self, send: bool, latency: bool = True) -> DecisionEvent:
         """The pending decision reaches the autopilot now (``send``), or the episode ended
-        before it did: it is still recorded, as the planner made it."""
+        before it did: it is still recorded, as the planner made it. Without a ``latency``
+        it is applied at the picture's time, as an in-process decision."""
         step, t, own, intruders, truth, planned = self._pending
         self._pending = None
         decision = planned if planned is not None else self.planner.result()
@@ -197,7 +216,8 @@ class Episode:
             intruders = self.planner.beliefs  # what the companion planned from
         if send:
             self.path.send(decision, self.state.t)
-        return self._decided(DecisionEvent(step, t, own, intruders, decision, truth, self.state.t))
+        applied = self.state.t if latency else None
+        return self._decided(DecisionEvent(step, t, own, intruders, decision, truth, applied))
 
     def ownship(self) -> Ownship:
         """The ownship as the planner sees it now (:func:`ownship_view` of the autopilot's

@@ -97,7 +97,6 @@ def run_episode(
 ) -> dict:
     """Fly one seeded episode through MAVLink in JSBSim; write trajectory.csv,
     decisions.jsonl and run.rrd into ``out``; return its summary (SPEC §4)."""
-    from uavxai.avoidance.planners import make_planner
     from uavxai.avoidance.types import PlannerConfig
     from uavxai.comms.channel import Channel
     from uavxai.sim.companion import Companion
@@ -106,10 +105,9 @@ def run_episode(
     sc = scenario
     goal = episode_goal(sc, service.service_point)
     config, checkpoint = PlannerConfig.from_scenario(sc), sc.avoidance.checkpoint
-    if sc.avoidance.decision_latency_s > 0:  # it may think while the world flies: own core
-        planner = Companion(sc.avoidance.planner, config, checkpoint, scenario=sc)
-    else:
-        planner = make_planner(sc.avoidance.planner, config, checkpoint=checkpoint)
+    # On its own core, as on a UAV's companion computer: it searches while the world flies
+    # (the intruders, with an instant decision; everyone, with a latency).
+    planner = Companion(sc.avoidance.planner, config, checkpoint, scenario=sc)
     channel = Channel.from_scenario(sc, users=service.users)
     observers = [
         Throughput(channel, service.power_w),
@@ -141,8 +139,7 @@ def run_episode(
             mission=mission,
         )
     finally:
-        if isinstance(planner, Companion):
-            planner.close()
+        planner.close()
     summary = result.summary
     summary.update(service.to_summary())
     summary["goal_is_service_point"] = sc.ownship.goal is None
