@@ -310,10 +310,6 @@ class MCTSConfig(_Model):
     depth: Annotated[int, Field(ge=1, le=8)] = 4
     c: Annotated[float, Field(ge=0, le=100)] = 1.0
     action_hold_s: Annotated[float, Field(gt=0, le=60)] = 4.0
-    # Room to manoeuvre (PlannerConfig.clearance_buffer_m / clearance_value): a line that
-    # passes an intruder within d_min + buffer is worth up to this much less. 0: off.
-    clearance_buffer_m: Annotated[float, Field(ge=0, le=10_000)] = 0.0
-    clearance_value: Annotated[float, Field(ge=0, lt=0.1)] = 0.0
 
 
 class NMAC(_Model):

@@ -517,27 +517,9 @@ class TreeBuilder:
         return values.tolist()
 
     def leaf_value(self, node: int) -> float:
-        """Eq 13 at an open node: 1 - d(o, g) / d_max, less the line's want of room
-        (:meth:`crowding`) when ``clearance_value`` is set."""
-        cfg = self.model.config
+        """Eq 13 at an open node: 1 - d(o, g) / d_max."""
         xyz = self.placed[(node - 1) // self.k].position((node - 1) % self.k)
-        value = 1.0 - math.dist(xyz, self.goal) / cfg.d_max
-        if cfg.clearance_value > 0 and cfg.clearance_buffer_m > 0:
-            value -= cfg.clearance_value * self.crowding(node)
-        return value
-
-    def crowding(self, node: int) -> float:
-        """How little room the line from the root to ``node`` leaves: 0 if it passes every
-        intruder (net of its margin) at d_min + clearance_buffer_m or more, 1 at d_min,
-        linear between."""
-        cfg, k = self.model.config, self.k
-        closest = math.inf
-        while node > 0:
-            block = (node + k - 1) // k
-            closest = min(closest, float(self.min_sep[block][(node - 1) % k]))
-            node = self.block_parent[block]
-        room = (closest - cfg.d_min_m) / cfg.clearance_buffer_m
-        return min(max(1.0 - room, 0.0), 1.0)
+        return 1.0 - math.dist(xyz, self.goal) / self.model.config.d_max
 
     def finish(self) -> SearchTree:
         blocks = len(self.block_parent) - 1

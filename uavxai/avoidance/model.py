@@ -526,7 +526,7 @@ class EncounterModel:
         beyond ``d_min`` at times ``t`` (T,) from now (see :func:`intruder_margin`)."""
         n = self.substeps(duration)
         t = t0 + (duration / n) * np.arange(n + 1)
-        distance = self.reach(0.0, duration) + self.config.cull_m if index else 0.0
+        distance = self.reach(0.0, duration) + self.config.d_min_m if index else 0.0
         extra = None if margin is None else margin(t)
         wind = self.config.wind_mps
         return Track.of(turn_positions(pos, vel, t, turn_rate, wind), distance, extra)
@@ -571,7 +571,7 @@ class EncounterModel:
         """
         n = self._check(duration, track)
         body, xy, hs, end, box = self._place(states, actions, goal, duration, n)
-        reach = math.hypot(box[3], box[4]) + self.config.cull_m
+        reach = math.hypot(box[3], box[4]) + self.config.d_min_m
         near = track.near(box[:3], reach) if cull else np.arange(track.count)
         seen = _Intruders.of(track, near)
         own_step = self._own_step(body, duration / n)
@@ -657,7 +657,7 @@ class EncounterModel:
         c = origin + body.ball * rot + half
         h_lo, h_hi = min(h, *h_ends), max(h, *h_ends)
         box = (c.real, c.imag, 0.5 * (h_lo + h_hi), body.ball_r + abs(half), 0.5 * (h_hi - h_lo))
-        near = track.near(box[:3], math.hypot(box[3], box[4]) + cfg.cull_m)
+        near = track.near(box[:3], math.hypot(box[3], box[4]) + cfg.d_min_m)
         if not near.size and not self._near_goal(box, goal) and not self._near_wall(box):
             return placed, Segment(None, *self._quiet, xy=None, hs=None)  # no sample needed
         xy = origin + body.z * rot + drift

@@ -127,16 +127,6 @@ class PlannerConfig:
     # when every line meets someone, the search still prefers the one that meets them later,
     # which re-planning can still turn into a miss. 0: every collision is worth 0 (the paper).
     late_collision_value: float = 0.05
-    # Room to manoeuvre: an open leaf whose line passes an intruder (net of its margin) within
-    # d_min + clearance_buffer_m is worth up to clearance_value less, linearly from 0 at the
-    # buffer's edge to the whole of it at d_min. Without it every line the prediction calls
-    # clear scores by goal distance alone, so the search threads gaps a few metres wider than
-    # d_min, which close when the intruders turn (manoeuvring traffic at 40 intruders: the
-    # lines chosen while every option was clear passed 30-70 m from the intruders' true
-    # paths where 120-230 m were available, and 8-10 s later every option conflicted).
-    # 0 / 0: off (the paper's eq 13).
-    clearance_buffer_m: float = 0.0
-    clearance_value: float = 0.0
     # The steady wind the planner knows (east, north), m/s, that carries the air mass: the
     # model flies airspeed and heading through it, so its paths are over the ground, where
     # the intruders' tracks are (scenario `environment.wind`).
@@ -160,24 +150,13 @@ class PlannerConfig:
                 f"PlannerConfig.intruder_model must be one of {', '.join(INTRUDER_MODELS)}, "
                 f"got {self.intruder_model!r}."
             )
-        for name in (
-            "reach_horizon_s",
-            "uncertainty_k",
-            "late_collision_value",
-            "clearance_buffer_m",
-            "clearance_value",
-        ):
+        for name in ("reach_horizon_s", "uncertainty_k", "late_collision_value"):
             if not getattr(self, name) >= 0:
                 raise UserError(f"PlannerConfig.{name} must be >= 0, got {getattr(self, name)}.")
         if not 0 < self.intruder_bank_limit_deg < 90:
             raise UserError(
                 "PlannerConfig.intruder_bank_limit_deg must be in (0, 90), "
                 f"got {self.intruder_bank_limit_deg}."
-            )
-        if self.clearance_value >= 0.1:
-            raise UserError(
-                "PlannerConfig.clearance_value must be below the time-out's value 0.1, "
-                f"got {self.clearance_value}."
             )
         if self.late_collision_value >= 0.1:
             raise UserError(
@@ -245,8 +224,6 @@ class PlannerConfig:
             "depth": a.mcts.depth,
             "c": a.mcts.c,
             "action_hold_s": a.mcts.action_hold_s,
-            "clearance_buffer_m": a.mcts.clearance_buffer_m,
-            "clearance_value": a.mcts.clearance_value,
             "actions": a.actions,
             "seed": scenario.seed,
             "wind_mps": env.wind_enu[:2],
@@ -290,12 +267,6 @@ class PlannerConfig:
     @property
     def bank_step_rad(self) -> float:
         return math.radians(self.bank_step_deg)
-
-    @property
-    def cull_m(self) -> float:
-        """How far from an ownship path an intruder (net of its margin) is still measured:
-        d_min, plus the clearance buffer when lines are scored by their room to manoeuvre."""
-        return self.d_min_m + (self.clearance_buffer_m if self.clearance_value > 0 else 0.0)
 
     @property
     def d_max(self) -> float:
