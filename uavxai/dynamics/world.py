@@ -197,7 +197,7 @@ class JSBSimWorld(ScheduledWorld):
         ticks = min(int(ticks), self._pilot_period - start % self._pilot_period)
         keep = math.gcd(int(every), self._guidance_period)
         runs, rows = self._runs[1:], self.aircraft[1:]
-        self._kept = {start: np.array([a.raw_state() for a in rows])}
+        self._kept = {start: _read(rows)}
         done = 0
         try:
             while done < ticks:
@@ -205,8 +205,7 @@ class JSBSimWorld(ScheduledWorld):
                     run()
                 done += 1
                 if (start + done) % keep == 0 or done == ticks:
-                    raw = np.array([a.raw_state() for a in rows])
-                    self._kept[start + done] = raw
+                    raw = self._kept[start + done] = _read(rows)
                     if not _raw_healthy(raw):
                         break
         except jsbsim.BaseError as exc:
@@ -263,7 +262,7 @@ class JSBSimWorld(ScheduledWorld):
                 raw[0] = self.aircraft[0].raw_state()
                 raw[1:] = kept
             else:
-                raw = np.array([a.raw_state() for a in self.aircraft])
+                raw = _read(self.aircraft)
             pos = np.empty((len(raw), 3))
             pos[:, 0], pos[:, 1], _ = self.frame.to_local(raw[:, 0], raw[:, 1], 0.0)
             pos[:, 2] = raw[:, 2] * FT
@@ -358,6 +357,11 @@ class JSBSimWorld(ScheduledWorld):
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _read(aircraft: list[Aircraft]) -> np.ndarray:
+    """The raw states (STATE_PROPERTIES, JSBSim units) of ``aircraft``, one row each."""
+    return np.array([a.raw_state() for a in aircraft])
 
 
 def _all_healthy(s: TrafficState) -> bool:

@@ -148,13 +148,8 @@ class Episode:
                 self.path.altitude(goal[2], state.t)
             decision = m.decide(self, own, intruders) if m is not None else None
             if decision is None and self.clock.latency_ticks:
-                submit = getattr(self.planner, "submit", None)
-                if submit is not None:  # a companion: it plans while the world flies on
-                    submit(own, intruders, goal, step=self._leg_step())
-                    self._fly_intruders_ahead()
-                    planned = None
-                else:  # in-process: plan now, apply later; the same decision either way
-                    planned = self.planner.plan(own, intruders, goal, step=self._leg_step())
+                # in-process: planned now, applied later; a companion: planning meanwhile
+                planned = self._start_search(own, intruders, goal)
                 self._pending = (self.steps, state.t, own, intruders, state, planned)
                 self.steps += 1
                 return None
@@ -185,14 +180,20 @@ class Episode:
         return True
 
     def _search(self, own: Ownship, intruders: list[Intruder], goal) -> Decision:
-        """The planner's decision now. A companion searches on its own core while the world
-        flies the intruders through the period ahead."""
+        """The planner's decision now."""
+        planned = self._start_search(own, intruders, goal)
+        return planned if planned is not None else self.planner.result()
+
+    def _start_search(self, own: Ownship, intruders: list[Intruder], goal) -> Decision | None:
+        """Plan in-process (the decision), or submit to a companion, which searches on its
+        own core while the world flies the intruders through the period ahead (None: its
+        :meth:`result` has the decision)."""
         submit = getattr(self.planner, "submit", None)
         if submit is None:
             return self.planner.plan(own, intruders, goal, step=self._leg_step())
         submit(own, intruders, goal, step=self._leg_step())
         self._fly_intruders_ahead()
-        return self.planner.result()
+        return None
 
     def _fly_intruders_ahead(self) -> None:
         """Nothing the intruders do before the next decision depends on the command being
