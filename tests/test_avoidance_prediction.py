@@ -279,6 +279,24 @@ def test_predict_levels_follow_the_config():
         assert (tracks[0].margin is not None) == margin
 
 
+def test_the_scenario_sets_how_far_ahead_manoeuvres_are_covered():
+    """`avoidance.mcts.reach_horizon_s` reaches the planner, and a longer reach needs more
+    separation from the same intruder beyond the shorter one's horizon (never less before)."""
+    from uavxai.scenario import default_scenario
+
+    vel = np.array([[0.0, 20.0, 0.0]])
+    t = np.array([1.0, 3.0, 5.0, 8.0])
+    margins = {}
+    for reach in (3.0, 5.0):
+        scenario = default_scenario(avoidance={"mcts": {"reach_horizon_s": reach}})
+        cfg = PlannerConfig.from_scenario(scenario)
+        assert cfg.reach_horizon_s == reach
+        margins[reach] = intruder_margin(cfg, vel, np.zeros(1))(t)[:, 0]
+    np.testing.assert_allclose(margins[5.0][:2], margins[3.0][:2])  # the same up to 3 s
+    assert margins[5.0][2] > margins[3.0][2] + 20.0  # 5 s: the reachable set has grown
+    assert margins[5.0][3] == pytest.approx(margins[5.0][2])  # capped beyond the reach
+
+
 @pytest.mark.parametrize(
     ("field", "value", "message"),
     [

@@ -62,6 +62,7 @@ BROKEN: list[tuple[str, tuple[str, ...]]] = [
     ("name: x\nseed: -1\n", ("seed", "greater than or equal to 0")),
     ("name: x\navoidance: {planner: astar}\n", ("avoidance.planner", "mcts")),
     ("name: x\navoidance: {mcts: {depth: 0}}\n", ("avoidance.mcts.depth",)),
+    ("name: x\navoidance: {mcts: {reach_horizon_s: -2}}\n", ("mcts.reach_horizon_s", "0")),
     ("name: x\navoidance: {bank_step_deg: 40}\n", ("bank_step_deg", "bank_limit_deg")),
     ("name: x\nownship: {start: {x: 5000}}\n", ("ownship.start", "outside the world")),
     ("name: x\nownship: {aircraft: cessna}\n", ("aircraft 'cessna'", "known")),

@@ -310,6 +310,9 @@ class MCTSConfig(_Model):
     depth: Annotated[int, Field(ge=1, le=8)] = 4
     c: Annotated[float, Field(ge=0, le=100)] = 1.0
     action_hold_s: Annotated[float, Field(gt=0, le=60)] = 4.0
+    # How far ahead the tree planners cover what an intruder could do by banking anywhere
+    # within its limit (uavxai.avoidance.model.intruder_margin); 0: only its estimated turn.
+    reach_horizon_s: Annotated[float, Field(ge=0, le=60)] = 3.0
 
 
 class NMAC(_Model):

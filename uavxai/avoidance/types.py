@@ -224,6 +224,7 @@ class PlannerConfig:
             "depth": a.mcts.depth,
             "c": a.mcts.c,
             "action_hold_s": a.mcts.action_hold_s,
+            "reach_horizon_s": a.mcts.reach_horizon_s,
             "actions": a.actions,
             "seed": scenario.seed,
             "wind_mps": env.wind_enu[:2],
