@@ -37,7 +37,6 @@ from uavxai.avoidance.lines import cornered_choice, measured_children
 from uavxai.avoidance.model import (
     COLLISION,
     NONE,
-    OUT_OF_BOUNDS,
     OUTCOME_NAMES,
     TERMINAL_VALUE,
     TIMEOUT,
@@ -47,7 +46,6 @@ from uavxai.avoidance.model import (
     Track,
     accel_command,
     bank_command,
-    can_stay_inside,
     intruder_margin,
     ownship_air,
     ownship_state,
@@ -519,13 +517,9 @@ class TreeBuilder:
         return values.tolist()
 
     def leaf_value(self, node: int) -> float:
-        """Eq 13 at an open node: 1 - d(o, g) / d_max; with ``wall_viability``, 0 (leaving
-        the area's value) if the line ends too close to an edge to turn away from it."""
-        cfg = self.model.config
-        placed, row = self.placed[(node - 1) // self.k], (node - 1) % self.k
-        if cfg.wall_viability and not can_stay_inside(placed.state(row), cfg):
-            return float(_VALUE_OF[OUT_OF_BOUNDS])
-        return 1.0 - math.dist(placed.position(row), self.goal) / cfg.d_max
+        """Eq 13 at an open node: 1 - d(o, g) / d_max."""
+        xyz = self.placed[(node - 1) // self.k].position((node - 1) % self.k)
+        return 1.0 - math.dist(xyz, self.goal) / self.model.config.d_max
 
     def finish(self) -> SearchTree:
         blocks = len(self.block_parent) - 1

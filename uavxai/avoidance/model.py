@@ -137,29 +137,6 @@ def climb_rate(speed, cfg: PlannerConfig):
     return cfg.climb_rate_mps * np.clip((np.asarray(speed) - lo) / (hi - lo), 0.0, 1.0)
 
 
-def can_stay_inside(state: Sequence[float], cfg: PlannerConfig) -> bool:
-    """Can the ownship in ``state`` stay inside the area's horizontal bounds for good, by
-    rolling to the bank limit on one side and circling there (at its present speed, the roll
-    at the roll-rate limit, flown on straight before the circle starts, as a bound)?
-
-    A tree's horizon ends somewhere; a line that ends heading into a wall too close to turn
-    away has left the area already, only later. The steady wind, which would carry the circle
-    downwind, is not counted.
-    """
-    x, y, _, v, psi, phi = state[:6]
-    bank = math.radians(cfg.bank_limit_deg)
-    radius = v * v / (G * math.tan(bank))
-    ex, ey = math.sin(psi), math.cos(psi)  # heading, clockwise from north
-    (x0, x1), (y0, y1) = cfg.x_bounds, cfg.y_bounds
-    for side in (1.0, -1.0):  # right, left
-        roll_s = abs(side * bank - phi) / math.radians(cfg.roll_rate_limit_deg_s)
-        cx = x + v * roll_s * ex + side * radius * ey
-        cy = y + v * roll_s * ey - side * radius * ex
-        if x0 <= cx - radius and cx + radius <= x1 and y0 <= cy - radius and cy + radius <= y1:
-            return True
-    return False
-
-
 def vertical_command(current, action):
     """The vertical command after ``action``: climb and descend step it one place along
     (descend, the leg's height, climb), the paper's nine keep it, as bank actions step the

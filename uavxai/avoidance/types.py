@@ -142,9 +142,6 @@ class PlannerConfig:
     # floor), where it levels off, reached at climb_rate_mps.
     actions: str = "paper"
     vertical_margin_m: float = 20.0
-    # Whether an open line's end that cannot turn away from the area's edge any more
-    # (uavxai.avoidance.model.can_stay_inside) is worth what leaving the area is.
-    wall_viability: bool = True
 
     def __post_init__(self) -> None:
         self._check_actions()
