@@ -312,6 +312,7 @@ class MCTSConfig(_Model):
     action_hold_s: Annotated[float, Field(gt=0, le=60)] = 4.0
     # How far ahead the tree planners cover what an intruder could do by banking anywhere
     # within its limit (uavxai.avoidance.model.intruder_margin); 0: only its estimated turn.
+    # mvp resolves without it; only the option separations its explanations quote use it.
     reach_horizon_s: Annotated[float, Field(ge=0, le=60)] = 3.0
 
 
