@@ -4,6 +4,7 @@ them."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -297,6 +298,31 @@ def test_the_scenario_sets_how_far_ahead_manoeuvres_are_covered():
     assert margins[5.0][3] == pytest.approx(margins[5.0][2])  # capped beyond the reach
 
 
+def test_the_ownship_models_own_error_needs_more_separation_as_t_to_the_1_5():
+    """``own_error_10s_m`` is a sigma per axis 10 s ahead growing as t^1.5, added to the
+    track's uncertainty in quadrature and counted ``uncertainty_k`` times."""
+    vel = np.array([[0.0, 20.0, 0.0], [15.0, 0.0, 0.0]])
+    t = np.array([0.0, 2.5, 10.0, 16.0])
+    cfg = PlannerConfig(intruder_model="ct", own_error_10s_m=20.0, uncertainty_k=2.0)
+    margin = intruder_margin(cfg, vel, np.zeros(2))(t)
+    np.testing.assert_allclose(margin[:, 0], 2.0 * 20.0 * (t / 10.0) ** 1.5)
+    np.testing.assert_allclose(margin[:, 1], margin[:, 0])  # the same for every intruder
+    # with a track error of 30 m (sigma) the two add in quadrature
+    both = intruder_margin(cfg, vel, np.zeros(2), np.array([30.0, 0.0]), np.zeros(2))(t)
+    np.testing.assert_allclose(both[2, 0], 2.0 * math.hypot(30.0, 20.0))
+    np.testing.assert_allclose(both[:, 1], margin[:, 1])
+    assert intruder_margin(dataclasses.replace(cfg, own_error_10s_m=0.0), vel, np.zeros(2)) is None
+
+
+def test_the_scenario_sets_the_ownship_models_own_error():
+    """`avoidance.mcts.own_error_10s_m` reaches the planner; 0 (the default) adds nothing."""
+    from uavxai.scenario import default_scenario
+
+    assert PlannerConfig.from_scenario(default_scenario()).own_error_10s_m == 0.0
+    scenario = default_scenario(avoidance={"mcts": {"own_error_10s_m": 20.2}})
+    assert PlannerConfig.from_scenario(scenario).own_error_10s_m == 20.2
+
+
 @pytest.mark.parametrize(
     ("field", "value", "message"),
     [
@@ -304,6 +330,7 @@ def test_the_scenario_sets_how_far_ahead_manoeuvres_are_covered():
         ("uncertainty_k", -1.0, "uncertainty_k must be >= 0"),
         ("intruder_bank_limit_deg", 95.0, "intruder_bank_limit_deg must be in"),
         ("late_collision_value", 0.2, "below the time-out"),
+        ("own_error_10s_m", -5.0, "own_error_10s_m must be >= 0"),
     ],
 )
 def test_bad_prediction_settings_are_user_errors(field, value, message):

@@ -63,6 +63,8 @@ BROKEN: list[tuple[str, tuple[str, ...]]] = [
     ("name: x\navoidance: {planner: astar}\n", ("avoidance.planner", "mcts")),
     ("name: x\navoidance: {mcts: {depth: 0}}\n", ("avoidance.mcts.depth",)),
     ("name: x\navoidance: {mcts: {reach_horizon_s: -2}}\n", ("mcts.reach_horizon_s", "0")),
+    ("name: x\navoidance: {mcts: {own_error_10s_m: -1}}\n", ("mcts.own_error_10s_m", "0")),
+    ("name: x\navoidance: {mcts: {own_error_10s_m: lots}}\n", ("mcts.own_error_10s_m",)),
     ("name: x\navoidance: {bank_step_deg: 40}\n", ("bank_step_deg", "bank_limit_deg")),
     ("name: x\nownship: {start: {x: 5000}}\n", ("ownship.start", "outside the world")),
     ("name: x\nownship: {aircraft: cessna}\n", ("aircraft 'cessna'", "known")),

@@ -314,6 +314,11 @@ class MCTSConfig(_Model):
     # within its limit (uavxai.avoidance.model.intruder_margin); 0: only its estimated turn.
     # mvp resolves without it; only the option separations its explanations quote use it.
     reach_horizon_s: Annotated[float, Field(ge=0, le=60)] = 3.0
+    # How far the ownship strays from the tree planners' model 10 s ahead (1 sigma per axis,
+    # growing as t^1.5), added to the intruders' track uncertainty (uavxai.avoidance.model.
+    # intruder_margin); 0: the model's path is taken as flown. docs/scenario.md has the values
+    # measured in JSBSim (benchmarks/bench_own_model.py) and what they cost.
+    own_error_10s_m: Annotated[float, Field(ge=0, le=1000)] = 0.0
 
 
 class NMAC(_Model):

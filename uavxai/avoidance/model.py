@@ -311,8 +311,9 @@ def intruder_margin(
     """The separation needed beyond ``d_min`` from each intruder, as a function of the time
     ``t`` (T,) from now, (T, N); None when there is none.
 
-    Two parts add up: the track's uncertainty, ``uncertainty_k`` sigmas of
-    ``sqrt(sigma_m^2 + (sigma_v t)^2)``; and with ``intruder_model="reachable"`` what the
+    Two parts add up: the uncertainty, ``uncertainty_k`` sigmas of
+    ``sqrt(sigma_m^2 + (sigma_v t)^2 + own(t)^2)``, the track's and the ownship model's own
+    (``own_error_10s_m`` at 10 s, as ``t^1.5``); and with ``intruder_model="reachable"`` what the
     intruder could do next, :func:`manoeuvre_spread` at ``min(t, reach_horizon_s)``. The
     reachable set is covered only that far ahead because re-planning every decision period
     answers what comes later; beyond it the whole set would cover most of a crowded sky (a
@@ -322,8 +323,9 @@ def intruder_margin(
     sm = np.zeros(n) if sigma_m is None else np.asarray(sigma_m, dtype=float)
     sv = np.zeros(n) if sigma_v is None else np.asarray(sigma_v, dtype=float)
     k = config.uncertainty_k
+    own = config.own_error_10s_m / 10.0**1.5
     reach = config.intruder_model == "reachable" and config.reach_horizon_s > 0
-    uncertain = k > 0 and (np.any(sm) or np.any(sv))
+    uncertain = k > 0 and (np.any(sm) or np.any(sv) or own > 0)
     if not n or not (reach or uncertain):
         return None
     limit = math.radians(config.intruder_bank_limit_deg)
@@ -333,7 +335,8 @@ def intruder_margin(
     def margin(t: np.ndarray) -> np.ndarray:
         out = np.zeros((t.size, n))
         if uncertain:
-            out += k * np.sqrt(sm[None] ** 2 + (sv[None] * t[:, None]) ** 2)
+            tt = t[:, None]
+            out += k * np.sqrt(sm[None] ** 2 + (sv[None] * tt) ** 2 + own**2 * tt**3)
         if reach:  # turns differ through the air: the wind carries all of them alike
             out += manoeuvre_spread(air, turn_rate, np.minimum(t, horizon), limit)
         return out
@@ -996,3 +999,35 @@ def _closest_on_chords(
 def _first_true(mask: np.ndarray) -> np.ndarray:
     """Index of the first True along axis 1, or the axis length when there is none."""
     return np.where(mask.any(axis=1), mask.argmax(axis=1), mask.shape[1])
+
+
+# ------------------------------------------------------------------------------ model drift
+def model_drift(
+    config: PlannerConfig,
+    flown: Sequence[Ownship],
+    actions: Sequence[int],
+    goal: np.ndarray,
+    horizons: Sequence[int],
+    every: int = 1,
+) -> dict[int, np.ndarray]:
+    """How far an aircraft strayed from this model: from every ``every``-th decision k of a
+    flight (``flown[k]`` the ownship then, ``actions[k]`` the action chosen), the model flies
+    the actions actually chosen, one decision period each, open loop; per horizon n (in
+    decisions) the horizontal distances between its position and ``flown[k + n]``, m. The
+    evidence behind ``PlannerConfig.own_error_10s_m`` (benchmarks/bench_own_model.py)."""
+    period = config.decision_period_s
+    last = max(horizons)
+    out: dict[int, list[float]] = {n: [] for n in horizons}
+    model = EncounterModel(config)
+    far = Track.of(np.full((model.substeps(period) + 1, 1, 3), 1e7))  # no intruder in reach
+    for k in range(0, len(flown) - last, every):
+        model.carry_ownship(ownship_air(flown[k], config))
+        state = ownship_state(flown[k])[None]
+        for n in range(1, last + 1):
+            action = np.array([actions[k + n - 1]])
+            seg = model.fly(state, action, goal, period, far, cull=False, exact=True)
+            state = seg.end
+            if n in out:
+                truth = flown[k + n]
+                out[n].append(float(np.hypot(state[0, 0] - truth.x, state[0, 1] - truth.y)))
+    return {n: np.asarray(d) for n, d in out.items()}

@@ -123,6 +123,11 @@ class PlannerConfig:
     # The separation needed grows by uncertainty_k sigmas of the track's position error,
     # sqrt(sigma_m^2 + (sigma_v t)^2) at t seconds ahead.
     uncertainty_k: float = 2.0
+    # The ownship's own path is not exact either: the JSBSim aircraft strays from the model's
+    # prediction of the same commands like a random acceleration, sigma (per axis) growing as
+    # t^1.5; this is that sigma 10 s ahead, added to the intruders' track error (the same
+    # uncertainty_k). 0: the model's path is taken as flown (as the kinematic dynamics fly it).
+    own_error_10s_m: float = 0.0
     # Value of a line that collides at the end of the search horizon (linear from 0 at once):
     # when every line meets someone, the search still prefers the one that meets them later,
     # which re-planning can still turn into a miss. 0: every collision is worth 0 (the paper).
@@ -150,7 +155,8 @@ class PlannerConfig:
                 f"PlannerConfig.intruder_model must be one of {', '.join(INTRUDER_MODELS)}, "
                 f"got {self.intruder_model!r}."
             )
-        for name in ("reach_horizon_s", "uncertainty_k", "late_collision_value"):
+        checked = ("reach_horizon_s", "uncertainty_k", "late_collision_value", "own_error_10s_m")
+        for name in checked:
             if not getattr(self, name) >= 0:
                 raise UserError(f"PlannerConfig.{name} must be >= 0, got {getattr(self, name)}.")
         if not 0 < self.intruder_bank_limit_deg < 90:
@@ -225,6 +231,7 @@ class PlannerConfig:
             "c": a.mcts.c,
             "action_hold_s": a.mcts.action_hold_s,
             "reach_horizon_s": a.mcts.reach_horizon_s,
+            "own_error_10s_m": a.mcts.own_error_10s_m,
             "actions": a.actions,
             "seed": scenario.seed,
             "wind_mps": env.wind_enu[:2],

@@ -123,6 +123,20 @@ class Trust(Observer):
         summary["trust"] = {"separation_error_m": stats(self.errors, ("mean", "p95", "max"))}
 
 
+class OwnPath(Observer):
+    """The ownship at every decision and the action it chose: what
+    :func:`uavxai.avoidance.model.model_drift` replays to measure how far the aircraft strays
+    from the planner's model of it."""
+
+    def __init__(self) -> None:
+        self.own: list = []
+        self.actions: list[int] = []
+
+    def on_decision(self, ep: Episode, event: DecisionEvent) -> None:
+        self.own.append(event.own)
+        self.actions.append(int(event.decision.action))
+
+
 class Throughput(Observer):
     """In-flight throughput: the sum rate at the ownship's position (the service plan's
     users and powers) integrated over the flight. Positions are kept per sample and the
