@@ -1019,13 +1019,13 @@ def model_drift(
     last = max(horizons)
     out: dict[int, list[float]] = {n: [] for n in horizons}
     model = EncounterModel(config)
-    far = Track.of(np.full((model.substeps(period) + 1, 1, 3), 1e7))  # no intruder in reach
+    alone = Track.of(np.zeros((model.substeps(period) + 1, 0, 3)))  # the ownship's path only
     for k in range(0, len(flown) - last, every):
         model.carry_ownship(ownship_air(flown[k], config))
         state = ownship_state(flown[k])[None]
         for n in range(1, last + 1):
             action = np.array([actions[k + n - 1]])
-            seg = model.fly(state, action, goal, period, far, cull=False, exact=True)
+            seg = model.fly(state, action, goal, period, alone, cull=False, exact=True)
             state = seg.end
             if n in out:
                 truth = flown[k + n]

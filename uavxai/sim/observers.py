@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from uavxai.avoidance.types import Ownship
 from uavxai.dynamics.state import TrafficState
 from uavxai.sim.episode import DecisionEvent, Episode, Observer, stats
 from uavxai.vocabulary import Outcome
@@ -129,7 +130,7 @@ class OwnPath(Observer):
     from the planner's model of it."""
 
     def __init__(self) -> None:
-        self.own: list = []
+        self.own: list[Ownship] = []
         self.actions: list[int] = []
 
     def on_decision(self, ep: Episode, event: DecisionEvent) -> None:
