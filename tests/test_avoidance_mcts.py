@@ -30,7 +30,7 @@ ENCOUNTERS = {
     # from the right, both reach (1000, 600) at t = 10 s
     "crossing": (Ownship(1000, 400, 120, 20, NORTH), [spec(1200, 600, 270, 20)]),
     # a slow aircraft ahead on the same track, 12 m/s closing
-    "overtaking": (Ownship(1000, 300, 120, 25, NORTH), [spec(1000, 420, 0, 13)]),
+    "overtaking": (Ownship(1000, 300, 120, 25, NORTH), [spec(1000, 460, 0, 13)]),
 }
 GOAL = (1000.0, 1800.0, 120.0)
 SCENARIO = default_scenario("mcts-test")

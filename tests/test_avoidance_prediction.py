@@ -296,6 +296,10 @@ def test_the_scenario_sets_how_far_ahead_manoeuvres_are_covered():
     np.testing.assert_allclose(margins[5.0][:2], margins[3.0][:2])  # the same up to 3 s
     assert margins[5.0][2] > margins[3.0][2] + 20.0  # 5 s: the reachable set has grown
     assert margins[5.0][3] == pytest.approx(margins[5.0][2])  # capped beyond the reach
+    # a scenario that omits the key plans as a bare PlannerConfig does: 4 s since issue 11's
+    # tables were flown again (docs/results/README.md)
+    omitted = PlannerConfig.from_scenario(default_scenario())
+    assert omitted.reach_horizon_s == PlannerConfig().reach_horizon_s == 4.0
 
 
 def test_the_ownship_models_own_error_needs_more_separation_as_t_to_the_1_5():

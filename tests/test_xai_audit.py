@@ -801,9 +801,11 @@ def fast_runs(tmp: Path) -> list[Run]:
     """Short runs with real avoidance, kinematic for speed (about 20 s in all)."""
     sims = {"mcts": {"simulations": 100}}
     return [
-        # dense manoeuvring traffic: cornered decisions, then a collision at step 55
+        # dense manoeuvring traffic: cornered decisions, then a collision at step 55 (with 3 s
+        # of turn cover; the default 4 s flies clear of this one)
         fly_recorded(
-            scenario("manoeuvring", seed=6, intruders={"count": 40}, avoidance=sims),
+            scenario("manoeuvring", seed=6, intruders={"count": 40},
+                     avoidance={"mcts": {"simulations": 100, "reach_horizon_s": 3.0}}),
             "mcts",
             tmp / "dense-collision",
         ),  # fmt: skip

@@ -167,7 +167,10 @@ def test_a_rejected_option_with_the_higher_q_is_not_called_lower():
 
 def test_a_conflict_quotes_its_predicted_miss_not_where_it_first_came_too_close():
     own, intruders = HEAD_ON
-    d = MCTSPlanner(PlannerConfig(seed=0)).plan(own, intruders, (1000, 1800, 120))
+    # 3 s of turn cover: the search's line after holding then flies on into the intruder (with
+    # the default 4 s it already swerves in the next level, and the miss is that swerve's)
+    cfg = PlannerConfig(seed=0, reach_horizon_s=3.0)
+    d = MCTSPlanner(cfg).plan(own, intruders, (1000, 1800, 120))
     hold = next(c for c in d.children if c.action == 4)
     m = hold.meets
     # dead ahead: on the predicted tracks the two would nearly touch; where holding first

@@ -118,7 +118,7 @@ class PlannerConfig:
     # "reachable" that turn, with the separation needed grown by how far the intruder could
     # stray from it within reach_horizon_s by banking anywhere within intruder_bank_limit_deg.
     intruder_model: str = "reachable"
-    reach_horizon_s: float = 3.0
+    reach_horizon_s: float = 4.0
     intruder_bank_limit_deg: float = 30.0
     # The separation needed grows by uncertainty_k sigmas of the track's position error,
     # sqrt(sigma_m^2 + (sigma_v t)^2) at t seconds ahead.
