@@ -19,8 +19,11 @@ from uavxai.metrics import wilson_interval  # noqa: E402
 
 HERE = Path(__file__).parent
 SETTINGS = {  # label: (kinematic files, JSBSim files)
-    "reach 3 s (default)": (["kinematic-preroll200"], ["jsbsim-preroll", "jsbsim-seeds30"]),
-    "reach 4 s": (["kinematic-reach4-200"], ["jsbsim-reach4"]),
+    "reach 3 s (earlier default)": (
+        ["kinematic-preroll200"],
+        ["jsbsim-preroll", "jsbsim-seeds30"],
+    ),
+    "reach 4 s (default)": (["kinematic-reach4-200"], ["jsbsim-reach4", "jsbsim-reach4-seeds60"]),
     "reach 5 s": (["kinematic-reach5-200"], ["jsbsim-reach5", "jsbsim-reach5-seeds30"]),
     "own error 20.2 m": ([], ["jsbsim-own-error"]),
 }
