@@ -4,6 +4,7 @@ the JSBSim episode loop, and (slow) the paper's claim on a reduced campaign."""
 from __future__ import annotations
 
 import csv
+import json
 import math
 import os
 import sys
@@ -23,7 +24,7 @@ from uavxai.campaign import (
     run_campaign_episode,
     summarise,
 )
-from uavxai.cli import main
+from uavxai.cli import MARKER, main
 from uavxai.errors import UserError
 from uavxai.geometry import closest_approach
 from uavxai.scenario import default_scenario
@@ -160,7 +161,7 @@ def test_evaluate_through_the_cli(tmp_path: Path) -> None:
 
 
 def test_merge_campaigns_of_different_methods(tmp_path: Path) -> None:
-    kwargs = dict(intruders=[3], episodes=2, dynamics="kinematic", workers=1, ray_address=None)
+    kwargs = dict(intruders=[40], episodes=2, dynamics="kinematic", workers=1, ray_address=None)
     evaluate_command(SCENARIO, methods=["none"], out=tmp_path / "a", **kwargs)
     evaluate_command(SCENARIO, methods=["mcts_fast"], out=tmp_path / "b", **kwargs)
     merged = merge_campaigns([tmp_path / "a", tmp_path / "b"], tmp_path / "ab")
@@ -169,11 +170,101 @@ def test_merge_campaigns_of_different_methods(tmp_path: Path) -> None:
     assert columns == list(RESULT_COLUMNS) and len(rows) == 2
     _, a_rows = _read(tmp_path / "a" / "results.csv")
     assert rows[0] == a_rows[0]
+    # flown apart, mcts_fast had no `none` to compare with; merged, it has (seed 1 is an NMAC
+    # for `none`)
+    _, b_rows = _read(tmp_path / "b" / "results.csv")
+    assert b_rows[0]["risk_ratio"] == "" and rows[1]["risk_ratio"] != ""
+    assert rows[1]["decision_ms_p50"] == b_rows[0]["decision_ms_p50"]
     _, episodes = _read(tmp_path / "ab" / "episodes.csv")
     assert len(episodes) == 4
     assert (tmp_path / "ab" / "collision_rate.png").is_file()
-    with pytest.raises(UserError, match="more than one source"):
+    with pytest.raises(UserError, match="seed 0: flown in both"):
         merge_campaigns([tmp_path / "a", tmp_path / "a"], tmp_path / "aa")
+
+
+def test_merge_pools_seeds_into_the_campaign_flown_at_once(tmp_path: Path) -> None:
+    """Seeds 0-1 and 2-4 flown apart, then merged, give the rows of seeds 0-4 flown at once:
+    rates, intervals and the paired risk ratio alike."""
+    kwargs = dict(methods=["none", "mvp"], intruders=[40], dynamics="kinematic",
+                  workers=1, ray_address=None)  # fmt: skip
+    own = SCENARIO.ownship.model_copy(update={"goal": (900.0, 950.0, 120.0)})
+    goal = SCENARIO.model_copy(update={"ownship": own})
+    evaluate_command(goal, episodes=2, out=tmp_path / "first", **kwargs)
+    evaluate_command(goal.with_seed(2), episodes=3, out=tmp_path / "more", **kwargs)
+    evaluate_command(goal, episodes=5, out=tmp_path / "once", **kwargs)
+    merge_campaigns([tmp_path / "first", tmp_path / "more"], tmp_path / "pooled")
+    _, pooled = _read(tmp_path / "pooled" / "results.csv")
+    _, once = _read(tmp_path / "once" / "results.csv")
+    assert _seeded(pooled) == _seeded(once)
+    assert [r["episodes"] for r in pooled] == ["5", "5"]
+    assert pooled[1]["risk_ratio"] != ""  # `none` had NMACs to compare with
+    _, episodes = _read(tmp_path / "pooled" / "episodes.csv")
+    assert sorted({int(r["seed"]) for r in episodes}) == [0, 1, 2, 3, 4]
+    assert {(r["goal_x"], r["goal_y"], r["goal_h"]) for r in episodes} == {("900", "950", "120")}
+
+
+def test_merge_refuses_campaigns_that_flew_to_other_goals(tmp_path: Path) -> None:
+    """Without ownship.goal a campaign flies to the service point of its seed: another --seed
+    is another goal, and its seeds are not the same encounters."""
+    kwargs = dict(methods=["none"], intruders=[3], episodes=1, dynamics="kinematic",
+                  workers=1, ray_address=None)  # fmt: skip
+    evaluate_command(SCENARIO, out=tmp_path / "a", **kwargs)
+    evaluate_command(SCENARIO.with_seed(1), out=tmp_path / "b", **kwargs)
+    _, a = _read(tmp_path / "a" / "episodes.csv")
+    _, b = _read(tmp_path / "b" / "episodes.csv")
+    assert (a[0]["goal_x"], a[0]["goal_y"]) != (b[0]["goal_x"], b[0]["goal_y"])
+    with pytest.raises(UserError, match="flew to different goals"):
+        merge_campaigns([tmp_path / "a", tmp_path / "b"], tmp_path / "ab")
+    # the row's goal flies it again as it was flown
+    (tmp_path / "s.yaml").write_text("name: campaign-test\n")  # SCENARIO, seed 0
+    again = rerun_row(tmp_path / "s.yaml", "none", 3, 1,
+                      goal=[float(b[0][k]) for k in ("goal_x", "goal_y", "goal_h")])  # fmt: skip
+    assert again["min_separation_m"] == pytest.approx(float(b[0]["min_separation_m"]), abs=1e-3)
+
+
+def test_merge_refuses_what_is_not_a_campaign(tmp_path: Path) -> None:
+    kwargs = dict(intruders=[3], episodes=1, dynamics="kinematic", workers=1, ray_address=None)
+    evaluate_command(SCENARIO, methods=["none"], out=tmp_path / "a", **kwargs)
+    with pytest.raises(UserError, match="no such file; is .* a campaign folder"):
+        merge_campaigns([tmp_path / "a", tmp_path / "nothing"], tmp_path / "m")
+    (tmp_path / "b").mkdir()
+    (tmp_path / "b" / "episodes.csv").write_text("method,seed\nnone,1\n")
+    with pytest.raises(UserError, match="lacks the columns intruders, episode, outcome"):
+        merge_campaigns([tmp_path / "b"], tmp_path / "m")
+    (tmp_path / "a" / "episodes.csv").write_text(
+        (tmp_path / "a" / "episodes.csv").read_text().replace("none,3,0,0,", "none,3,0,seven,")
+    )
+    with pytest.raises(UserError, match="line 2: intruders, seed, .* must be numbers"):
+        merge_campaigns([tmp_path / "a"], tmp_path / "m")
+
+
+def test_merge_through_the_cli(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    scenario = tmp_path / "s.yaml"
+    scenario.write_text("name: cli-merge\nownship:\n  goal: [900, 900, 120]\n")
+    for name, seed in (("one", "1"), ("two", "3")):
+        args = ["evaluate", str(scenario), "--methods", "none", "--intruders", "3", "--episodes",
+                "2", "--seed", seed, "--out", str(tmp_path / name)]  # fmt: skip
+        assert main(args) == 0
+    out = tmp_path / "both"
+    assert main(["merge", str(tmp_path / "one"), str(tmp_path / "two"), "--out", str(out)]) == 0
+    _, rows = _read(out / "results.csv")
+    assert [(r["method"], r["episodes"]) for r in rows] == [("none", "4")]
+    assert "none" in capsys.readouterr().out
+    # never into one of its sources, never over a folder without --force
+    assert main(["merge", str(tmp_path / "one"), "--out", str(tmp_path / "one"), "--force"]) == 2
+    assert (tmp_path / "one" / "episodes.csv").is_file()
+    assert main(["merge", str(tmp_path / "one"), "--out", str(out)]) == 2
+    # a campaign of other dynamics is not the same encounters
+    other = tmp_path / "jsb"
+    other.mkdir()
+    for f in ("results.csv", "episodes.csv"):
+        (other / f).write_text((tmp_path / "one" / f).read_text())
+    marker = json.loads((tmp_path / "one" / MARKER).read_text())
+    marker["argv"] += ["--dynamics", "jsbsim"]
+    (other / MARKER).write_text(json.dumps(marker))
+    capsys.readouterr()
+    assert main(["merge", str(tmp_path / "one"), str(other), "--out", str(tmp_path / "x")]) == 2
+    assert "different scenarios or dynamics" in capsys.readouterr().err
 
 
 def test_closest_approach_catches_a_pass_through_between_samples() -> None:

@@ -8,7 +8,10 @@ meet the same encounters (the same start, goal and intruders) and any row of
     python -c "from uavxai.campaign import rerun_row; print(rerun_row('scenarios/demo.yaml', \
 'mcts', 20, 17))"
 
-(scenario file, method, intruders, seed; ``dynamics='jsbsim'`` for a JSBSim row).
+(scenario file, method, intruders, seed; ``dynamics='jsbsim'`` for a JSBSim row; and
+``goal=(goal_x, goal_y, goal_h)`` of the row if the scenario has no ``ownship.goal`` and the
+campaign ran with another ``--seed`` than the file's, since the goal is then the service
+point of that seed).
 
 Every episode is flown by the one episode engine (:func:`uavxai.sim.build.fly`), on the
 kinematic encounter model or in JSBSim, with the planner's commands going straight to the
@@ -24,6 +27,7 @@ runs, its numbers are the same: only the ``decision_ms`` timings differ.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import math
 import multiprocessing
@@ -78,7 +82,13 @@ EPISODE_COLUMNS = (
     "flight_time_s",
     "decision_ms_p50",
     "nmac",
+    # The campaign's goal: one per campaign, written on every row so that pooled campaigns
+    # (merge_campaigns) can check they flew the same encounters.
+    "goal_x",
+    "goal_y",
+    "goal_h",
 )
+GOAL_COLUMNS = EPISODE_COLUMNS[-3:]
 # The columns whose values depend on the machine, not on the seed.
 TIMING_COLUMNS = ("decision_ms_p50",)
 
@@ -137,6 +147,7 @@ def run_campaign_episode(
         "flight_time_s": round(float(r.flight_time_s), 3),
         "nmac": int(r.nmac),
         "decision_ms_p50": round(float(np.median(ms)), 4) if ms else math.nan,
+        **{k: round(float(v), 3) for k, v in zip(GOAL_COLUMNS, goal, strict=True)},
         "decision_ms": ms,
     }
 
@@ -147,11 +158,14 @@ def rerun_row(
     n_intruders: int,
     seed: int,
     dynamics: str = "kinematic",
+    goal: Sequence[float] | None = None,
 ) -> dict:
-    """Fly one row of an ``episodes.csv`` again: its scenario file, method, intruders, seed."""
+    """Fly one row of an ``episodes.csv`` again: its scenario file, method, intruders, seed and
+    (for a scenario without ``ownship.goal`` flown with another ``--seed``) the row's goal."""
     from uavxai.scenario import load_scenario
 
-    row = run_campaign_episode(load_scenario(scenario_path), method, n_intruders, seed, dynamics)
+    scenario = load_scenario(scenario_path)
+    row = run_campaign_episode(scenario, method, n_intruders, seed, dynamics, goal)
     row.pop("decision_ms")
     return row
 
@@ -502,32 +516,83 @@ def plot_results(results: Sequence[dict], out: Path, title: str = "") -> list[Pa
 
 
 def merge_campaigns(sources: Sequence[str | Path], out: str | Path, title: str = "") -> list[dict]:
-    """One campaign from several that ran different methods (or counts) of the same scenario
-    and seeds, e.g. on different machines: their ``results.csv`` and ``episodes.csv`` rows
-    side by side in ``out``, with the plots redrawn. A (method, intruders) pair found in two
-    sources is an error, since their episodes would overlap."""
+    """One campaign from several of the same scenario and dynamics: other methods, other
+    intruder counts, or more seeds of the same ones (a campaign extended later, or split over
+    machines). The episodes are pooled and every ``results.csv`` row is computed again from
+    them, so a risk ratio pairs a method with ``none`` on every seed both flew, whichever source
+    flew it. The same (method, intruders, seed) in two sources is an error: it would count twice.
+
+    ``decision_ms_p50`` is the source's when one source flew the whole row; a pooled row has
+    only each episode's median to go on and takes the median of those."""
     out = Path(out)
-    results: list[dict] = []
     episodes: list[dict] = []
+    flown_by: dict[tuple[str, int, int], Path] = {}
+    p50: dict[tuple[str, int], float] = {}
+    goals: dict[tuple[str, ...], Path] = {}
     for src in map(Path, sources):
-        for name, into in (("results.csv", results), ("episodes.csv", episodes)):
-            if not (src / name).is_file():
-                raise UserError(f"{src / name}: no such file; is {src} a campaign folder?")
-            with (src / name).open() as f:
-                into.extend(csv.DictReader(f))
-    seen: set[tuple[str, int]] = set()
+        # files written before the goal was recorded lack its columns, and are taken on trust
+        rows = _read_rows(src / "episodes.csv", EPISODE_COLUMNS[: -len(GOAL_COLUMNS)])
+        for i, r in enumerate(rows, start=2):
+            try:
+                key = (r["method"], int(r["intruders"]), int(r["seed"]))
+                int(r["steps"]), float(r["min_separation_m"]), float(r["nmac"] or 0)
+            except (TypeError, ValueError):
+                raise UserError(
+                    f"{src / 'episodes.csv'} line {i}: intruders, seed, steps, "
+                    "min_separation_m and nmac must be numbers."
+                ) from None
+            if key in flown_by:
+                raise UserError(
+                    f"{key[0]} at {key[1]} intruders, seed {key[2]}: flown in both "
+                    f"{flown_by[key]} and {src}; merge campaigns of different seeds, methods or "
+                    "intruder counts."
+                )
+            flown_by[key] = src
+            goal = tuple(r.setdefault(k, "") for k in GOAL_COLUMNS)
+            if any(goal):
+                goals.setdefault(goal, src)
+        episodes.extend(rows)
+        for r in _read_rows(src / "results.csv", RESULT_COLUMNS):
+            # garbage timing: nothing to keep, the row's own median of medians stands
+            with contextlib.suppress(ValueError):
+                p50[(r["method"], int(r["intruders"]))] = float(r["decision_ms_p50"] or "nan")
+    if len(goals) > 1:
+        what = "; ".join(f"{src}: ({', '.join(g)})" for g, src in goals.items())
+        raise UserError(
+            f"these campaigns flew to different goals ({what}), so the same seed is not the same "
+            "encounter; a scenario without ownship.goal flies to the service point of its seed."
+        )
+    sources_of: dict[tuple[str, int], set[Path]] = {}
+    for (m, n, _), src in flown_by.items():
+        sources_of.setdefault((m, n), set()).add(src)
+    results = summarise(episodes)
     for r in results:
-        key = (r["method"], int(r["intruders"]))
-        if key in seen:
-            raise UserError(f"{key[0]} at {key[1]} intruders appears in more than one source.")
-        seen.add(key)
-        for k in RESULT_COLUMNS[1:]:
-            r[k] = int(r[k]) if k in ("intruders", "episodes") else float(r[k] or "nan")
+        if len(sources_of[(r["method"], r["intruders"])]) == 1:
+            r["decision_ms_p50"] = p50.get((r["method"], r["intruders"]), r["decision_ms_p50"])
     out.mkdir(parents=True, exist_ok=True)
     write_csv(out / "results.csv", RESULT_COLUMNS, results)
     write_csv(out / "episodes.csv", EPISODE_COLUMNS, episodes)
     plot_results(results, out, title)
     return results
+
+
+def _read_rows(path: Path, columns: Sequence[str]) -> list[dict]:
+    """A campaign file's rows, refused with a clear message if it is not one."""
+    if not path.is_file():
+        raise UserError(f"{path}: no such file; is {path.parent} a campaign folder?")
+    try:
+        with path.open(newline="") as f:
+            reader = csv.DictReader(f)
+            rows = list(reader)
+            missing = [c for c in columns if c not in (reader.fieldnames or ())]
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise UserError(f"{path}: cannot read it as a campaign file ({exc}).") from None
+    if missing:
+        raise UserError(
+            f"{path}: not a campaign file of this uavxai, it lacks the columns "
+            f"{', '.join(missing)}."
+        )
+    return rows
 
 
 def evaluate_command(
@@ -592,7 +657,7 @@ def evaluate_command(
     write_csv(out / "results.csv", RESULT_COLUMNS, results)
     plots = plot_results(results, out, f"{scenario.name}, {dynamics}, {episodes} episodes")
     wall = time.perf_counter() - wall0
-    console.print(_table(results))
+    console.print(results_table(results))
     console.print(f"wrote {out / 'results.csv'}, {out / 'episodes.csv'} and {len(plots)} plots")
     return {"episodes": len(rows), "wall_s": wall, "results": results}
 
@@ -613,7 +678,7 @@ def _keep_finished(rows: list[dict], out: Path, console) -> None:
     )
 
 
-def _table(results: Sequence[dict]):
+def results_table(results: Sequence[dict]):
     from rich.table import Table
 
     def ci(r: dict, key: str) -> str:

@@ -120,6 +120,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_run(sub)
     _add_train(sub)
     _add_evaluate(sub)
+    _add_merge(sub)
     _add_service(sub)
     _add_explain(sub)
     _add_validate(sub)
@@ -216,6 +217,17 @@ def _add_evaluate(sub: argparse._SubParsersAction) -> None:
     e.add_argument("--force", action="store_true")
 
 
+def _add_merge(sub: argparse._SubParsersAction) -> None:
+    """`uavxai merge`: campaigns of one scenario pooled into one."""
+    m = sub.add_parser(
+        "merge",
+        help="pool campaign folders of one scenario (other methods, counts or seeds) into one",
+    )
+    m.add_argument("sources", metavar="CAMPAIGN_DIR", nargs="+", type=Path)
+    m.add_argument("--out", type=Path, required=True)
+    m.add_argument("--force", action="store_true")
+
+
 def _add_service(sub: argparse._SubParsersAction) -> None:
     """`uavxai service`: the service-point stage alone."""
     s = sub.add_parser("service", help="the service-point stage alone")
@@ -274,14 +286,16 @@ def _dangerous(path: Path) -> str | None:
     return None
 
 
-def prepare_out_dir(out: Path, force: bool) -> Path:
+def prepare_out_dir(out: Path, force: bool, argv: Sequence[str] | None = None) -> Path:
     """Create (or reuse an empty) output folder, mark it as uavxai's and lock it.
 
     Never overwrites silently: a non-empty folder needs ``--force``, and ``--force`` empties only
     a folder that uavxai made (it holds the ``.uavxai-run`` marker), never the current folder,
     home or '/'. The marker file is locked (fcntl) for as long as this process lives, so a
-    second run into the same folder fails at once instead of mixing its files into ours.
+    second run into the same folder fails at once instead of mixing its files into ours. It
+    records the command (``argv``, default this process's) that writes the folder.
     """
+    argv = sys.argv[1:] if argv is None else argv
     text = str(out)
     if "\x00" in text:
         raise UserError(f"--out {text!r}: a folder name cannot contain a NUL byte.")
@@ -336,7 +350,7 @@ def prepare_out_dir(out: Path, force: bool) -> Path:
         lock.seek(0)
         lock.truncate()
         lock.write(
-            json.dumps({"uavxai": _version(), "pid": os.getpid(), "argv": sys.argv[1:]}) + "\n"
+            json.dumps({"uavxai": _version(), "pid": os.getpid(), "argv": list(argv)}) + "\n"
         )
         lock.flush()
     except BaseException as exc:
@@ -418,7 +432,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
 
 def cmd_service(args: argparse.Namespace) -> int:
     sc = _load(args)
-    out = prepare_out_dir(args.out or Path("runs") / f"{sc.name}-service", args.force)
+    out = prepare_out_dir(args.out or Path("runs") / f"{sc.name}-service", args.force, args.argv)
     from uavxai.service.stage import run_service_stage
 
     summary = run_service_stage(sc, planner=args.planner)
@@ -436,7 +450,8 @@ def cmd_train(args: argparse.Namespace) -> int:
             f"--algo {args.algo} is not available for --stage {args.stage}; "
             f"allowed: {', '.join(allowed)}."
         )
-    out = prepare_out_dir(args.out or Path("runs") / f"train-{args.stage}-{args.algo}", args.force)
+    default = Path("runs") / f"train-{args.stage}-{args.algo}"
+    out = prepare_out_dir(args.out or default, args.force, args.argv)
     if args.finetune and args.stage != "service":
         raise UserError("--finetune is for --stage service (the universal d3qn/dqn model).")
     if args.stage == "service":
@@ -454,7 +469,7 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
     sc = _load(args)
-    out = prepare_out_dir(args.out or Path("runs") / f"{sc.name}-evaluate", args.force)
+    out = prepare_out_dir(args.out or Path("runs") / f"{sc.name}-evaluate", args.force, args.argv)
     from uavxai.campaign import evaluate_command
 
     evaluate_command(
@@ -470,12 +485,53 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def cmd_merge(args: argparse.Namespace) -> int:
+    if args.out.resolve() in {s.resolve() for s in args.sources}:
+        raise UserError(f"--out {args.out}: is one of the sources; merge into a new folder.")
+    _same_campaign(args.sources)
+    out = prepare_out_dir(args.out, args.force, args.argv)
+    from rich.console import Console
+
+    from uavxai.campaign import merge_campaigns, results_table
+
+    results = merge_campaigns(args.sources, out, f"merged from {len(args.sources)} campaigns")
+    console = Console(width=None if sys.stdout.isatty() else 200)
+    console.print(results_table(results))
+    console.print(f"wrote {out / 'results.csv'}, {out / 'episodes.csv'} and the plots")
+    return EXIT_OK
+
+
+def _same_campaign(sources: list[Path]) -> None:
+    """Refuse to pool campaigns flown on other scenarios or dynamics, as each folder's marker
+    records the `uavxai evaluate` command that wrote it (a folder without one is taken on
+    trust: copied results, or a campaign run from Python)."""
+    seen: dict[tuple[str, str], Path] = {}
+    for src in sources:
+        try:
+            argv = json.loads((src / MARKER).read_text())["argv"]
+            flown = build_parser().parse_args(argv)
+        except (OSError, ValueError, KeyError, TypeError, UserError):
+            continue
+        if flown.command == "merge":
+            continue  # its sources were checked when it was made
+        if flown.command != "evaluate":
+            raise UserError(f"{src}: written by `uavxai {flown.command}`, not by `uavxai "
+                            "evaluate`; merge takes campaign folders.")  # fmt: skip
+        seen.setdefault((Path(flown.scenario).name, flown.dynamics), src)
+    if len(seen) > 1:
+        what = "; ".join(f"{src}: {scen}, {dyn}" for (scen, dyn), src in seen.items())
+        raise UserError(
+            f"these campaigns were flown on different scenarios or dynamics ({what}); pooling "
+            "them would mix encounters that are not the same."
+        )
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     sc = _load(args)
     from uavxai.service.stage import check_planner_fits
 
     check_planner_fits(sc)
-    out = prepare_out_dir(args.out or Path("runs") / sc.name, args.force)
+    out = prepare_out_dir(args.out or Path("runs") / sc.name, args.force, args.argv)
     from uavxai.sim.run import run_command
 
     final = run_command(
@@ -509,6 +565,7 @@ COMMANDS = {
     "run": cmd_run,
     "train": cmd_train,
     "evaluate": cmd_evaluate,
+    "merge": cmd_merge,
     "service": cmd_service,
     "explain": cmd_explain,
     "validate": cmd_validate,
@@ -535,6 +592,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
+        args.argv = list(sys.argv[1:] if argv is None else argv)  # for the output's marker
         if args.command is None:
             parser.print_help()
             return EXIT_BAD_INPUT
