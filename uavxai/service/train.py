@@ -158,7 +158,9 @@ def finetune_command(
 def _train_all(env, algo: str, configs: dict, episodes: int, seed: int):
     """Train ``algo`` and the other learner, run random search and solve the exact grid, with
     one progress bar each; returns (runs by name, the grid optimum)."""
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
+    from rich.progress import BarColumn, MofNCompleteColumn, TextColumn
+
+    from uavxai.progress import progress_bar
 
     other = "dqn" if algo == "d3qn" else "d3qn"
     columns = (
@@ -168,7 +170,7 @@ def _train_all(env, algo: str, configs: dict, episodes: int, seed: int):
         TextColumn("{task.fields[status]}"),
     )
     runs: dict[str, dict[str, Any]] = {}
-    with Progress(*columns) as progress:
+    with progress_bar(columns=columns) as progress:
         for name in (algo, other):
             task = progress.add_task(name, total=episodes, status="")
             result = d3qn.train(

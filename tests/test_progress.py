@@ -1,0 +1,75 @@
+"""Progress where no terminal shows a bar (a log file, CI, a batch job): lines now and then,
+one when a task completes, and a whole campaign's progress in its log."""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+import pytest
+from rich.console import Console
+from rich.progress import Progress
+
+from uavxai.campaign import evaluate_command
+from uavxai.progress import LineProgress, progress_bar
+from uavxai.scenario import default_scenario
+
+
+class Clock:
+    def __init__(self) -> None:
+        self.t = 0.0
+
+    def __call__(self) -> float:
+        return self.t
+
+
+def _console(terminal: bool) -> tuple[Console, io.StringIO]:
+    buf = io.StringIO()
+    return Console(file=buf, force_terminal=terminal, width=200), buf
+
+
+def test_a_terminal_gets_the_bar_and_a_log_gets_lines() -> None:
+    assert isinstance(progress_bar(_console(True)[0]), Progress)
+    assert isinstance(progress_bar(_console(False)[0]), LineProgress)
+
+
+def test_lines_at_most_every_interval_and_one_at_the_end() -> None:
+    console, buf = _console(False)
+    clock = Clock()
+    with LineProgress(console, every_s=60.0, clock=clock) as progress:
+        task = progress.add_task("campaign", total=10)
+        for _ in range(9):
+            clock.t += 20.0
+            progress.update(task, advance=1, description="campaign")
+        assert len(buf.getvalue().splitlines()) == 3  # at 60, 120 and 180 s
+        clock.t += 20.0
+        progress.update(task, advance=1)
+    lines = buf.getvalue().splitlines()
+    assert len(lines) == 4  # the completion, and nothing more on leaving
+    assert "campaign: 3/10 (30 %), 1m00s elapsed, about 2m20s left" in lines[0]
+    assert "campaign: 10/10 (100 %), 3m20s elapsed" in lines[-1] and "left" not in lines[-1]
+
+
+def test_a_task_that_stops_short_says_where_on_leaving() -> None:
+    console, buf = _console(False)
+    with pytest.raises(KeyboardInterrupt), LineProgress(console, clock=Clock()) as progress:
+        task = progress.add_task("run", total=400, status="")
+        progress.update(task, advance=7, status="t=7s")
+        raise KeyboardInterrupt
+    last = buf.getvalue().splitlines()[-1]
+    assert last.endswith("run: 7/400 (2 %), 0s elapsed, about 0s left; t=7s")
+
+
+def test_a_campaign_logs_its_progress(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    evaluate_command(
+        default_scenario("progress-test"),
+        methods=["none"],
+        intruders=[3],
+        episodes=3,
+        dynamics="kinematic",
+        workers=1,
+        ray_address=None,
+        out=tmp_path,
+    )
+    err = capsys.readouterr().err
+    assert "none x3: goal: 3/3 (100 %)" in err
