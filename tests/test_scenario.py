@@ -37,6 +37,25 @@ def test_every_shipped_scenario_validates() -> None:
         assert load_scenario(f).name
 
 
+def test_the_stress_scenarios_of_the_results_differ_from_manoeuvring_only_as_they_say() -> None:
+    """docs/results/manoeuvring/stress/*.yaml: each is scenarios/manoeuvring.yaml with the one
+    change its comment names (and its own name)."""
+    base = load_scenario(scenarios_dir() / "manoeuvring.yaml").model_dump()
+    folder = Path(__file__).parent.parent / "docs" / "results" / "manoeuvring" / "stress"
+    changed = {
+        "noncooperative": {("surveillance", "noncooperative")},
+        "poor-adsb": {("surveillance", k) for k in ("nacp", "nacv", "latency_s", "dropout")},
+        "co-altitude": {("intruders", "altitude_m")},
+        "goal-seeking": {("intruders", "behaviour")},
+    }
+    for stem, keys in changed.items():
+        sc = load_scenario(folder / f"{stem}.yaml").model_dump()
+        assert sc["name"] == f"stress-{stem}"
+        diff = {(s, k) for s in base if isinstance(base[s], dict)
+                for k in base[s] if base[s][k] != sc[s][k]}  # fmt: skip
+        assert diff == keys, stem
+
+
 def test_demo_is_the_defaults_with_walking_users_and_ofdma() -> None:
     demo = load_scenario(scenarios_dir() / "demo.yaml")
     assert demo == default_scenario(
