@@ -25,6 +25,7 @@ from uavxai.avoidance.model import (
     turn_positions,
 )
 from uavxai.errors import UserError
+from uavxai.scenario import default_scenario
 
 HOLD = 4  # hold bank, hold speed
 
@@ -105,6 +106,27 @@ def test_margin_adds_uncertainty_and_manoeuvres():
     spread3 = manoeuvre_spread(vel, np.zeros(2), np.array([3.0]), math.radians(30.0))[0]
     np.testing.assert_allclose(r[2], spread3)  # capped at the reach horizon
     assert np.all(r[1] > 0) and np.all(r[1] < r[2])
+
+
+def test_an_uncertainty_horizon_stops_the_velocity_error_growing_there():
+    vel = np.array([[0.0, 20.0, 0.0]])
+    t = np.array([0.0, 4.0, 8.0, 12.0, 16.0])
+    sm, sv = np.array([20.0]), np.array([8.0])
+    whole = PlannerConfig(intruder_model="cv")
+    capped = PlannerConfig(intruder_model="cv", uncertainty_horizon_s=8.0)
+    m = intruder_margin(whole, vel, np.zeros(1), sm, sv)(t)[:, 0]
+    c = intruder_margin(capped, vel, np.zeros(1), sm, sv)(t)[:, 0]
+    np.testing.assert_allclose(c[:3], m[:3])  # the same up to the horizon
+    np.testing.assert_allclose(c[2:], 2.0 * np.hypot(20.0, 8.0 * 8.0))  # then held
+    assert m[-1] > 1.9 * c[-1]  # 16 s ahead, the whole-search margin is twice as wide
+    own = PlannerConfig(intruder_model="cv", uncertainty_horizon_s=8.0, own_error_10s_m=20.0)
+    o = intruder_margin(own, vel, np.zeros(1), sm, sv)(t)[:, 0]
+    assert np.all(np.diff(o) > 0)  # the ownship's own error keeps growing
+    sc = default_scenario(avoidance={"mcts": {"uncertainty_horizon_s": 8}})
+    assert PlannerConfig.from_scenario(sc).uncertainty_horizon_s == 8.0
+    assert PlannerConfig.from_scenario(default_scenario()).uncertainty_horizon_s is None
+    with pytest.raises(UserError, match="uncertainty_horizon_s"):
+        PlannerConfig(uncertainty_horizon_s=0.0)
 
 
 def _one(model, own, pos, vel, margin=None, duration=8.0):
@@ -283,8 +305,6 @@ def test_predict_levels_follow_the_config():
 def test_the_scenario_sets_how_far_ahead_manoeuvres_are_covered():
     """`avoidance.mcts.reach_horizon_s` reaches the planner, and a longer reach needs more
     separation from the same intruder beyond the shorter one's horizon (never less before)."""
-    from uavxai.scenario import default_scenario
-
     vel = np.array([[0.0, 20.0, 0.0]])
     t = np.array([1.0, 3.0, 5.0, 8.0])
     margins = {}

@@ -42,11 +42,14 @@ def test_the_stress_scenarios_of_the_results_differ_from_manoeuvring_only_as_the
     change its comment names (and its own name)."""
     base = load_scenario(scenarios_dir() / "manoeuvring.yaml").model_dump()
     folder = Path(__file__).parent.parent / "docs" / "results" / "manoeuvring" / "stress"
+    poor = {("surveillance", k) for k in ("nacp", "nacv", "latency_s", "dropout")}
     changed = {
         "noncooperative": {("surveillance", "noncooperative")},
-        "poor-adsb": {("surveillance", k) for k in ("nacp", "nacv", "latency_s", "dropout")},
+        "poor-adsb": poor,
         "co-altitude": {("intruders", "altitude_m")},
         "goal-seeking": {("intruders", "behaviour")},
+        "poor-adsb-horizon8": poor | {("avoidance", "mcts")},
+        "horizon8": {("avoidance", "mcts")},
     }
     for stem, keys in changed.items():
         sc = load_scenario(folder / f"{stem}.yaml").model_dump()

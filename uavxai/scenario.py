@@ -322,6 +322,10 @@ class MCTSConfig(_Model):
     # intruder_margin); 0: the model's path is taken as flown. docs/scenario.md has the values
     # measured in JSBSim (benchmarks/bench_own_model.py) and what they cost.
     own_error_10s_m: Annotated[float, Field(ge=0, le=1000)] = 0.0
+    # How far ahead a track's velocity error grows the separation the tree planners ask of it
+    # (uavxai.avoidance.model.intruder_margin); null: over the whole search. With a poor
+    # picture a shorter one keeps the mission going (docs/scenario.md has what it measured).
+    uncertainty_horizon_s: Annotated[float, Field(gt=0, le=60)] | None = None
 
 
 class NMAC(_Model):

@@ -312,8 +312,9 @@ def intruder_margin(
     ``t`` (T,) from now, (T, N); None when there is none.
 
     Two parts add up: the uncertainty, ``uncertainty_k`` sigmas of
-    ``sqrt(sigma_m^2 + (sigma_v t)^2 + own(t)^2)``, the track's and the ownship model's own
-    (``own_error_10s_m`` at 10 s, as ``t^1.5``); and with ``intruder_model="reachable"`` what the
+    ``sqrt(sigma_m^2 + (sigma_v t_v)^2 + own(t)^2)``, the track's and the ownship model's own
+    (``own_error_10s_m`` at 10 s, as ``t^1.5``), with ``t_v = min(t,
+    uncertainty_horizon_s)`` (``t`` when None); and with ``intruder_model="reachable"`` what the
     intruder could do next, :func:`manoeuvre_spread` at ``min(t, reach_horizon_s)``. The
     reachable set is covered only that far ahead because re-planning every decision period
     answers what comes later; beyond it the whole set would cover most of a crowded sky (a
@@ -330,13 +331,15 @@ def intruder_margin(
         return None
     limit = math.radians(config.intruder_bank_limit_deg)
     horizon = config.reach_horizon_s
+    vel_horizon = config.uncertainty_horizon_s
     air = np.asarray(vel, dtype=float) - np.array([*config.wind_mps, 0.0])
 
     def margin(t: np.ndarray) -> np.ndarray:
         out = np.zeros((t.size, n))
         if uncertain:
             tt = t[:, None]
-            out += k * np.sqrt(sm[None] ** 2 + (sv[None] * tt) ** 2 + own**2 * tt**3)
+            tv = tt if vel_horizon is None else np.minimum(tt, vel_horizon)
+            out += k * np.sqrt(sm[None] ** 2 + (sv[None] * tv) ** 2 + own**2 * tt**3)
         if reach:  # turns differ through the air: the wind carries all of them alike
             out += manoeuvre_spread(air, turn_rate, np.minimum(t, horizon), limit)
         return out

@@ -123,6 +123,10 @@ class PlannerConfig:
     # The separation needed grows by uncertainty_k sigmas of the track's position error,
     # sqrt(sigma_m^2 + (sigma_v t)^2) at t seconds ahead.
     uncertainty_k: float = 2.0
+    # How far ahead a track's velocity error keeps growing that position error (None: over
+    # the whole search). Re-planning every decision period, on fresh reports, answers what
+    # lies beyond; a vague track otherwise fences off hundreds of metres 16 s ahead.
+    uncertainty_horizon_s: float | None = None
     # The ownship's own path is not exact either: the JSBSim aircraft strays from the model's
     # prediction of the same commands like a random acceleration, sigma (per axis) growing as
     # t^1.5; this is that sigma 10 s ahead, added to the intruders' track error (the same
@@ -159,6 +163,9 @@ class PlannerConfig:
         for name in checked:
             if not getattr(self, name) >= 0:
                 raise UserError(f"PlannerConfig.{name} must be >= 0, got {getattr(self, name)}.")
+        h = self.uncertainty_horizon_s
+        if h is not None and not h > 0:
+            raise UserError(f"PlannerConfig.uncertainty_horizon_s must be > 0 or None, got {h}.")
         if not 0 < self.intruder_bank_limit_deg < 90:
             raise UserError(
                 "PlannerConfig.intruder_bank_limit_deg must be in (0, 90), "
@@ -232,6 +239,7 @@ class PlannerConfig:
             "action_hold_s": a.mcts.action_hold_s,
             "reach_horizon_s": a.mcts.reach_horizon_s,
             "own_error_10s_m": a.mcts.own_error_10s_m,
+            "uncertainty_horizon_s": a.mcts.uncertainty_horizon_s,
             "actions": a.actions,
             "seed": scenario.seed,
             "wind_mps": env.wind_enu[:2],

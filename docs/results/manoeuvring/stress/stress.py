@@ -16,7 +16,7 @@ from uavxai.campaign import summarise  # noqa: E402
 
 HERE = Path(__file__).parent
 DEFAULT = HERE.parent / "kinematic-reach4-200-episodes.csv"
-VARIANTS = ("noncooperative", "poor-adsb", "co-altitude", "goal-seeking")
+VARIANTS = ("noncooperative", "poor-adsb", "co-altitude", "goal-seeking", "poor-adsb-horizon8")
 
 
 def rows(path: Path) -> list[dict]:
@@ -29,12 +29,12 @@ def main() -> None:
         (v, rows(HERE / f"kinematic-{v}-episodes.csv")) for v in VARIANTS
     ]
     fig, axes = plt.subplots(1, 2, figsize=(10, 4), dpi=120, sharey=False)
-    width = 0.18
+    width = 0.14
     for k, (name, rs) in enumerate(cases):
         for r in summarise(rs):
             if r["method"] != "mcts_vertical":
                 continue
-            x = [20, 40].index(r["intruders"]) + (k - 2) * width
+            x = [20, 40].index(r["intruders"]) + (k - 2.5) * width
             axes[0].bar(x, r["collision_rate"], width, color=f"C{k}",
                         label=name if r["intruders"] == 20 else None)  # fmt: skip
             axes[0].errorbar(x, r["collision_rate"], color="k", capsize=2, yerr=[
