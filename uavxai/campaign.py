@@ -535,7 +535,8 @@ def merge_campaigns(sources: Sequence[str | Path], out: str | Path, title: str =
         for i, r in enumerate(rows, start=2):
             try:
                 key = (r["method"], int(r["intruders"]), int(r["seed"]))
-                int(r["steps"]), float(r["min_separation_m"]), float(r["nmac"] or 0)
+                for column in ("steps", "min_separation_m", "nmac"):  # summarise reads these
+                    float(r[column] or 0)
             except (TypeError, ValueError):
                 raise UserError(
                     f"{src / 'episodes.csv'} line {i}: intruders, seed, steps, "
