@@ -41,6 +41,7 @@ from uavxai.dynamics.state import TrafficState
 from . import telemetry
 from .framing import FrameReader, Parsed
 from .link import Link
+from .operator import SETPOINT_REFUSAL, Decoded, Limits, OperatorCommand, decode
 from .params import ParamTable
 from .protocol import (
     AUTOPILOT_COMPONENT,
@@ -81,8 +82,6 @@ DEFAULT_SPEED_LIMITS_MPS = (12.0, 30.0)
 DEFAULT_BANK_LIMIT_RAD = math.radians(60.0)
 DEFAULT_ACCEL_LIMIT_MPS2 = 10.0
 DEFAULT_XY_LIMITS_M = ((0.0, 2000.0), (0.0, 2000.0))
-MIN_ORBIT_RADIUS_M = 1.0
-ORBIT_CENTRE_TOLERANCE_M = 0.05
 # Bound the work one poll() does, so a flooding peer cannot stall the simulation loop.
 _MAX_READS_PER_POLL = 1000
 _COUNTERS = (
@@ -98,6 +97,8 @@ _COUNTERS = (
     "refused_bad_signature",
     "param_requests",
     "param_sets_refused",
+    "operator_commands",  # a ground station's aims taken (modes, heights, speeds, points)
+    "operator_refused",  # a ground station's commands refused (setpoints, modes not flown)
     "failsafe_events",
     "clamped_commands",  # obeyed, but at a limit of the world or the aircraft
 )
@@ -184,7 +185,10 @@ class MavlinkBridge:
         # Publish every intruder's exact state as ADSB_VEHICLE (no surveillance model); off
         # when a surveillance model's reports are relayed instead.
         self.truth_adsb = True
-        self.phase = "transit"  # the mission phase, shown as the flight mode
+        self.phase = "transit"  # the mission phase, announced in STATUSTEXT
+        self.mode = "AUTO"  # the flight mode ground stations see (uavxai.sim.operator)
+        self._operator_commands: list[OperatorCommand] = []
+        self._from_link = False  # the message being handled came from a ground station
         self.power = telemetry.Power()  # battery and throttle, when the dynamics model them
 
         self._init_link(link, system_id, signing_key, signing_state)
@@ -220,6 +224,7 @@ class MavlinkBridge:
             raise ValueError(f"accel_limit_mps2 must be positive, got {accel_limit_mps2}")
         self._bank_limit = float(bank_limit_rad)
         self._accel_limit = float(accel_limit_mps2)
+        self.limits = Limits(self._alt_limits, self._speed_limits, self._xy_limits)
 
     def _param_table(
         self,
@@ -278,15 +283,27 @@ class MavlinkBridge:
         self._link_gate = link_gate
         decoder = new_codec(None, system_id, AUTOPILOT_COMPONENT)
         self._feed_reader = FrameReader(decoder, stream=False, gate=feed_gate)
+        self._script_reader = FrameReader(decoder, stream=False)
         self._link_reader = (
             FrameReader(decoder, stream=self._link.stream, gate=link_gate) if self._link else None
         )
 
     # ------------------------------------------------------------------ input
     def feed(self, data: bytes) -> int:
-        """Decode and obey MAVLink bytes handed over in-process (whole frames, like one
-        datagram); returns the number of commands obeyed."""
-        return self._handle(self._feed_reader.push(data))
+        """Decode and obey MAVLink bytes handed over in-process by the onboard planner (whole
+        frames, like one datagram); returns the number of commands obeyed."""
+        return self._handle(self._feed_reader.push(data), from_link=False)
+
+    def feed_operator(self, data: bytes) -> int:
+        """Frames of the scenario's scripted operator (``operator.commands``): decoded as a
+        ground station's, from a station the scenario itself allows; returns the number of
+        aims taken."""
+        return self._handle(self._script_reader.push(data), from_link=True)
+
+    def take_operator_commands(self) -> list[OperatorCommand]:
+        """The ground stations' aims received since the last call, oldest first."""
+        out, self._operator_commands = self._operator_commands, []
+        return out
 
     def poll(self) -> int:
         """Read and obey whatever the link has received, without blocking; returns the number
@@ -298,7 +315,7 @@ class MavlinkBridge:
             data = self._link.read()
             if not data:
                 break
-            obeyed += self._handle(self._link_reader.push(data))
+            obeyed += self._handle(self._link_reader.push(data), from_link=True)
         return obeyed
 
     # ------------------------------------------------------------------ time and output
@@ -324,7 +341,7 @@ class MavlinkBridge:
             return
         t, gates = state.t, self._gates
         if gates["heartbeat"].due(t):
-            self._send(telemetry.heartbeat(self.failsafe_active, self.phase))
+            self._send(telemetry.heartbeat(self.failsafe_active, self.mode))
         if gates["home"].due(t):
             self._send(telemetry.home_position(self.frame, self._home, t))
         if gates["vehicle"].due(t):
@@ -369,7 +386,7 @@ class MavlinkBridge:
         self.close()
 
     # ------------------------------------------------------------------ internals
-    def _handle(self, parsed: Parsed) -> int:
+    def _handle(self, parsed: Parsed, from_link: bool) -> int:
         c = self.counters
         c["malformed"] += parsed.malformed
         c["unknown_messages"] += parsed.unknown
@@ -383,14 +400,47 @@ class MavlinkBridge:
                 "only counted"
             )
         obeyed = 0
+        self._from_link = from_link
         for msg in parsed.messages:
             c["messages_in"] += 1
+            if from_link:  # a ground station commands aims, never setpoints
+                read = decode(msg, self.frame, self.limits)
+                if read is not None:
+                    obeyed += self._operator(msg, read)
+                    if msg.get_type() != "MISSION_SET_CURRENT":
+                        continue
             handler = self._handlers.get(msg.get_type())
             if handler is None:
                 c["ignored_messages"] += 1
             elif handler(msg):
                 obeyed += 1
+        self._from_link = False
         return obeyed
+
+    def _operator(self, msg, read: Decoded) -> int:
+        """A ground station's command: its aim queued for the episode's operator, or refused;
+        acknowledged (COMMAND_LONG/INT) and explained (STATUSTEXT) to the station."""
+        if not self._addressed_to_me(msg, allow_broadcast=msg.get_type() == "SET_MODE"):
+            return 0
+        acked = msg.get_type() in ("COMMAND_LONG", "COMMAND_INT")
+        if read.command is None:
+            self.counters["operator_refused"] += 1
+            if read.refused == SETPOINT_REFUSAL:
+                self._clamped("setpoint", read.refused)  # at most one notice every few s
+            else:
+                self.announce(read.refused or "command refused", mavlink.MAV_SEVERITY_WARNING)
+            if acked:
+                self._ack(msg, read.result)
+            return 0
+        if read.notes:
+            self.counters["clamped_commands"] += 1
+            for note in read.notes:
+                self.announce(f"clamped: {note}", mavlink.MAV_SEVERITY_WARNING)
+        if acked:
+            self._ack(msg, mavlink.MAV_RESULT_ACCEPTED, ACK_CLAMPED if read.notes else 0)
+        self.counters["operator_commands"] += 1
+        self._operator_commands.append(read.command)
+        return 1
 
     def _send(self, msg) -> None:
         self._codec.send(msg)
@@ -450,13 +500,12 @@ class MavlinkBridge:
         return self._obey(accel_cmd_mps2=flown)
 
     def _on_command_long(self, msg) -> bool:
+        """The onboard planner's DO_CHANGE_SPEED / DO_CHANGE_ALTITUDE (flown), and message
+        requests from anyone (a ground station's aims are decoded in :meth:`_operator`)."""
         if not self._addressed_to_me(msg):
             return False
-        command = msg.command
-        if command == mavlink.MAV_CMD_DO_CHANGE_SPEED:
-            return self._change_speed(msg)
-        if command == mavlink.MAV_CMD_DO_CHANGE_ALTITUDE:
-            return self._change_altitude(msg)
+        if msg.command in (mavlink.MAV_CMD_DO_CHANGE_SPEED, mavlink.MAV_CMD_DO_CHANGE_ALTITUDE):
+            return self._fly_planner_command(msg)
         reply = self._requested_message(msg)
         if reply is None:
             self._ack(msg, mavlink.MAV_RESULT_UNSUPPORTED)
@@ -467,76 +516,33 @@ class MavlinkBridge:
         return False
 
     def _on_command_int(self, msg) -> bool:
-        """COMMAND_INT: MAV_CMD_DO_ORBIT (loiter about a point), the one position command."""
+        """The onboard planner's MAV_CMD_DO_ORBIT (the mission's loiter about a point)."""
         if not self._addressed_to_me(msg):
             return False
         if msg.command != mavlink.MAV_CMD_DO_ORBIT:
             self._ack(msg, mavlink.MAV_RESULT_UNSUPPORTED)
             self.counters["ignored_messages"] += 1
             return False
-        # param1 radius (m, positive clockwise); x, y lat/lon degE7; z altitude in `frame`.
-        radius, frames = msg.param1, (mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT,)
-        lat, lon = msg.x / 1e7, msg.y / 1e7
-        if (
-            msg.frame not in frames
-            or not (math.isfinite(radius) and abs(radius) >= MIN_ORBIT_RADIUS_M)
-            or not math.isfinite(msg.z)
-            or not (abs(lat) <= 90 and abs(lon) <= 180)
-        ):
-            self._ack(msg, mavlink.MAV_RESULT_DENIED)
-            return self._reject(
-                f"DO_ORBIT radius {radius} at {lat}, {lon}, {msg.z} in frame {msg.frame}"
-            )
-        x, y, _ = self.frame.to_local(lat, lon, 0.0)
-        (x0, x1), (y0, y1) = self._xy_limits
-        notes = []
-        cx, cy = min(max(float(x), x0), x1), min(max(float(y), y0), y1)
-        # degE7 on the wire is ~1 cm: a centre sent on the edge may come back just outside it.
-        if math.hypot(cx - x, cy - y) > ORBIT_CENTRE_TOLERANCE_M:
-            notes.append(f"centre ({cx:.6g}, {cy:.6g})")
-        # The whole circle need not fit (the world's edge is a soft limit for a loiter), but a
-        # circle larger than the world is no orbit of this world.
-        largest = max(x1 - x0, y1 - y0) / 2
-        r = min(abs(float(radius)), max(largest, MIN_ORBIT_RADIUS_M))
-        if r != abs(radius):
-            notes.append(f"radius {abs(radius):.4g} -> {r:.6g} m")
-        h, note = self._clamp_alt(float(msg.z))
-        notes += [note] if note else []
-        # param2: the orbit's speed (NaN or <= 0: keep the airspeed target as it is)
-        speed = None
-        if math.isfinite(msg.param2) and msg.param2 > 0:
-            speed, note = self._clamp_speed(float(msg.param2))
-            notes += [note] if note else []
-        self._ack_obeyed(msg, "DO_ORBIT", notes)
-        self._obey(alt_target_m=h, speed_target_mps=speed)
-        self._sink.command_orbit(cx, cy, r, radius >= 0)
+        return self._fly_planner_command(msg)
+
+    def _fly_planner_command(self, msg) -> bool:
+        """A command of the onboard planner, read by the same decoder as an operator's and
+        held to the same limits, then written to the autopilot."""
+        read = decode(msg, self.frame, self.limits)
+        cmd = read.command if read is not None else None
+        if cmd is None:
+            return self._reject(read.refused if read is not None else "unknown command")
+        if read.notes:
+            self.counters["clamped_commands"] += 1
+            for note in read.notes:
+                self.announce(f"clamped: {note}", mavlink.MAV_SEVERITY_WARNING)
+        if cmd.kind == "speed":
+            return self._obey(speed_target_mps=cmd.speed_mps)
+        if cmd.kind == "altitude":
+            return self._obey(alt_target_m=cmd.h)
+        self._obey(alt_target_m=cmd.h, speed_target_mps=cmd.speed_mps)
+        self._sink.command_orbit(cmd.x, cmd.y, cmd.radius_m, cmd.clockwise)
         return True
-
-    def _change_speed(self, msg) -> bool:
-        # param1 speed type: 0 airspeed, 1 ground speed; both set the airspeed target, since
-        # the ownship's autopilot holds airspeed. param2 = -1 ("no change") would leave only a
-        # throttle change, which this autopilot does not take: denied like any speed <= 0.
-        speed = msg.param2
-        if msg.param1 not in (0, 1) or not math.isfinite(speed) or speed <= 0:
-            self._ack(msg, mavlink.MAV_RESULT_DENIED)
-            return self._reject(f"DO_CHANGE_SPEED type {msg.param1} speed {speed}")
-        flown, note = self._clamp_speed(float(speed))
-        self._ack_obeyed(msg, "DO_CHANGE_SPEED", [note] if note else [])
-        return self._obey(speed_target_mps=flown)
-
-    def _change_altitude(self, msg) -> bool:
-        # param1 altitude (m), param2 its frame: MSL, or relative to the local origin (= h).
-        alt, frame = msg.param1, msg.param2
-        offsets = {
-            mavlink.MAV_FRAME_GLOBAL: -self.frame.alt0,
-            mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT: 0.0,
-        }
-        if frame not in offsets or not math.isfinite(alt):
-            self._ack(msg, mavlink.MAV_RESULT_DENIED)
-            return self._reject(f"DO_CHANGE_ALTITUDE {alt} in frame {frame}")
-        flown, note = self._clamp_alt(float(alt) + offsets[frame])
-        self._ack_obeyed(msg, "DO_CHANGE_ALTITUDE", [note] if note else [])
-        return self._obey(alt_target_m=flown)
 
     def _requested_message(self, msg):
         """The reply to a request for a message this bridge can send on demand, or None."""
@@ -551,6 +557,8 @@ class MavlinkBridge:
         return None
 
     def _ack(self, msg, result: int, result_param2: int = 0) -> None:
+        if not self._from_link:
+            return  # the onboard planner's commands are not acknowledged onto the ground link
         self._send(
             mavlink.MAVLink_command_ack_message(
                 msg.command,
@@ -563,24 +571,6 @@ class MavlinkBridge:
         )
 
     # ------------------------------------------------------------------ limits
-    def _clamp_alt(self, h: float) -> tuple[float, str | None]:
-        flown, clamped = _limited(h, *self._alt_limits)
-        return flown, f"h {h:.4g} -> {flown:.6g} m" if clamped else None
-
-    def _clamp_speed(self, speed: float) -> tuple[float, str | None]:
-        flown, clamped = _limited(speed, *self._speed_limits)
-        return flown, f"speed {speed:.4g} -> {flown:.4g} m/s" if clamped else None
-
-    def _ack_obeyed(self, msg, name: str, notes: list[str]) -> None:
-        """ACCEPTED; if a limit changed the command, say so first (STATUSTEXT, which ground
-        stations show; one per clamp, as a STATUSTEXT holds 50 characters) and mark the
-        acknowledgement with ACK_CLAMPED."""
-        if notes:
-            self.counters["clamped_commands"] += 1
-            for note in notes:
-                self.announce(f"{name} clamped: {note}", mavlink.MAV_SEVERITY_WARNING)
-        self._ack(msg, mavlink.MAV_RESULT_ACCEPTED, ACK_CLAMPED if notes else 0)
-
     def _clamped(self, kind: str, text: str) -> None:
         """A setpoint flown at a limit: counted; announced at most every few seconds."""
         self.counters["clamped_commands"] += 1
@@ -615,6 +605,10 @@ class MavlinkBridge:
             index = self._params.find(msg.param_id, -1)
             if index is not None:
                 self._send(self._params.value_message(index))
+                why = f"{msg.param_id} read-only: set it in the scenario"
+            else:
+                why = f"no parameter {msg.param_id}"
+            self.announce(why, mavlink.MAV_SEVERITY_WARNING)
         return False
 
     def _body_rates(self, state: TrafficState) -> np.ndarray:

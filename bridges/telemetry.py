@@ -25,6 +25,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from uavxai.dynamics.geodesy import LocalFrame
 from uavxai.dynamics.state import TrafficState
 
+from .operator import ARDUPLANE_MODES, FAILSAFE_MODE
 from .protocol import boot_ms
 
 # Simulated intruders get addresses from one made-up block, numbered as intruder-N, so a ground
@@ -82,19 +83,16 @@ class RateGate:
         self._next = None
 
 
-# Flight modes as custom_mode numbers of the fixed-wing mode table that pymavlink (and so
-# MAVProxy) and QGroundControl name for a MAV_TYPE_FIXED_WING vehicle: the mission's phases
-# show as GUIDED (transit, avoiding), LOITER (on station), RTL (returning), FBWA (failsafe:
-# wings level, holding height and speed).
-FLIGHT_MODES = {"transit": 15, "avoiding": 15, "on_station": 12, "returning": 11}
-FAILSAFE_MODE = 5
 
 
-def heartbeat(failsafe: bool, phase: str = "transit") -> mavlink.MAVLink_heartbeat_message:
-    custom = FAILSAFE_MODE if failsafe else FLIGHT_MODES.get(phase, FLIGHT_MODES["transit"])
+def heartbeat(failsafe: bool, mode: str = "AUTO") -> mavlink.MAVLink_heartbeat_message:
+    """An ArduPlane-compatible HEARTBEAT: MAV_AUTOPILOT_ARDUPILOTMEGA and ArduPlane's custom
+    mode numbers, so that MAVProxy and QGroundControl name the mode (AUTO, GUIDED, LOITER,
+    RTL; FBWA while the command failsafe holds the wings level)."""
+    custom = FAILSAFE_MODE if failsafe else ARDUPLANE_MODES[mode]
     return mavlink.MAVLink_heartbeat_message(
         mavlink.MAV_TYPE_FIXED_WING,
-        mavlink.MAV_AUTOPILOT_GENERIC,
+        mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA,
         mavlink.MAV_MODE_FLAG_SAFETY_ARMED
         | mavlink.MAV_MODE_FLAG_GUIDED_ENABLED
         | mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,

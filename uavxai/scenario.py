@@ -379,12 +379,45 @@ class Avoidance(_Model):
 
 
 # --------------------------------------------------------------------------------------- bridge
+class GroundStation(_Model):
+    """A ground station allowed to command: its MAVLink system id and its host's address."""
+
+    system_id: Annotated[int, Field(ge=1, le=255)] = 255
+    address: Annotated[str, Field(min_length=1, max_length=253)] = "127.0.0.1"
+
+    @field_validator("address")
+    @classmethod
+    def _address(cls, v: str) -> str:
+        import ipaddress
+
+        try:
+            return str(ipaddress.ip_address(v))
+        except ValueError:
+            raise ValueError(
+                f"address must be an IP address (as the ground station's datagrams come "
+                f"from, e.g. 127.0.0.1), got {v!r}"
+            ) from None
+
+
 class Bridge(_Model):
     mavlink: Annotated[str, Field(max_length=500)] | None = None
     system_id: Annotated[int, Field(ge=1, le=255)] = 1
     signing_key_hex: str | None = None
     command_timeout_s: Annotated[float, Field(gt=0, le=600)] = 3.0  # failsafe: wings level
-    override_s: Annotated[float, Field(ge=0, le=86_400)] = 30.0  # operator command holds this
+    # who may command without a signing key (none by default); with a key, signed commands
+    ground_stations: Annotated[list[GroundStation], Field(max_length=16)] = []
+    tlog: bool = True  # every frame in and out to RUN/link.tlog (uavxai run with a link)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _removed(cls, data: Any) -> Any:
+        if isinstance(data, dict) and "override_s" in data:
+            raise ValueError(
+                "bridge.override_s was removed: an operator's command no longer switches "
+                "avoidance off for a while, it sets where the ownship goes and avoidance "
+                "stays on (see 'Operating from a ground station' in the README); delete the key"
+            )
+        return data
 
     @field_validator("signing_key_hex")
     @classmethod
@@ -441,6 +474,50 @@ class Surveillance(_Model):
     preroll_s: Annotated[float, Field(ge=0, le=600)] = 10.0  # listening before t = 0
 
 
+# ------------------------------------------------------------------------------------- operator
+OPERATOR_MODES = ("AUTO", "GUIDED", "LOITER", "RTL")
+
+
+class OrbitAim(_Model):
+    x: Finite
+    y: Finite
+    h: Finite
+    radius_m: Annotated[float, Field(ge=1, le=MAX_M)] = 150.0
+    clockwise: bool = True
+
+
+class OperatorCommandSpec(_Model):
+    """One timed command of the scripted operator: at ``t`` (s of simulated time) exactly one
+    of a height, an airspeed, a flight mode, a point to go to or an orbit."""
+
+    t: Annotated[float, Field(ge=0, le=86_400, allow_inf_nan=False)]
+    altitude_m: Finite | None = None
+    speed_mps: Annotated[float, Field(gt=0, le=1000)] | None = None
+    mode: Literal["AUTO", "GUIDED", "LOITER", "RTL"] | None = None
+    goto: tuple[Finite, Finite, Finite] | None = None
+    orbit: OrbitAim | None = None
+
+    @model_validator(mode="after")
+    def _one(self) -> OperatorCommandSpec:
+        given = [k for k in ("altitude_m", "speed_mps", "mode", "goto", "orbit")
+                 if getattr(self, k) is not None]  # fmt: skip
+        if len(given) != 1:
+            raise ValueError(
+                "each operator command gives t and exactly one of altitude_m, speed_mps, "
+                f"mode ({', '.join(OPERATOR_MODES)}), goto [x, y, h] or orbit {{x, y, h, "
+                f"radius_m}}; this one gives {', '.join(given) or 'none'}"
+            )
+        return self
+
+
+class Operator(_Model):
+    """A scripted operator: timed ground-station commands, sent as MAVLink frames through the
+    bridge's own decoder (BlueSky's timed stack commands, for a pilot in the loop)."""
+
+    system_id: Annotated[int, Field(ge=1, le=255)] = 255
+    commands: Annotated[list[OperatorCommandSpec], Field(max_length=1000)] = []
+
+
 # -------------------------------------------------------------------------------------- mission
 class Mission(_Model):
     service_s: Annotated[float, Field(ge=0, le=86_400)] = 300.0
@@ -464,6 +541,7 @@ class Scenario(_Model):
     environment: Environment = Environment()
     surveillance: Surveillance = Surveillance()
     mission: Mission = Mission()
+    operator: Operator = Operator()
 
     @field_validator("name")
     @classmethod

@@ -189,7 +189,8 @@ def flies(action: int, own: Ownship, config: PlannerConfig) -> int | None:
         bank = 0
     if accel:
         commanded = config.accel_mps2 * config.action_hold_s
-        lo, hi = min(config.speed_mps[0], own.speed), max(config.speed_mps[1], own.speed)
+        band = own.speed_band or config.speed_mps
+        lo, hi = min(band[0], own.speed), max(band[1], own.speed)
         change = min(max(own.speed + accel * commanded, lo), hi) - own.speed
         if abs(change) < SPEED_CHANGE_SHARE * commanded or commanded == 0:
             accel = 0

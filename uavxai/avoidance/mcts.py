@@ -175,6 +175,7 @@ class TreePlanner:
         cfg, model = self.config, self.model
         goal_xyz = np.asarray(goal, dtype=float)
         model.carry_ownship(ownship_air(own, cfg))  # before predicting: it sets their index
+        model.hold_speed_band(own.speed_band)
         tracks = predict_levels(model, intruders, cfg.depth, cfg.action_hold_s)
         time_left_s = (cfg.max_steps - step) * cfg.decision_period_s
         tree = self.search(ownship_state(own), goal_xyz, tracks, time_left_s)

@@ -475,6 +475,7 @@ class EncounterModel:
         self.config = config
         self._roll = math.radians(config.roll_rate_limit_deg_s)
         self._memo: dict[tuple[float, float, float, float], _BodyMotion] = {}
+        self._band: tuple[float, float] | None = None  # hold_speed_band
         self._substeps: dict[float, int] = {}
         # ground drift of the air the ownship flies in, x + iy m/s (see carry_ownship); the
         # intruders' tracks are in the steady wind, config.wind_mps
@@ -495,6 +496,15 @@ class EncounterModel:
         )
 
     # ------------------------------------------------------------------------------- helpers
+    def hold_speed_band(self, band: tuple[float, float] | None) -> None:
+        """From now on the ownship flies airspeeds within ``band`` (None: the config's
+        ``speed_mps``): an operator's speed (``Ownship.speed_band``). A planner sets it once
+        per decision, with :meth:`carry_ownship`."""
+        band = None if band is None else (float(band[0]), float(band[1]))
+        if band != self._band:
+            self._band = band
+            self._memo.clear()
+
     def carry_ownship(self, air: tuple[float, float]) -> None:
         """From now on the ownship's paths drift with ``air`` (east, north) m/s, the motion
         of the air it flies in (:func:`ownship_air`), instead of the steady wind; the
@@ -764,8 +774,9 @@ class EncounterModel:
         roll = self._roll
         phi_cmd = bank_command(cmd0, actions, cfg)
         accel = accel_command(actions, cfg)
-        vmin = np.minimum(cfg.speed_mps[0], v0)  # an out-of-range start speed never jumps
-        vmax = np.maximum(cfg.speed_mps[1], v0)
+        band = self._band or cfg.speed_mps
+        vmin = np.minimum(band[0], v0)  # an out-of-range start speed never jumps
+        vmax = np.maximum(band[1], v0)
 
         dphi = (phi_cmd - phi0)[:, None]
         phi_m = phi0[:, None] + np.clip(dphi, -roll * tm, roll * tm)

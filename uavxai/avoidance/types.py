@@ -41,6 +41,10 @@ class Ownship:
     # wind plus the gust of the moment (see uavxai.avoidance.model.ownship_air). None: not
     # known, the planner's steady wind only.
     ground_velocity: tuple[float, float] | None = None
+    # The airspeeds the planner may fly (min, max); None: PlannerConfig.speed_mps. An
+    # operator's DO_CHANGE_SPEED pins it to that speed (uavxai.sim.operator): avoidance then
+    # manoeuvres by bank and height, as DAA guidance does, and the speed stays the operator's.
+    speed_band: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -455,6 +459,9 @@ class Decision:
     # vertical action set; a climb aims at the ceiling and climbs at the rate limit). None:
     # unchanged, the leg's height (the paper's nine).
     alt_target_m: float | None = None
+    # What the operator on a ground station asked for, when the decision was taken under an
+    # operator's aim (uavxai.sim.operator): the explanation opens with it.
+    aim: str = ""
 
     @property
     def explanation(self) -> str:
@@ -469,6 +476,8 @@ class Decision:
     def _narrated(self) -> tuple[str, str]:
         if self.words is None:
             self.words = _NARRATOR[0](self) if _NARRATOR else ("", "")
+            if self.aim:
+                self.words = (f"{self.aim}: {self.words[0]}", self.words[1])
         return self.words
 
     def to_json(self) -> dict:

@@ -14,6 +14,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
+
 from uavxai.errors import UserError
 
 WATTS_PER_HP = 745.7  # JSBSim's hptowatts (FGJSBBase), so that W -> hp -> W is exact
@@ -29,6 +31,15 @@ PAYLOAD_POWER_W = "electric/payload-power-w"
 # What JSBSim computes
 SHAFT_POWER_HP = "propulsion/engine/power-hp"  # FGElectric: throttle x rated power
 THROTTLE = "fcs/throttle-pos-norm"  # the motor's throttle, 0..1, after the servo mixer
+
+# A lithium polymer cell's open-circuit voltage against its state of charge (a typical
+# discharge curve of a LiPo cell at low rate: flat near 3.8 V, falling steeply below 10 %).
+LIPO_OCV = (
+    (0.0, 3.27), (0.05, 3.61), (0.1, 3.69), (0.2, 3.73), (0.3, 3.77), (0.4, 3.79),
+    (0.5, 3.82), (0.6, 3.87), (0.7, 3.92), (0.8, 3.98), (0.9, 4.06), (1.0, 4.20),
+)  # fmt: skip
+LIPO_NOMINAL_CELL_V = 3.7
+CELL_RESISTANCE_OHM = 0.004  # per cell, a 10 Ah pack: a 20 A load sags 6S by about 0.5 V
 
 
 @dataclass(frozen=True)
@@ -68,6 +79,18 @@ class BatterySpec:
         """The battery current for a load of ``power_w`` at the nominal voltage (MAVLink
         SYS_STATUS ``current_battery``); 0 when the package gives no voltage."""
         return power_w / self.voltage_v if self.voltage_v > 0 else 0.0
+
+    def terminal_voltage_v(self, soc: float, current_a: float) -> float:
+        """The pack's voltage under load (MAVLink SYS_STATUS ``voltage_battery``): a lithium
+        polymer cell's open-circuit voltage at this state of charge (:data:`LIPO_OCV`), times
+        the cells the nominal voltage implies (3.7 V each), less the sag of the load on the
+        pack's internal resistance (:data:`CELL_RESISTANCE_OHM` per cell); 0 when the package
+        gives no voltage."""
+        if self.voltage_v <= 0:
+            return 0.0
+        cells = max(1, round(self.voltage_v / LIPO_NOMINAL_CELL_V))
+        ocv = float(np.interp(min(max(soc, 0.0), 1.0), *zip(*LIPO_OCV, strict=True)))
+        return max(0.0, cells * (ocv - max(current_a, 0.0) * CELL_RESISTANCE_OHM))
 
     def endurance_s(self, power_w: float) -> float:
         """Time from full charge to the reserve at a constant total load ``power_w``."""

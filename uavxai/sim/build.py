@@ -14,6 +14,7 @@ from functools import lru_cache
 import numpy as np
 
 from uavxai.avoidance.types import Planner
+from uavxai.dynamics.orbit import scenario_orbit_radius
 from uavxai.scenario import IntruderSpec, Scenario
 from uavxai.sim.clock import Clock
 from uavxai.sim.command import CommandPath, DirectPath, Dynamics
@@ -21,6 +22,7 @@ from uavxai.sim.episode import Episode, EpisodeResult, Observer
 from uavxai.sim.judge import Judge
 from uavxai.sim.kinematic import KinematicWorld
 from uavxai.sim.mission import Mission, MissionConfig
+from uavxai.sim.operator import Operator, ScriptedOperator
 from uavxai.sim.picture import Picture
 from uavxai.surveillance.tracker import truth_beliefs
 
@@ -89,6 +91,11 @@ def fly(
         if hasattr(command, "bridge"):  # ground stations see the traffic the planner sees
             command.bridge.truth_adsb = picture.truth
         flying = Mission(mission, command.announce) if mission is not None else None
+        start = scenario.ownship.start
+        operator = Operator(
+            (start.x, start.y, start.h), scenario_orbit_radius(scenario), start.speed_mps
+        )
+        script = [ScriptedOperator(scenario)] if scenario.operator.commands else []
         max_steps = av.max_steps
         if mission is not None:  # there and back, plus the time on station
             max_steps = 2 * av.max_steps + math.ceil(mission.service_s / av.decision_period_s)
@@ -99,7 +106,7 @@ def fly(
             command,
             goal,
             max_steps=max_steps,
-            observers=[picture, *([flying] if flying else []), *observers],
+            observers=[picture, *script, operator, *([flying] if flying else []), *observers],
             picture=picture,
             mission=flying,
             label={"scenario": scenario.name, "seed": seed, "dynamics": dynamics},

@@ -17,7 +17,6 @@ aircraft, not the height the autopilot holds.
 
 from __future__ import annotations
 
-import math
 from typing import Protocol
 
 import numpy as np
@@ -71,9 +70,32 @@ class CommandPath(Protocol):
     def altitude(self, h: float, t: float) -> None:
         """The height the autopilot holds (MAV_CMD_DO_CHANGE_ALTITUDE)."""
 
-    def operator_in_command(self, t: float) -> bool:
-        """Whether a ground station's command holds the aircraft at ``t`` (the planner then
-        advises but does not command)."""
+    def set_cruise_speed(self, speed_mps: float, t: float) -> None:
+        """The airspeed the autopilot holds whenever the planner asks for no other (an
+        operator's DO_CHANGE_SPEED): sent now, and again with every decision that holds
+        speed."""
+
+    def cruise_speed(self, default: float) -> float:
+        """The operator's airspeed if one was asked for, else ``default``."""
+
+    def set_mode(self, mode: str) -> None:
+        """The flight mode ground stations see (HEARTBEAT)."""
+
+    def operator_input(self, frames: bytes) -> None:
+        """MAVLink frames from the scenario's scripted operator (``operator.commands``), taken
+        as from a ground station the scenario allows."""
+
+    def operator_commands(self) -> list:
+        """The operator's commands received since the last call (OperatorCommand)."""
+
+    def mission_items(self) -> list[tuple]:
+        """The mission uploaded from a ground station, as (seq, command, params, x, y, h)."""
+
+    def mission_reached(self, seq: int) -> None:
+        """Tell the ground stations an item was reached (MISSION_ITEM_REACHED)."""
+
+    def mission_set_current(self, seq: int) -> None:
+        """Tell the ground stations the item flown now (MISSION_CURRENT)."""
 
     def close(self) -> dict[str, int] | None:
         """Finish; returns the link's counters for summary.json (None: no link)."""
@@ -94,15 +116,47 @@ def wire_values(bank_cmd_rad: float, accel_mps2: float) -> tuple[float, float]:
     return roll_from_quaternion(q.tolist()), float(np.float32(accel_mps2))
 
 
-class DirectPath:
-    """Setpoints straight to the autopilot (no bytes, no bridge)."""
+class _Cruise:
+    """The operator's airspeed, which both paths re-send with every decision that holds
+    speed: the planner's along-track acceleration moves the speed target, holding keeps it,
+    so without this one avoidance manoeuvre would leave the operator's speed behind."""
+
+    _cruise: float | None = None
+
+    def cruise_speed(self, default: float) -> float:
+        return self._cruise if self._cruise is not None else default
+
+    def set_cruise_speed(self, speed_mps: float, t: float) -> None:
+        self._cruise = float(np.float32(speed_mps))
+        self._speed(self._cruise, t)
+
+    def _hold_cruise(self, decision: Decision, t: float) -> None:
+        if self._cruise is not None and decision.accel_mps2 == 0.0:
+            self._speed(self._cruise, t)
+
+    def _speed(self, speed_mps: float, t: float) -> None:
+        raise NotImplementedError
+
+
+class DirectPath(_Cruise):
+    """Setpoints straight to the autopilot (no bytes, no bridge). A scripted operator's
+    frames are decoded by the bridge's own decoder (``uavxai.bridges.operator``)."""
 
     def __init__(self, world: Dynamics) -> None:
+        from uavxai.bridges.framing import FrameReader
+        from uavxai.bridges.operator import Limits
+        from uavxai.bridges.protocol import AUTOPILOT_COMPONENT, new_codec
         from uavxai.dynamics.geodesy import LocalFrame
 
         self._world = world
-        self._frame = LocalFrame.from_origin(world.scenario.world.origin)
+        sc = world.scenario
+        self._frame = LocalFrame.from_origin(sc.world.origin)
         self.commands = 0
+        self._system = sc.bridge.system_id
+        self._reader = FrameReader(new_codec(None, self._system, AUTOPILOT_COMPONENT), False)
+        self._limits = operator_limits(sc)
+        self._limits_type = Limits
+        self._received: list = []
 
     def orbit(self, x, y, h, radius_m, clockwise, speed_mps, t) -> None:
         _, _, xq, yq = orbit_centre_on_wire(self._frame, x, y)
@@ -118,6 +172,37 @@ class DirectPath:
         self.commands += 2
         if decision.alt_target_m is not None:  # the vertical set's height command
             self.altitude(decision.alt_target_m, t)
+        self._hold_cruise(decision, t)
+
+    def _speed(self, speed_mps: float, t: float) -> None:
+        self._world.command_ownship(speed_target_mps=speed_mps)
+        self.commands += 1
+
+    def operator_input(self, frames: bytes) -> None:
+        from uavxai.bridges.operator import decode
+
+        for msg in self._reader.push(frames).messages:
+            if getattr(msg, "target_system", self._system) not in (self._system, 0):
+                continue
+            read = decode(msg, self._frame, self._limits)
+            if read is not None and read.command is not None:
+                self._received.append(read.command)
+
+    def operator_commands(self) -> list:
+        out, self._received = self._received, []
+        return out
+
+    def set_mode(self, mode: str) -> None:
+        pass
+
+    def mission_items(self) -> list[tuple]:
+        return []
+
+    def mission_reached(self, seq: int) -> None:
+        pass
+
+    def mission_set_current(self, seq: int) -> None:
+        pass
 
     def on_sample(self, state: TrafficState) -> None:
         pass
@@ -132,46 +217,55 @@ class DirectPath:
         self._world.command_ownship(alt_target_m=float(np.float32(h)))
         self.commands += 1
 
-    def operator_in_command(self, t: float) -> bool:
-        return False
-
     def close(self) -> None:
         return None
 
 
-class MavlinkPath:
+class MavlinkPath(_Cruise):
     """The planner as a companion computer: its commands are bytes through the bridge.
 
-    A command a ground station sends on the link (a DO_CHANGE_ALTITUDE from MAVProxy, a
-    bank setpoint) is obeyed and puts the operator in command for ``override_s`` of
-    simulated time after the last such command; then the planner takes over again."""
+    A ground station's command on the link (a DO_CHANGE_ALTITUDE from MAVProxy, a mode, a
+    mission) is an aim: the bridge decodes it and :meth:`operator_commands` hands it to the
+    episode's operator (``uavxai.sim.operator``); the planner keeps flying."""
 
-    def __init__(self, bridge, encoder, override_s: float = 30.0) -> None:
+    def __init__(self, bridge, encoder) -> None:
         self.bridge = bridge
         self._encoder = encoder
-        self.override_s = float(override_s)
-        self.override_until = -math.inf
-        self.overrides = 0
-
-    def operator_in_command(self, t: float) -> bool:
-        return t < self.override_until
 
     def send(self, decision: Decision, t: float) -> None:
         self.bridge.feed(self._encoder.encode(decision.bank_cmd_rad, decision.accel_mps2, t))
         if decision.alt_target_m is not None:  # the vertical set's height command
             self.altitude(decision.alt_target_m, t)
+        self._hold_cruise(decision, t)
+
+    def _speed(self, speed_mps: float, t: float) -> None:
+        self.bridge.feed(self._encoder.change_speed(speed_mps))
 
     def orbit(self, x, y, h, radius_m, clockwise, speed_mps, t) -> None:
         lat_e7, lon_e7, _, _ = orbit_centre_on_wire(self.bridge.frame, x, y)
         self.bridge.feed(self._encoder.orbit(lat_e7, lon_e7, h, radius_m, clockwise, speed_mps))
 
     def on_sample(self, state: TrafficState) -> None:
-        if self.bridge.poll():  # the operator commanded the aircraft from the link
-            if not self.operator_in_command(state.t):
-                self.bridge.announce(f"operator in command for {self.override_s:.0f} s")
-            self.override_until = state.t + self.override_s
-            self.overrides += 1
+        self.bridge.poll()
         self.bridge.publish(state)
+
+    def operator_input(self, frames: bytes) -> None:
+        self.bridge.feed_operator(frames)
+
+    def operator_commands(self) -> list:
+        return self.bridge.take_operator_commands()
+
+    def set_mode(self, mode: str) -> None:
+        self.bridge.mode = mode
+
+    def mission_items(self) -> list[tuple]:
+        return self.bridge.mission_items_local()
+
+    def mission_reached(self, seq: int) -> None:
+        self.bridge.missions.reached(seq)
+
+    def mission_set_current(self, seq: int) -> None:
+        self.bridge.missions.set_current(seq)
 
     def relay(self, frames: bytes) -> None:
         self.bridge.relay(frames)
@@ -188,3 +282,16 @@ class MavlinkPath:
         counters = dict(self.bridge.counters)
         self.bridge.close()
         return counters
+
+
+def operator_limits(scenario):
+    """What an operator's commands are held to: the scenario's world and the aircraft."""
+    from uavxai.bridges.operator import Limits
+    from uavxai.scenario import aircraft_speed_range
+
+    w = scenario.world
+    return Limits(
+        alt_m=(float(w.h[0]), float(w.h[1])),
+        speed_mps=tuple(float(v) for v in aircraft_speed_range(scenario.ownship.aircraft)),
+        xy_m=((float(w.x[0]), float(w.x[1])), (float(w.y[0]), float(w.y[1]))),
+    )

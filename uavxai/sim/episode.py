@@ -9,6 +9,7 @@ same loop, and the same scenario and seed give the same flight through either pa
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Callable, Sequence
@@ -117,7 +118,7 @@ class Episode:
         self.sample_separation_m = self.min_separation_m  # closest approach over the last sample
         self.decision_ms: list[float] = []
         self.sample_metrics: dict = {}  # per-sample values observers share (rates, users)
-        self._overridden = False
+        self.operator = None  # uavxai.sim.operator.Operator, when a ground station may command
         # a decision on its way to the autopilot: its step, picture and, planned in-process,
         # the decision itself (None: the companion is still planning it)
         self._pending: tuple | None = None
@@ -131,31 +132,24 @@ class Episode:
         reaches the autopilot, in :meth:`advance` (None here)."""
         state = self.state
         own = self.ownship()
-        m = self.mission
-        goal = m.goal if m is not None else self.goal
+        plan = self.plan()
+        goal = self.aim()
         if self._plan_onboard(state, own, goal):
             self._fly_intruders_ahead()  # while the companion searches
             if self.clock.latency_ticks:
                 return None
             return self._arrive(send=True, latency=False)
         intruders = self.picture(state)
-        if self.path.operator_in_command(state.t):
-            decision = self._advise(own, intruders, goal)
-        else:
-            if self._overridden:  # handed back: the mission's height and plan again
-                self._overridden = False
-                self.path.announce("operator override over, resuming the mission")
-                self.path.altitude(goal[2], state.t)
-            decision = m.decide(self, own, intruders) if m is not None else None
-            if decision is None and self.clock.latency_ticks:
-                # in-process: planned now, applied later; a companion: planning meanwhile
-                planned = self._start_search(own, intruders, goal)
-                self._pending = (self.steps, state.t, own, intruders, state, planned)
-                self.steps += 1
-                return None
-            if decision is None:  # the avoidance planner flies
-                decision = self._search(own, intruders, goal)
-                self.path.send(decision, state.t)
+        decision = plan.decide(self, own, intruders) if plan is not None else None
+        if decision is None and self.clock.latency_ticks:
+            # in-process: planned now, applied later; a companion: planning meanwhile
+            planned = self._start_search(own, intruders, goal)
+            self._pending = (self.steps, state.t, own, intruders, state, planned)
+            self.steps += 1
+            return None
+        if decision is None:  # the avoidance planner flies
+            decision = self._search(own, intruders, goal)
+            self.path.send(decision, state.t)
         self.steps += 1
         event = DecisionEvent(self.steps - 1, state.t, own, intruders, decision, state)
         return self._decided(event)
@@ -167,11 +161,9 @@ class Episode:
         onboard = getattr(self.planner, "receiver", None)
         if (
             onboard is None
-            or self.mission is not None
+            or self.plan() is not None
             or getattr(self.picture, "receiver", None) is not onboard
             or getattr(self.picture, "truth", True)
-            or self._overridden
-            or self.path.operator_in_command(state.t)
         ):
             return False
         self.planner.submit_onboard(own, state.t, goal, step=self._leg_step())
@@ -200,7 +192,30 @@ class Episode:
         searched for: the world may fly them meanwhile (JSBSim; the same flight to the bit)."""
         self.world.lookahead(self.clock.decision_ticks, self.clock.sample_ticks)
 
+    def plan(self):
+        """What the planner flies for now (a mission, an operator's route: something with a
+        ``goal``, ``decide``, ``leg_start_step`` and ``outcome``), or None: ``goal``."""
+        return self.operator.active(self) if self.operator is not None else self.mission
+
+    def aim(self) -> tuple[float, float, float]:
+        """Where the avoidance planner steers now."""
+        plan = self.plan()
+        if plan is not None:
+            return plan.goal
+        h = self.operator.height_m if self.operator is not None else None
+        return self.goal if h is None else (self.goal[0], self.goal[1], h)
+
+    def plan_label(self) -> str:
+        """Who flies now, as the explanations name it: the mission's phase or the mode."""
+        route = self.operator.route if self.operator is not None else None
+        if route is not None:
+            return route.label
+        m = self.mission
+        return m.phase.value.replace("_", " ") if m is not None else "transit"
+
     def _decided(self, event: DecisionEvent) -> DecisionEvent:
+        if self.operator is not None and event.decision.words is None:
+            event.decision.aim = self.operator.aim_words(self, event.t)
         self.decision_ms.append(event.decision.ms)
         for o in self.observers:
             o.on_decision(self, event)
@@ -225,25 +240,17 @@ class Episode:
         commands)."""
         cmd = self.world.ownship_command()
         vertical = self.planner.config.vertical_of(cmd.get("alt_target_m"))
-        return ownship_view(self.state, cmd["bank_cmd_rad"], vertical)
+        own = ownship_view(self.state, cmd["bank_cmd_rad"], vertical)
+        cruise = self.path.cruise_speed(None)
+        if cruise is not None:  # the operator's airspeed: avoidance by bank and height
+            own = dataclasses.replace(own, speed_band=(cruise, cruise))
+        return own
 
     def _leg_step(self) -> int:
         """Decisions taken on the way to the current goal: the planner weighs its time-out
         (``max_steps``) against these, per leg of a mission."""
-        return self.steps - (self.mission.leg_start_step if self.mission is not None else 0)
-
-    def _advise(self, own: Ownship, intruders: list[Intruder], goal) -> Decision:
-        """While the operator is in command the planner still looks, and says what it would
-        do, but sends nothing."""
-        self._overridden = True
-        decision = self.planner.plan(own, intruders, goal, step=self._leg_step())
-        decision.words = (
-            "operator override: the ground station's commands fly the aircraft; the planner "
-            f"would have {decision.explanation}",
-            decision.counterfactual,
-        )
-        decision.planner = f"{decision.planner} (advice, operator in command)"
-        return decision
+        plan = self.plan()
+        return self.steps - (plan.leg_start_step if plan is not None else 0)
 
     def advance(self, event: DecisionEvent | None) -> Outcome | None:
         """Fly one decision period sample by sample, judging each; the outcome or None.
@@ -264,8 +271,11 @@ class Episode:
             for o in self.observers:
                 o.on_sample(self, self.state)
             outcome = self.judge.judge(self.state, sep, self.world.failure())
+            if outcome is None:
+                plan = self.plan()
+                outcome = plan.outcome if plan is not None else None
             if outcome is None and self.mission is not None:
-                outcome = self.mission.outcome
+                outcome = self.mission.outcome  # the battery ends a suspended mission too
             if outcome is not None:
                 break
         if self._pending is not None:

@@ -96,6 +96,7 @@ class Mission(Observer):
         self.leg_start_step = 0
         self._own_xy: tuple[float, float] | None = None
         self._horizon_s = 16.0
+        self.suspended = False  # the operator flies elsewhere (uavxai.sim.operator)
 
     # ------------------------------------------------------------------------- phases
     def _enter(self, phase: Phase, t: float, why: str, ep: Episode) -> None:
@@ -117,6 +118,8 @@ class Mission(Observer):
         """The battery reached its reserve: go home now, whatever the phase."""
         if not self._battery_low and self.phase != Phase.RETURNING:
             self._battery_low = True
+            if ep.operator is not None:  # whatever the operator asked: home, as RTL
+                ep.operator.release(ep, "battery at reserve")
             self._enter(Phase.RETURNING, ep.state.t, "battery at reserve, returning home", ep)
 
     @property
@@ -141,17 +144,21 @@ class Mission(Observer):
 
     @property
     def serving(self) -> bool:
-        return self.phase in (Phase.ON_STATION, Phase.AVOIDING)
+        return self.phase in (Phase.ON_STATION, Phase.AVOIDING) and not self.suspended
 
     def on_sample(self, ep: Episode, state: TrafficState) -> None:
+        if self.suspended:
+            return
         c, p, t = self.config, state.pos[0], state.t
         self._own_xy = (float(p[0]), float(p[1]))
         self._horizon_s = ep.planner.config.depth * ep.planner.config.action_hold_s
         if self.phase == Phase.TRANSIT:
             d = math.hypot(p[0] - c.station[0], p[1] - c.station[1])
             if d <= c.radius_m + ep.judge.goal_radius_m:
-                self._enter(Phase.ON_STATION, t, f"orbiting at {c.radius_m:.0f} m", ep)
-                ep.path.orbit(*c.station, c.radius_m, c.clockwise, c.speed_mps, t)
+                why = f"orbiting {c.radius_m:.0f} m radius at {c.station[2]:.0f} m height"
+                self._enter(Phase.ON_STATION, t, why, ep)
+                speed = ep.path.cruise_speed(c.speed_mps)
+                ep.path.orbit(*c.station, c.radius_m, c.clockwise, speed, t)
         elif self.serving:
             self.on_station_s += ep.clock.sample_s
             if self.phase == Phase.AVOIDING:
@@ -171,33 +178,42 @@ class Mission(Observer):
         if not self.serving:
             return None
         c, t = self.config, ep.state.t
-        horizon = ep.planner.config.depth * ep.planner.config.action_hold_s
-        sep, who, when = orbit_clearance(c, own, intruders, horizon)
-        d_min = ep.judge.d_min_m
-        # Hysteresis: leave the orbit below 2 d_min, rejoin only above 3 d_min, so that a
-        # pass near the threshold does not toggle the phase every decision.
-        limit = (CONFLICT_FACTOR + (1.0 if self.phase == Phase.AVOIDING else 0.0)) * d_min
-        if sep < limit:
+        orbit = Orbit(c.station, c.radius_m, c.clockwise, ep.path.cruise_speed(c.speed_mps))
+        step = orbit_step(ep, orbit, own, intruders, self.phase == Phase.AVOIDING)
+        if step.conflict is not None:
             if self.phase == Phase.ON_STATION:
-                why = f"{who} would pass the orbit at {sep:.0f} m in {when:.0f} s"
-                self._enter(Phase.AVOIDING, t, why, ep)
+                self._enter(Phase.AVOIDING, t, step.conflict, ep)
             return None
         if self.phase == Phase.AVOIDING:
             self._enter(Phase.ON_STATION, t, "orbit clear, rejoining", ep)
-        ep.path.orbit(*c.station, c.radius_m, c.clockwise, c.speed_mps, t)
-        near = f"; {who} passes it at {sep:.0f} m in {when:.0f} s" if who else ""
-        return Decision(
-            bank_cmd_rad=float(ep.world.ownship_command()["bank_cmd_rad"]),
-            accel_mps2=0.0,
-            action=HOLD,
-            children=[],
-            predicted_min_separation_m=sep,
-            branch_min_separation_m=sep,
-            confidence=1.0,
-            planner="orbit",
-            d_min_m=d_min,
-            words=(f"on station: orbiting the service point at {c.radius_m:.0f} m{near}", ""),
-        )
+        return step.decision
+
+    def set_height(self, ep: Episode, h: float) -> None:
+        """The operator's height for the leg flown now (the service point's, or home's on
+        the way back); on station the orbit climbs or sinks to it."""
+        c = self.config
+        if self.phase == Phase.RETURNING:
+            self.config = dataclasses.replace(c, home=(c.home[0], c.home[1], float(h)))
+        else:
+            self.config = dataclasses.replace(c, station=(c.station[0], c.station[1], float(h)))
+        if not self.serving:
+            ep.path.altitude(float(h), ep.state.t)
+
+    def suspend(self) -> None:
+        """The operator took the aircraft elsewhere (GUIDED, LOITER, RTL, an uploaded
+        mission): the mission's phases wait, and nothing here commands, until it resumes."""
+        self.suspended = True
+
+    def resume(self, ep: Episode) -> None:
+        """AUTO again: carry on from the phase it was in (its height again; the orbit is
+        re-sent at the next decision)."""
+        if not self.suspended:
+            return
+        self.suspended = False
+        self.leg_start_step = ep.steps
+        if not self.serving:
+            ep.path.altitude(self.goal[2], ep.state.t)
+        self.announce(f"AUTO: mission resumed, {self.phase.value.replace('_', ' ')}", None)
 
     def move_station(self, ep: Episode, point: Sequence[float], why: str) -> None:
         """A re-planned service point: the orbit moves there (now, if on station)."""
@@ -206,8 +222,11 @@ class Mission(Observer):
         self.service_points.append((round(t, 3), *self.config.station))
         c = self.config
         self.announce(f"service point moved: {why}", self.phase.value)
+        if self.suspended:
+            return
         if self.phase == Phase.ON_STATION:
-            ep.path.orbit(*c.station, c.radius_m, c.clockwise, c.speed_mps, t)
+            speed = ep.path.cruise_speed(c.speed_mps)
+            ep.path.orbit(*c.station, c.radius_m, c.clockwise, speed, t)
         elif self.phase == Phase.TRANSIT:
             ep.path.altitude(c.station[2], t)
 
@@ -251,3 +270,59 @@ def orbit_clearance(
         if d[k] < best:
             best, who, when = float(d[k]), f"intruder {str(i.id).removeprefix('intruder-')}", t[k]
     return best, who, float(when)
+
+
+@dataclass(frozen=True)
+class Orbit:
+    """A loiter about ``centre`` (x, y, h) at ``radius_m``, flown at ``speed_mps``."""
+
+    centre: tuple[float, float, float]
+    radius_m: float
+    clockwise: bool
+    speed_mps: float
+
+
+@dataclass(frozen=True)
+class OrbitStep:
+    decision: Decision | None  # the orbit's decision (None: the planner must fly)
+    conflict: str | None  # why the orbit ahead is not clear (None: it is)
+
+
+def orbit_step(
+    ep: Episode, orbit: Orbit, own: Ownship, intruders: list[Intruder], avoiding: bool
+) -> OrbitStep:
+    """One decision on an orbit: check the orbit ahead against every believed intruder over
+    the planner's horizon; clear, re-send the orbit (MAV_CMD_DO_ORBIT) and say so, else say
+    what conflicts. Hysteresis: leave the orbit below 2 d_min, rejoin only above 3 d_min
+    (``avoiding``), so that a pass near the threshold does not toggle every decision."""
+    horizon = ep.planner.config.depth * ep.planner.config.action_hold_s
+    c = MissionConfig(orbit.centre, orbit.centre, 0.0, False, orbit.radius_m, orbit.speed_mps,
+                      orbit.clockwise)  # fmt: skip
+    sep, who, when = orbit_clearance(c, own, intruders, horizon)
+    d_min = ep.judge.d_min_m
+    limit = (CONFLICT_FACTOR + (1.0 if avoiding else 0.0)) * d_min
+    if sep < limit:
+        return OrbitStep(None, f"{who} would pass the orbit at {sep:.0f} m in {when:.0f} s")
+    x, y, h = orbit.centre
+    ep.path.orbit(x, y, h, orbit.radius_m, orbit.clockwise, orbit.speed_mps, ep.state.t)
+    off = math.hypot(own.x - x, own.y - y) - orbit.radius_m
+    where = (
+        f"orbiting ({x:.0f}, {y:.0f}) at {orbit.radius_m:.0f} m radius, {h:.0f} m height"
+        if abs(off) <= ep.judge.goal_radius_m
+        else f"joining the orbit about ({x:.0f}, {y:.0f}), {abs(off):.0f} m "
+        f"{'outside' if off > 0 else 'inside'} its {orbit.radius_m:.0f} m radius"
+    )
+    near = f"; {who} predicted to pass it at {sep:.0f} m in {when:.0f} s" if who else ""
+    decision = Decision(
+        bank_cmd_rad=float(ep.world.ownship_command()["bank_cmd_rad"]),
+        accel_mps2=0.0,
+        action=HOLD,
+        children=[],
+        predicted_min_separation_m=sep,
+        branch_min_separation_m=sep,
+        confidence=1.0,
+        planner="orbit",
+        d_min_m=d_min,
+        words=(f"{ep.plan_label()}: {where}{near}", ""),
+    )
+    return OrbitStep(decision, None)

@@ -276,8 +276,9 @@ class Energy(Observer):
         self.battery.draw(power, ep.clock.sample_s)
         bridge = getattr(ep.path, "bridge", None)
         if bridge is not None:
-            bridge.power.voltage_v = self.spec.voltage_v
-            bridge.power.current_a = self.spec.current_a(power)
+            current = self.spec.current_a(power)
+            bridge.power.voltage_v = self.spec.terminal_voltage_v(self.battery.soc, current)
+            bridge.power.current_a = current
             bridge.power.soc = self.battery.soc
             bridge.power.throttle = self._own.throttle()
         if ep.mission is not None and self.battery.at_reserve:

@@ -66,7 +66,8 @@ def mavlink_path(scenario: Scenario, link: str | None):
             signing_key=key,
             command_timeout_s=sc.bridge.command_timeout_s,
             params=params,
-            home=(start.x, start.y, start.h),
+            # home on the ground below the start: relative heights are heights above it (h)
+            home=(start.x, start.y, 0.0),
             # every command, the planner's or a ground station's, is clamped to these
             alt_limits_m=tuple(sc.world.h),
             speed_limits_mps=aircraft_speed_range(sc.ownship.aircraft),
@@ -77,8 +78,7 @@ def mavlink_path(scenario: Scenario, link: str | None):
             signing_state=default_state_path(key) if key else None,
         )
         encoder = CommandEncoder(sc.bridge.system_id, sc.bridge.system_id, signing_key=key)
-        override_s = float(getattr(sc.bridge, "override_s", 30.0))
-        return MavlinkPath(bridge, encoder, override_s=override_s)
+        return MavlinkPath(bridge, encoder)
 
     return build
 

@@ -482,3 +482,17 @@ def _deg(x: Any) -> str:
 
 
 set_narrator(explain)  # every Decision's words come from here
+
+
+def operator_aim(
+    asked: str, kind: str, ago_s: float, mode: str, own_h: float, own_speed: float
+) -> str:
+    """How a decision under an operator's aim opens: what was asked, when, in which mode, and
+    where the aircraft is against it ("the operator asked for 60 m 14 s ago (AUTO), at
+    118 m now"); the decision's own sentence then says why it flies as it does."""
+    now = ""
+    if kind == "altitude":
+        now = f", at {own_h:.0f} m now"
+    elif kind == "speed":
+        now = f", at {own_speed:.1f} m/s now"
+    return f"the operator asked for {asked} {ago_s:.0f} s ago ({mode}){now}; avoidance on"

@@ -1,0 +1,138 @@
+"""An operator on the ground station says where to go; avoidance stays on whatever it says.
+
+Scripted operators (`operator.commands`) send real MAVLink frames (a ground station's
+COMMAND_LONG / COMMAND_INT) through the bridge's decoder, in both command paths.
+"""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from uavxai.avoidance.planners import make_planner
+from uavxai.avoidance.types import PlannerConfig
+from uavxai.scenario import ScenarioError, default_scenario, parse_scenario
+from uavxai.sim.build import fly
+from uavxai.sim.episode import Observer
+from uavxai.sim.run import mavlink_path
+from uavxai.vocabulary import Outcome
+
+GOAL = (1000.0, 1900.0, 120.0)
+# Head-on: the ownship flies north from (1000, 700); the intruder comes south at it, 800 m ahead.
+HEAD_ON = {
+    "ownship": {
+        "start": {"x": 1000, "y": 700, "h": 120, "heading_deg": 0, "speed_mps": 20},
+        "goal": list(GOAL),
+    },
+    "intruders": {"list": [{"x": 1000, "y": 1500, "h": 120, "heading_deg": 180,
+                            "speed_mps": 20}]},  # fmt: skip
+    "surveillance": {"model": "truth"},
+    "avoidance": {"planner": "mcts_fast", "max_steps": 150},
+    "log": {"rerun": False},
+}
+
+
+class Watch(Observer):
+    """Per decision: time, height, airspeed, planner, words; the bridge's counters at the end."""
+
+    def __init__(self) -> None:
+        self.rows: list[tuple[float, float, float, str, str]] = []
+
+    def on_decision(self, ep, event) -> None:
+        s = event.truth
+        self.rows.append((event.t, float(s.pos[0, 2]), float(s.airspeed[0]),
+                          event.decision.planner, event.decision.explanation))  # fmt: skip
+
+
+def _fly(commands: list[dict], path=None, **changes):
+    sc = default_scenario("operator", **{**HEAD_ON, **changes},
+                          operator={"commands": commands})  # fmt: skip
+    planner = make_planner(sc.avoidance.planner, PlannerConfig.from_scenario(sc))
+    watch = Watch()
+    kwargs = {"path": path(sc)} if path is not None else {}
+    r = fly(sc, planner, GOAL, dynamics="kinematic", observers=[watch], **kwargs)
+    return r, watch
+
+
+def test_without_an_operator_the_head_on_encounter_is_avoided_as_before() -> None:
+    r, _ = _fly([])
+    assert r.outcome is Outcome.GOAL
+    assert r.min_separation_m > 50.0
+    assert "operator" not in r.summary
+
+
+@pytest.mark.parametrize("via_mavlink", [False, True])
+def test_operator_height_and_speed_during_a_head_on_encounter_keep_avoidance_on(
+    via_mavlink: bool,
+) -> None:
+    """The issue's attack: one in-limits command used to switch avoidance off for 30 s and
+    collide. Now the commands set the aim and the planner keeps deciding and sending."""
+    commands = [{"t": 5, "speed_mps": 22}, {"t": 8, "altitude_m": 130}]
+    path = (lambda sc: mavlink_path(sc, None)) if via_mavlink else None
+    r, watch = _fly(commands, path=path)
+    assert r.outcome is Outcome.GOAL
+    assert r.min_separation_m > 50.0
+    # every decision is the planner's own, none is advice
+    assert all(p == "mcts_fast" for *_, p, _ in watch.rows), {p for *_, p, _ in watch.rows}
+    assert len(watch.rows) == r.steps
+    if via_mavlink:
+        assert r.summary["bridge"]["failsafe_events"] == 0
+        assert r.summary["bridge"]["operator_commands"] == 2
+    # the aims were flown: the height the operator asked for, the speed held when holding
+    t_end, h_end, v_end, *_ = watch.rows[-1]
+    assert abs(h_end - 130.0) < 3.0, h_end
+    assert abs(v_end - 22.0) < 1.5, v_end
+    # the explanations open with the operator's aim
+    later = [w for t, *_, w in watch.rows if t >= 9]
+    assert later and all(w.startswith("the operator asked for 130 m") for w in later), later[0]
+    ops = r.summary["operator"]["commands"]
+    assert [c["kind"] for c in ops] == ["speed", "altitude"]
+
+
+def test_guided_goto_then_rtl_completes_at_home() -> None:
+    """GUIDED to a point (DO_REPOSITION), where it loiters; then RTL ends the flight home."""
+    commands = [{"t": 2, "goto": [1400, 1000, 150]}, {"t": 80, "mode": "RTL"}]
+    r, watch = _fly(commands, intruders={"count": 0}, avoidance={"planner": "mcts_fast",
+                    "max_steps": 300})  # fmt: skip
+    assert r.outcome is Outcome.COMPLETED, r.outcome
+    assert r.summary["operator"]["mode_end"] == "RTL"
+    # it went to the point, climbed to 150 m, and loitered about it until RTL
+    near = [row for row in watch.rows if 40 <= row[0] <= 78]
+    assert near and all("GUIDED" in row[4] or "orbit" in row[4] for row in near[-5:])
+    assert any(abs(h - 150.0) < 5.0 for _, h, *_ in near)
+    assert r.flight_time_s > 80.0
+
+
+def test_a_goal_is_not_reached_in_passing_while_the_operator_flies_elsewhere() -> None:
+    """The scenario's goal ends the episode only while the scenario's flight is flown."""
+    commands = [{"t": 1, "mode": "LOITER"}, {"t": 60, "mode": "AUTO"}]
+    r, watch = _fly(commands, intruders={"count": 0})
+    assert r.outcome is Outcome.GOAL
+    assert r.flight_time_s > 60.0
+    loitering = [row for row in watch.rows if 20 <= row[0] <= 59]
+    assert all(row[3] == "orbit" for row in loitering)
+
+
+def test_scripted_operator_commands_are_validated() -> None:
+    with pytest.raises(ScenarioError, match="exactly one of"):
+        parse_scenario({"name": "x", "operator": {"commands": [{"t": 1}]}})
+    with pytest.raises(ScenarioError, match="exactly one of"):
+        parse_scenario({"name": "x", "operator": {"commands": [
+            {"t": 1, "altitude_m": 100, "speed_mps": 20}]}})  # fmt: skip
+    with pytest.raises(ScenarioError, match="override_s was removed"):
+        parse_scenario({"name": "x", "bridge": {"override_s": 30}})
+    with pytest.raises(ScenarioError, match="IP address"):
+        parse_scenario({"name": "x", "bridge": {"ground_stations": [{"address": "gcs"}]}})
+    with pytest.raises(ScenarioError):
+        parse_scenario({"name": "x", "operator": {"commands": [{"t": 1, "mode": "FBWA"}]}})
+
+
+def test_the_same_scripted_flight_repeats_exactly() -> None:
+    commands = [{"t": 5, "speed_mps": 25}, {"t": 10, "orbit": {"x": 1100, "y": 1200,
+                "h": 140, "radius_m": 150}}]  # fmt: skip
+    a, wa = _fly(commands)
+    b, wb = _fly(commands)
+    assert a.outcome == b.outcome and a.steps == b.steps
+    assert [r[:3] for r in wa.rows] == [r[:3] for r in wb.rows]
+    assert math.isfinite(a.min_separation_m)
