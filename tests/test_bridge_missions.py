@@ -5,17 +5,29 @@ and with MAVProxy itself when the `gcs` extra is installed."""
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import logging
 import math
+import os
 import random
+import shutil
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
 from types import SimpleNamespace
 
+import numpy as np
 import pytest
-from pymavlink import mavwp
+from pymavlink import mavutil, mavwp
 from pymavlink.dialects.v20 import common as mavlink
 
+from uavxai.bridges import MavlinkBridge
 from uavxai.bridges.missions import MissionItem, MissionServer, item_from_message
+from uavxai.dynamics.geodesy import LocalFrame
+from uavxai.dynamics.state import TrafficState
 
 VEHICLE, GCS = (1, 1), (255, 190)
 MISSION = mavlink.MAV_MISSION_TYPE_MISSION
@@ -119,7 +131,10 @@ def download(wire: Wire, legacy: bool = False) -> list:
     return items
 
 
-def assert_matches_loader(items: list[MissionItem], loader: mavwp.MAVWPLoader) -> None:
+def assert_matches_loader(
+    items: list[MissionItem], loader: mavwp.MAVWPLoader, deg: float = 0.6e-7
+) -> None:
+    """`items` are the loader's; coordinates within `deg` (degE7 rounding by default)."""
     assert len(items) == loader.count()
     for item, wp in zip(items, loader.wpoints, strict=True):
         assert (item.seq, item.command, item.frame) == (wp.seq, wp.command, wp.frame)
@@ -128,8 +143,8 @@ def assert_matches_loader(items: list[MissionItem], loader: mavwp.MAVWPLoader) -
         if item.command == mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH:
             assert (item.lat_deg, item.lon_deg, item.alt_m) == (0.0, 0.0, 0.0)
             continue
-        assert item.lat_deg == pytest.approx(wp.x, abs=0.6e-7)
-        assert item.lon_deg == pytest.approx(wp.y, abs=0.6e-7)
+        assert item.lat_deg == pytest.approx(wp.x, abs=deg)
+        assert item.lon_deg == pytest.approx(wp.y, abs=deg)
         assert item.alt_m == pytest.approx(wp.z)
 
 
@@ -432,3 +447,211 @@ def test_no_field_value_makes_the_server_raise_or_grow(caplog):
     assert wire.server.version >= 1  # some uploads and clears went through
     # `handle` logs any exception it had to catch: there must be none to catch.
     assert not [r for r in caplog.records if r.levelno >= logging.ERROR]
+
+
+# ------------------------------------------------------------------ over loopback UDP
+FRAME = LocalFrame(34.1230, 108.8370, HOME_MSL_M)
+WAIT_S = 20.0  # the longest any step below waits: a lost reply fails the test, never hangs it
+
+
+class IdleSink:
+    def command_ownship(self, **setpoint) -> None:
+        pass
+
+    def command_orbit(self, x: float, y: float, radius_m: float, clockwise: bool = True) -> None:
+        pass
+
+
+def ownship(t: float) -> TrafficState:
+    """The ownship alone, cruising north at 120 m."""
+    return TrafficState(
+        t,
+        ("ownship",),
+        np.array([[0.0, 20.0 * t, 120.0]]),
+        np.array([[0.0, 20.0, 0.0]]),
+        np.zeros((1, 3)),
+        np.full(1, 20.0),
+    )
+
+
+def free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def answer(bridge: MavlinkBridge, gcs, kinds: tuple[str, ...]):
+    """The next message of one of `kinds` the ground station receives, polling the bridge
+    (on simulated time = wall time since the call) meanwhile."""
+    start = time.monotonic()
+    while (elapsed := time.monotonic() - start) < WAIT_S:
+        bridge.tick(bridge._now + elapsed if bridge._now is not None else elapsed)
+        bridge.poll()
+        msg = gcs.recv_match(type=list(kinds), blocking=False)
+        if msg is not None:
+            return msg
+        time.sleep(0.002)
+    raise AssertionError(f"no {kinds} within {WAIT_S} s")
+
+
+def test_a_pymavlink_station_uploads_and_downloads_over_udp(wpl_file):
+    port = free_port()
+    bridge = MavlinkBridge(1, FRAME, IdleSink(), link=f"udpin:127.0.0.1:{port}")
+    gcs = mavutil.mavlink_connection(
+        f"udpout:127.0.0.1:{port}", source_system=GCS[0], source_component=GCS[1]
+    )
+    try:
+        loader = load(wpl_file)
+        gcs.mav.heartbeat_send(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+        gcs.mav.mission_count_send(*VEHICLE, loader.count(), MISSION)
+        while (reply := answer(bridge, gcs, ("MISSION_REQUEST_INT", "MISSION_ACK"))).get_type() != (
+            "MISSION_ACK"
+        ):
+            gcs.mav.send(as_int(loader.wp(reply.seq)))
+        assert reply.type == mavlink.MAV_MISSION_ACCEPTED
+        assert_matches_loader(bridge.missions.items, loader)
+
+        gcs.mav.mission_request_list_send(*VEHICLE, MISSION)
+        count = answer(bridge, gcs, ("MISSION_COUNT",)).count
+        back = mavwp.MAVWPLoader()
+        for seq in range(count):
+            gcs.mav.mission_request_int_send(*VEHICLE, seq, MISSION)
+            back.add(answer(bridge, gcs, ("MISSION_ITEM_INT",)))
+        gcs.mav.mission_ack_send(*VEHICLE, mavlink.MAV_MISSION_ACCEPTED, MISSION)
+        assert [item_from_message(m) for m in back.wpoints] == bridge.missions.items
+
+        # The vehicle's telemetry says which item is current, once a second with the heartbeat.
+        for k in range(21):
+            bridge.publish(ownship(100.0 + k / 10))
+        current = answer(bridge, gcs, ("MISSION_CURRENT",))
+        assert (current.seq, current.total) == (1, 5)
+    finally:
+        gcs.close()
+        bridge.close()
+
+
+def test_a_station_broadcasting_an_upload_is_not_obeyed(wpl_file):
+    """A write addressed to every system (target 0) is ignored; a read is answered."""
+    port = free_port()
+    bridge = MavlinkBridge(1, FRAME, IdleSink(), link=f"udpin:127.0.0.1:{port}")
+    gcs = mavutil.mavlink_connection(
+        f"udpout:127.0.0.1:{port}", source_system=GCS[0], source_component=GCS[1]
+    )
+    try:
+        gcs.mav.mission_count_send(0, 0, 3, MISSION)
+        gcs.mav.mission_request_list_send(0, 0, MISSION)
+        assert answer(bridge, gcs, ("MISSION_COUNT", "MISSION_REQUEST_INT")).count == 0
+        assert not bridge.missions.uploading
+        assert bridge.counters["ignored_other_target"] == 1
+    finally:
+        gcs.close()
+        bridge.close()
+
+
+# ------------------------------------------------------------------ with MAVProxy
+MAVPROXY = shutil.which("mavproxy.py") or str(Path(sys.executable).parent / "mavproxy.py")
+
+
+class MAVProxy:
+    """MAVProxy as the ground station, listening on udpin. Commands go to its stdin, as an
+    operator types them: `--cmd` runs before any vehicle is heard, so a `wp load` there goes
+    nowhere (udpin knows no peer yet) and MAVProxy does not send it again."""
+
+    def __init__(self, port: int, folder: Path) -> None:
+        self.log_path = folder / "mavproxy.log"
+        self._log = self.log_path.open("w")
+        self.proc = subprocess.Popen(
+            [
+                sys.executable,
+                MAVPROXY,
+                f"--master=udpin:127.0.0.1:{port}",
+                f"--state-basedir={folder}",
+                "--default-modules=link,wp",
+            ],
+            stdin=subprocess.PIPE,
+            stdout=self._log,
+            stderr=subprocess.STDOUT,
+            cwd=folder,
+            env={**os.environ, "HOME": str(folder)},
+            text=True,
+        )
+
+    def type(self, command: str) -> None:
+        self.proc.stdin.write(command + "\n")
+        self.proc.stdin.flush()
+
+    @property
+    def text(self) -> str:
+        return self.log_path.read_text(errors="replace")
+
+    def close(self) -> None:
+        try:
+            self.proc.stdin.close()  # end of input: MAVProxy exits
+            self.proc.wait(timeout=10)
+        except (OSError, subprocess.TimeoutExpired):
+            self.proc.kill()
+            self.proc.wait()
+        self._log.close()
+
+
+def fly_until(
+    bridge: MavlinkBridge,
+    clock: list[float],
+    done,
+    what: str,
+    gcs: MAVProxy,
+    timeout_s: float = WAIT_S,
+) -> None:
+    """Publish and poll every 0.05 s of wall time (simulated time = wall time, since MAVProxy
+    judges the link by its clock) until `done()`, at most `timeout_s`."""
+    deadline = time.monotonic() + timeout_s
+    while not done():
+        assert time.monotonic() < deadline, f"{what}: not within {timeout_s} s\n{gcs.text[-2000:]}"
+        clock[0] += 0.05
+        bridge.publish(ownship(clock[0]))
+        bridge.poll()
+        time.sleep(0.05)
+
+
+@pytest.mark.gcs
+@pytest.mark.skipif(not Path(MAVPROXY).exists(), reason="MAVProxy not installed (the `gcs` extra)")
+def test_mavproxy_wp_load_save_and_clear(wpl_file, tmp_path):
+    port = free_port()
+    bridge = MavlinkBridge(
+        1, FRAME, IdleSink(), link=f"udpout:127.0.0.1:{port}", command_timeout_s=600.0
+    )
+    gcs = MAVProxy(port, tmp_path)
+    clock = [0.0]
+    try:
+        fly_until(bridge, clock, lambda: "online system 1" in gcs.text, "vehicle online", gcs)
+
+        gcs.type(f"wp load {wpl_file}")
+        fly_until(bridge, clock, lambda: bridge.missions.version == 1, "wp load", gcs)
+        assert_matches_loader(bridge.missions.items, load(wpl_file))
+        fly_until(bridge, clock, lambda: "TYPE_MISSION: ACCEPTED" in gcs.text, "the ACK", gcs)
+
+        gcs.type("wp list")  # downloads, prints and saves to way.txt in the state folder
+        fly_until(bridge, clock, lambda: "Saved waypoints to" in gcs.text, "wp list", gcs)
+        assert "Requesting 6 waypoints" in gcs.text
+        assert_matches_loader(bridge.missions.items, load(tmp_path / "way.txt"), deg=0.6e-6)
+
+        saved = tmp_path / "saved.txt"
+        gcs.type(f"wp save {saved}")
+        fly_until(bridge, clock, lambda: f"Saved 6 waypoints to {saved}" in gcs.text, "save", gcs)
+        # what the vehicle sent back, as MAVProxy writes it (6 decimals: 1e-6 degrees)
+        assert_matches_loader(bridge.missions.items, load(saved), deg=0.6e-6)
+
+        # `wp set` first tries COMMAND_LONG DO_SET_MISSION_CURRENT and, if the vehicle says
+        # UNSUPPORTED, uses MISSION_SET_CURRENT from then on: typed until it takes (twice).
+        for _ in range(2):
+            gcs.type("wp set 3")
+            with contextlib.suppress(AssertionError):
+                fly_until(bridge, clock, lambda: bridge.missions.current == 3, "set", gcs, 3.0)
+        assert bridge.missions.current == 3
+
+        gcs.type("wp clear")
+        fly_until(bridge, clock, lambda: bridge.missions.version == 2, "wp clear", gcs)
+        assert bridge.missions.items == []
+    finally:
+        gcs.close()
+        bridge.close()
