@@ -26,6 +26,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from uavxai.bridges import MavlinkBridge
 from uavxai.bridges.missions import MissionItem, MissionServer, item_from_message
+from uavxai.bridges.telemetry import autopilot_version
 from uavxai.dynamics.geodesy import LocalFrame
 from uavxai.dynamics.state import TrafficState
 
@@ -392,6 +393,11 @@ def test_current_item_set_reached_and_reported(loaded):
     assert server.current_message().mission_state == mavlink.MISSION_STATE_COMPLETE
     with pytest.raises(ValueError):
         server.set_current(6)
+
+
+def test_the_vehicle_says_it_takes_int_missions():
+    capabilities = autopilot_version().capabilities
+    assert capabilities & mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_INT
 
 
 def test_the_server_consumes_only_mission_messages():
