@@ -621,7 +621,7 @@ def fly_until(
 
 @pytest.mark.gcs
 @pytest.mark.skipif(not Path(MAVPROXY).exists(), reason="MAVProxy not installed (the `gcs` extra)")
-def test_mavproxy_wp_load_save_and_clear(wpl_file, tmp_path):
+def test_mavproxy_wp_load_list_save_set_and_clear(wpl_file, tmp_path):
     port = free_port()
     bridge = MavlinkBridge(
         1, FRAME, IdleSink(), link=f"udpout:127.0.0.1:{port}", command_timeout_s=600.0
