@@ -41,6 +41,7 @@ from uavxai.dynamics.state import TrafficState
 from . import telemetry
 from .framing import FrameReader, Parsed
 from .link import Link
+from .missions import MissionServer
 from .operator import SETPOINT_REFUSAL, Decoded, Limits, OperatorCommand, decode
 from .params import ParamTable
 from .protocol import (
@@ -64,6 +65,8 @@ ACCEPTED_UNSIGNED = frozenset(
     }
 )
 HOME_PERIOD_S = 5.0
+# Mission-protocol messages that only read: any vehicle may answer a broadcast of these.
+_MISSION_READS = frozenset({"MISSION_REQUEST_LIST", "MISSION_REQUEST_INT", "MISSION_REQUEST"})
 # Commands that predate MAV_CMD_REQUEST_MESSAGE, and the message each one asks for.
 _LEGACY_REQUESTS = {
     mavlink.MAV_CMD_GET_HOME_POSITION: mavlink.MAVLINK_MSG_ID_HOME_POSITION,
@@ -192,6 +195,7 @@ class MavlinkBridge:
         self.power = telemetry.Power()  # battery and throttle, when the dynamics model them
 
         self._init_link(link, system_id, signing_key, signing_state)
+        self.missions = MissionServer(self._send)
         self._handlers = {
             "SET_ATTITUDE_TARGET": self._on_attitude_target,
             "SET_POSITION_TARGET_LOCAL_NED": self._on_position_target,
@@ -200,6 +204,7 @@ class MavlinkBridge:
             "PARAM_REQUEST_LIST": self._on_param_request_list,
             "PARAM_REQUEST_READ": self._on_param_request_read,
             "PARAM_SET": self._on_param_set,
+            **dict.fromkeys(MissionServer.MESSAGES, self._on_mission),
         }
 
     def _init_limits(
@@ -331,6 +336,7 @@ class MavlinkBridge:
                 self._watchdog.timeout_s,
             )
             self._sink.command_ownship(bank_cmd_rad=0.0, accel_cmd_mps2=0.0)
+        self.missions.tick(t)
 
     def publish(self, state: TrafficState) -> None:
         """Advance to `state.t` and send whatever telemetry is due (call every ~0.1 s)."""
@@ -342,6 +348,7 @@ class MavlinkBridge:
         t, gates = state.t, self._gates
         if gates["heartbeat"].due(t):
             self._send(telemetry.heartbeat(self.failsafe_active, self.mode))
+            self._send(self.missions.current_message())
         if gates["home"].due(t):
             self._send(telemetry.home_position(self.frame, self._home, t))
         if gates["vehicle"].due(t):
@@ -581,6 +588,12 @@ class MavlinkBridge:
             self.announce(text, mavlink.MAV_SEVERITY_WARNING)
         else:
             log.debug("%s", text)
+
+    def _on_mission(self, msg) -> bool:
+        # Uploads, clears and set-current change the vehicle: only when addressed to it.
+        if self._addressed_to_me(msg, allow_broadcast=msg.get_type() in _MISSION_READS):
+            self.missions.handle(msg, self._now if self._now is not None else 0.0)
+        return False  # not a flight command
 
     def _on_param_request_list(self, msg) -> bool:
         if self._addressed_to_me(msg, allow_broadcast=True):

@@ -49,8 +49,11 @@ _SENSORS = (
     | mavlink.MAV_SYS_STATUS_SENSOR_Z_ALTITUDE_CONTROL
     | mavlink.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL
 )
+# MISSION_INT: MAVLink asks every vehicle that takes missions to set it (bridges.missions), and
+# ground stations that see it upload MISSION_ITEM_INT (cm) rather than float MISSION_ITEM.
 CAPABILITIES = (
     mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2
+    | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_INT
     | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
     | mavlink.MAV_PROTOCOL_CAPABILITY_SET_ATTITUDE_TARGET
     | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
