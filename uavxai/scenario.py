@@ -385,6 +385,12 @@ class Bridge(_Model):
     signing_key_hex: str | None = None
     command_timeout_s: Annotated[float, Field(gt=0, le=600)] = 3.0  # failsafe: wings level
     override_s: Annotated[float, Field(ge=0, le=86_400)] = 30.0  # operator command holds this
+    # (MAVLink system id, host) of the ground stations that may command over the link; without
+    # a signing key nobody else is obeyed or sent telemetry on udpin (issue 28)
+    ground_stations: Annotated[
+        list[tuple[Annotated[int, Field(ge=1, le=255)], Annotated[str, Field(max_length=253)]]],
+        Field(max_length=64),
+    ] = []
 
     @field_validator("signing_key_hex")
     @classmethod

@@ -75,6 +75,7 @@ def mavlink_path(scenario: Scenario, link: str | None):
             xy_limits_m=(tuple(sc.world.x), tuple(sc.world.y)),
             # the link's signing timestamps outlive the run: no replay into the next one
             signing_state=default_state_path(key) if key else None,
+            ground_stations=[tuple(pair) for pair in sc.bridge.ground_stations],
         )
         encoder = CommandEncoder(sc.bridge.system_id, sc.bridge.system_id, signing_key=key)
         override_s = float(getattr(sc.bridge, "override_s", 30.0))
