@@ -420,7 +420,8 @@ class MavlinkBridge:
         if refused and not self._refusal_reported:
             self._refusal_reported = True
             log.warning(
-                "refused a MAVLink message that was unsigned or signed with another key: "
+                "refused a MAVLink message that was unsigned, signed with another key or "
+                "replayed: "
                 "signing is on, so commands need the bridge's key; further refusals are "
                 "only counted"
             )

@@ -174,6 +174,55 @@ def test_udpout_target_is_a_permanent_peer_and_strangers_are_only_heard():
         stranger.close()
 
 
+def test_udpbcast_talks_to_who_answers_bounded_and_broadcasts_again_when_they_fall_silent():
+    # A unicast loopback target stands in for the broadcast address (same socket rules).
+    now = [0.0]
+    target = peer_socket()
+    link = Link(
+        f"udpbcast:127.0.0.1:{target.getsockname()[1]}", 1, max_peers=2, peer_timeout_s=10.0,
+        clock=lambda: now[0],
+    )  # fmt: skip
+    answers = [peer_socket(f"127.0.0.{k}") for k in (11, 12, 13)]
+    try:
+        link.write(b"anyone?")
+        data, (_, our_port) = target.recvfrom(100)
+        assert data == b"anyone?"
+        for k, peer in enumerate(answers):
+            now[0] = float(k)
+            peer.sendto(b"me", ("127.0.0.1", our_port))
+            deadline = time.monotonic() + 2.0
+            while link.read() is None:
+                assert time.monotonic() < deadline
+        assert sorted(link.peers) == sorted(p.getsockname() for p in answers[1:])
+        link.write(b"to you")
+        assert [received(p, 0.1) for p in answers] == [[], [b"to you"], [b"to you"]]
+        assert received(target, 0.1) == []
+        now[0] = 30.0  # all silent: broadcast again
+        link.write(b"anyone?")
+        assert received(target) == [b"anyone?"]
+    finally:
+        link.close()
+        for s in (target, *answers):
+            s.close()
+
+
+def test_tcp_peers_are_the_connected_addresses():
+    port = free_port()
+    server = Link(f"tcpin:127.0.0.1:{port}", 1)
+    client = Link(f"tcp:127.0.0.1:{port}", 255)
+    try:
+        assert client.peers == [("127.0.0.1", port)]
+        client.write(b"hello")
+        deadline = time.monotonic() + 2.0
+        while (got := server.read()) is None:
+            assert time.monotonic() < deadline
+        data, peer = got
+        assert data == b"hello" and server.peers == [peer] and peer[0] == "127.0.0.1"
+    finally:
+        client.close()
+        server.close()
+
+
 # ------------------------------------------------------------------ who commands
 def test_without_a_key_or_ground_stations_nobody_on_the_link_commands(caplog):
     bridge, sink, address = listening()
