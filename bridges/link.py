@@ -175,9 +175,10 @@ class Link:
             else:
                 if self.kind == "udpbcast":
                     sock.setsockopt(socket.SOL_SOCKET, socket.SO_BROADCAST, 1)
-                # Bound now (an ephemeral port on every interface), so replies can be read
-                # before the first send.
-                sock.bind(("0.0.0.0", 0))
+                # Bound now, so replies can be read before the first send, and only on the
+                # interface that reaches the target (not on every interface, as an implicit
+                # bind at the first send would be).
+                sock.bind((_local_address_towards(address), 0))
                 self._target = address
         except OSError:
             sock.close()
@@ -299,6 +300,15 @@ class Link:
             self._client.close()
             self._client = None  # ready to accept the next ground station
             self._client_peer = None
+
+
+def _local_address_towards(target: Peer) -> str:
+    """The address of our interface that routes to ``target`` (a connected UDP socket sends
+    nothing: it only asks the routing table)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_BROADCAST, 1)
+        probe.connect(target)
+        return probe.getsockname()[0]
 
 
 def _peer_of(sock: socket.socket) -> Peer | None:
