@@ -212,10 +212,11 @@ class Link:
                 data, address = self._sock.recvfrom(_READ_BYTES)
             except (BlockingIOError, InterruptedError):
                 return None
+            except ConnectionRefusedError:
+                continue  # a send of ours met a closed port: reported once, read on
             except OSError as err:
-                # e.g. ECONNREFUSED after sending to a closed port: skip it, read on.
                 log.debug("MAVLink link %s: receive failed: %s", self.name, err)
-                continue
+                return None
             peer = (address[0], address[1])
             if not self._table.heard(peer) and self.kind == "udpbcast":
                 self._table.add(peer)  # today's udpbcast: whoever answers is talked to
