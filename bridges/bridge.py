@@ -28,6 +28,9 @@ from __future__ import annotations
 
 import logging
 import math
+import socket
+import time
+from collections.abc import Sequence
 from pathlib import Path
 from types import SimpleNamespace
 from typing import Protocol
@@ -37,10 +40,11 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from uavxai.dynamics.geodesy import LocalFrame
 from uavxai.dynamics.state import TrafficState
+from uavxai.errors import UserError
 
 from . import telemetry
 from .framing import FrameReader, Parsed
-from .link import Link
+from .link import Link, Peer
 from .missions import MissionServer
 from .operator import SETPOINT_REFUSAL, Decoded, Limits, OperatorCommand, decode
 from .params import ParamTable
@@ -53,6 +57,7 @@ from .protocol import (
     new_codec,
 )
 from .signing import Clock, SignatureGate
+from .tlog import TlogWriter
 from .watchdog import CommandWatchdog
 
 log = logging.getLogger(__name__)
@@ -98,6 +103,8 @@ _COUNTERS = (
     "unknown_messages",  # frames of message types outside the common dialect
     "refused_unsigned",
     "refused_bad_signature",
+    "refused_replay",  # signed with our key but not newer than its stream: a replayed capture
+    "refused_unknown_peer",  # from a host or system not in ground_stations (and not signed)
     "param_requests",
     "param_sets_refused",
     "operator_commands",  # a ground station's aims taken (modes, heights, speeds, points)
@@ -139,6 +146,12 @@ class MavlinkBridge:
     file where the link's stream timestamps are kept between runs, so signed frames captured
     in one run cannot be replayed into the next; without it, MAVLink's new-stream rule lets a
     capture in for about a minute.
+
+    `ground_stations` are the (MAVLink system id, host) pairs allowed to command over the link
+    (see `_link_source`); everyone else is heard but neither obeyed nor answered, and only
+    ground stations (or peers that sign with the key) receive telemetry on udpin. `tlog` is a
+    new file that receives every frame decoded and every frame sent, in MAVProxy's .tlog
+    format.
     """
 
     def __init__(
@@ -159,6 +172,8 @@ class MavlinkBridge:
         accel_limit_mps2: float = DEFAULT_ACCEL_LIMIT_MPS2,
         xy_limits_m: tuple[tuple[float, float], tuple[float, float]] = DEFAULT_XY_LIMITS_M,
         signing_state: str | Path | None = None,
+        ground_stations: Sequence[tuple[int, str]] = (),
+        tlog: str | Path | None = None,
     ) -> None:
         if not 1 <= system_id <= 255:
             raise ValueError(f"MAVLink system id must be 1..255, got {system_id}")
@@ -194,7 +209,7 @@ class MavlinkBridge:
         self._from_link = False  # the message being handled came from a ground station
         self.power = telemetry.Power()  # battery and throttle, when the dynamics model them
 
-        self._init_link(link, system_id, signing_key, signing_state)
+        self._init_link(link, system_id, signing_key, signing_state, ground_stations, tlog)
         self.missions = MissionServer(self._send)
         self._handlers = {
             "SET_ATTITUDE_TARGET": self._on_attitude_target,
@@ -267,10 +282,24 @@ class MavlinkBridge:
         system_id: int,
         signing_key: bytes | None,
         signing_state: str | Path | None,
+        ground_stations: Sequence[tuple[int, str]],
+        tlog: str | Path | None,
     ) -> None:
-        """Open the link (if any) and set up the codec, the signature gates and the readers
-        of both inputs (the in-process feed and the link)."""
-        self._link = Link(link, system_id) if link is not None else None
+        """Open the link (if any) and the telemetry log, and set up the codec, the signature
+        gates, the readers of both inputs (the in-process feed and the link) and who may
+        command over the link."""
+        self._ground_stations = _ground_stations(ground_stations)
+        self._listed_hosts = frozenset(host for _, host in self._ground_stations)
+        self._unknown_peer_reported = False
+        self._tlog = None  # before the link, so a refused file leaves no socket open
+        if tlog is not None:
+            self._tlog = TlogWriter(tlog, time.time())
+        try:
+            self._link = Link(link, system_id) if link is not None else None
+        except BaseException:
+            if self._tlog is not None:
+                self._tlog.close()
+            raise
         # One codec signs what we send; decoding is done by key-less codecs, because the
         # signature check belongs to the gates (pymavlink's records a timestamp before it
         # checks the signature: the forged-frame attack of issue 14).
@@ -297,13 +326,13 @@ class MavlinkBridge:
     def feed(self, data: bytes) -> int:
         """Decode and obey MAVLink bytes handed over in-process by the onboard planner (whole
         frames, like one datagram); returns the number of commands obeyed."""
-        return self._handle(self._feed_reader.push(data), from_link=False)
+        return self._handle(self._feed_reader.push(data))
 
     def feed_operator(self, data: bytes) -> int:
         """Frames of the scenario's scripted operator (``operator.commands``): decoded as a
         ground station's, from a station the scenario itself allows; returns the number of
         aims taken."""
-        return self._handle(self._script_reader.push(data), from_link=True)
+        return self._handle(self._script_reader.push(data), operator=True)
 
     def take_operator_commands(self) -> list[OperatorCommand]:
         """The ground stations' aims received since the last call, oldest first."""
@@ -317,10 +346,16 @@ class MavlinkBridge:
             return 0
         obeyed = 0
         for _ in range(_MAX_READS_PER_POLL):
-            data = self._link.read()
-            if not data:
+            got = self._link.read()
+            if got is None:
                 break
-            obeyed += self._handle(self._link_reader.push(data), from_link=True)
+            data, peer = got
+            if self._link_gate is None and peer[0] not in self._listed_hosts:
+                # Without a key, only listed hosts may speak. Refused before any parsing, so
+                # a flood of spoofed datagrams costs one set lookup each.
+                self._refuse_peer(peer)
+                continue
+            obeyed += self._handle(self._link_reader.push(data), peer)
         return obeyed
 
     # ------------------------------------------------------------------ time and output
@@ -385,6 +420,9 @@ class MavlinkBridge:
         if self._link is not None:
             self._link.close()
             self._link = None
+        if self._tlog is not None:
+            self._tlog.close()
+            self._tlog = None
 
     def __enter__(self) -> MavlinkBridge:
         return self
@@ -393,29 +431,38 @@ class MavlinkBridge:
         self.close()
 
     # ------------------------------------------------------------------ internals
-    def _handle(self, parsed: Parsed, from_link: bool) -> int:
+    def _handle(self, parsed: Parsed, peer: Peer | None = None, operator: bool = False) -> int:
+        """Obey what ``parsed`` holds; ``peer`` is who sent it over the link (None: in-process,
+        trusted: the onboard planner's feed, or with ``operator`` the scenario's scripted
+        ground station, whose commands are aims like any ground station's)."""
         c = self.counters
         c["malformed"] += parsed.malformed
         c["unknown_messages"] += parsed.unknown
         c["refused_unsigned"] += parsed.refused_unsigned
         c["refused_bad_signature"] += parsed.refused_bad_signature
-        if (parsed.refused_unsigned or parsed.refused_bad_signature) and not self._refusal_reported:
+        c["refused_replay"] += parsed.refused_replay
+        refused = parsed.refused_unsigned + parsed.refused_bad_signature + parsed.refused_replay
+        if refused and not self._refusal_reported:
             self._refusal_reported = True
             log.warning(
-                "refused a MAVLink message that was unsigned or signed with another key: "
+                "refused a MAVLink message that was unsigned, signed with another key or "
+                "replayed: "
                 "signing is on, so commands need the bridge's key; further refusals are "
                 "only counted"
             )
         obeyed = 0
-        self._from_link = from_link
+        from_link = self._from_link = peer is not None or operator
         for msg in parsed.messages:
             c["messages_in"] += 1
+            if self._tlog is not None:
+                self._tlog.write(self._now or 0.0, msg.get_msgbuf())
+            if peer is not None and not self._link_source(msg, peer):
+                continue
             if from_link:  # a ground station commands aims, never setpoints
                 read = decode(msg, self.frame, self.limits)
                 if read is not None:
                     obeyed += self._operator(msg, read)
-                    if msg.get_type() != "MISSION_SET_CURRENT":
-                        continue
+                    continue
             handler = self._handlers.get(msg.get_type())
             if handler is None:
                 c["ignored_messages"] += 1
@@ -449,6 +496,47 @@ class MavlinkBridge:
         self._operator_commands.append(read.command)
         return 1
 
+    def _link_source(self, msg, peer: Peer) -> bool:
+        """Whether ``msg`` from ``peer`` on the link may be handled; admits the peer to the
+        link's telemetry when it has earned it.
+
+        Without a key: only a listed (system, host) pair (the host alone was checked before
+        parsing). With a key: commands must be signed (the gate has checked the signature)
+        and, if ground stations are listed, come from one; HEARTBEAT and PARAM_REQUEST_*,
+        which the gate lets through unsigned, are answered for signed peers and listed hosts
+        only, because an answer is telemetry."""
+        listed = (msg.get_srcSystem(), peer[0]) in self._ground_stations
+        if self._link_gate is None:
+            admitted = allowed = listed
+        else:
+            buf = msg.get_msgbuf()
+            signed = buf[0] == mavlink.PROTOCOL_MARKER_V2 and bool(
+                buf[2] & mavlink.MAVLINK_IFLAG_SIGNED
+            )  # a signed frame that reached here passed the gate: the signature is ours
+            admitted = signed or peer[0] in self._listed_hosts
+            if msg.get_msgId() in ACCEPTED_UNSIGNED:
+                allowed = admitted
+            else:
+                allowed = signed and (listed or not self._ground_stations)
+        if admitted:
+            self._link.admit(peer)
+        if not allowed:
+            self._refuse_peer(peer)
+        return allowed
+
+    def _refuse_peer(self, peer: Peer) -> None:
+        self.counters["refused_unknown_peer"] += 1
+        if not self._unknown_peer_reported:
+            self._unknown_peer_reported = True
+            log.warning(
+                "refused MAVLink from %s (port %d): it is not a ground station this bridge "
+                "obeys; to allow it, list its system id and host in the scenario's "
+                "bridge.ground_stations%s. Further refusals are only counted",
+                peer[0],
+                peer[1],
+                " and sign with the bridge's key" if self._link_gate is not None else "",
+            )
+
     def _send(self, msg) -> None:
         self._codec.send(msg)
 
@@ -457,6 +545,8 @@ class MavlinkBridge:
         if self._link is not None:
             self._link.write(frame)
             self.counters["messages_out"] += 1
+            if self._tlog is not None:
+                self._tlog.write(self._now or 0.0, frame)
 
     def _addressed_to_me(self, msg, allow_broadcast: bool = False) -> bool:
         systems = (self.system_id, 0) if allow_broadcast else (self.system_id,)
@@ -647,6 +737,25 @@ def _limited(value: float, lo: float, hi: float) -> tuple[float, bool]:
     flown = min(max(value, lo), hi)
     tolerance = 1e-6 * max(1.0, abs(lo), abs(hi))
     return flown, not lo - tolerance <= value <= hi + tolerance
+
+
+def _ground_stations(pairs: Sequence[tuple[int, str]]) -> frozenset[tuple[int, str]]:
+    """The (system id, numeric IPv4 host) pairs allowed to command; host names are resolved
+    once, here, because the link reports its peers by address."""
+    allowed = set()
+    for pair in pairs:
+        try:
+            system, host = pair
+            system = int(system)
+            if not 1 <= system <= 255:
+                raise ValueError(f"system id {system} is not 1..255")
+            address = socket.getaddrinfo(str(host), None, socket.AF_INET)[0][4][0]
+        except (OSError, TypeError, ValueError) as err:
+            raise UserError(
+                f"bridge.ground_stations: cannot use {pair!r} as a (system id, host) pair: {err}"
+            ) from err
+        allowed.add((system, address))
+    return frozenset(allowed)
 
 
 def _interval(name: str, value, lowest: float = -math.inf) -> tuple[float, float]:

@@ -17,7 +17,13 @@ from dataclasses import dataclass, field
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from .signing import ACCEPTED, REFUSED_BAD_SIGNATURE, REFUSED_UNSIGNED, SignatureGate
+from .signing import (
+    ACCEPTED,
+    REFUSED_BAD_SIGNATURE,
+    REFUSED_REPLAY,
+    REFUSED_UNSIGNED,
+    SignatureGate,
+)
 
 _MAGIC_V1 = mavlink.PROTOCOL_MARKER_V1
 _MAGIC_V2 = mavlink.PROTOCOL_MARKER_V2
@@ -36,7 +42,8 @@ class Parsed:
     malformed: int = 0  # runs of bytes that are not a frame (garbage, truncation, bad CRC)
     unknown: int = 0  # frames of message types outside the dialect (cannot be checked)
     refused_unsigned: int = 0  # refused by the signing policy: no signature
-    refused_bad_signature: int = 0  # refused by the signing policy: wrong key or replayed
+    refused_bad_signature: int = 0  # refused by the signing policy: not signed with our key
+    refused_replay: int = 0  # signed with our key, but not newer than its stream: a replay
 
 
 class FrameReader:
@@ -106,6 +113,8 @@ class FrameReader:
             out.refused_unsigned += 1
         elif verdict == REFUSED_BAD_SIGNATURE:
             out.refused_bad_signature += 1
+        elif verdict == REFUSED_REPLAY:
+            out.refused_replay += 1
         else:
             out.messages.append(msg)
         return True

@@ -15,7 +15,8 @@ Rules (MAVLink 2 signing, as pymavlink applies them otherwise):
 
 * unsigned frames pass only for message ids the policy accepts unsigned;
 * a signed frame passes if its signature matches our key, and its timestamp is later than the
-  last one of its stream, or, for a stream not seen yet, at most 60 s behind our clock;
+  last one of its stream, or, for a stream not seen yet, at most 60 s behind our clock (a
+  rightly signed frame that fails the timestamp rule is a replay, counted as such);
 * a frame that carries a signature that fails is refused even when its message id would be
   accepted unsigned: it is a forgery, not a keyless station.
 """
@@ -40,6 +41,9 @@ log = logging.getLogger(__name__)
 ACCEPTED = "accepted"
 REFUSED_UNSIGNED = "refused_unsigned"
 REFUSED_BAD_SIGNATURE = "refused_bad_signature"
+# Signed with our key but not new: a captured frame sent again (counted apart from forgeries,
+# because it means someone records the link, not that someone guesses keys).
+REFUSED_REPLAY = "refused_replay"
 
 SIGNATURE_BLOCK = mavlink.MAVLINK_SIGNATURE_BLOCK_LEN  # link id 1, timestamp 6, signature 6
 # A new stream may start at most one minute behind our clock (timestamps count 10 us units).
@@ -101,7 +105,8 @@ class SignatureGate:
         self.streams: dict[tuple[int, int, int], int] = {}
 
     def check(self, frame: bytes, msg_id: int) -> str:
-        """ACCEPTED, REFUSED_UNSIGNED or REFUSED_BAD_SIGNATURE for one CRC-checked frame."""
+        """ACCEPTED, REFUSED_UNSIGNED, REFUSED_BAD_SIGNATURE or REFUSED_REPLAY for one
+        CRC-checked frame."""
         signed = frame[0] == mavlink.PROTOCOL_MARKER_V2 and frame[2] & mavlink.MAVLINK_IFLAG_SIGNED
         if not signed:
             return ACCEPTED if self._accept_unsigned(msg_id) else REFUSED_UNSIGNED
@@ -119,9 +124,9 @@ class SignatureGate:
         stream = (link_id, frame[5], frame[6])  # link id, source system, source component
         last = self.streams.get(stream)
         if last is not None and timestamp <= last:
-            return REFUSED_BAD_SIGNATURE
+            return REFUSED_REPLAY
         if last is None and timestamp + NEW_STREAM_WINDOW < self._clock.timestamp:
-            return REFUSED_BAD_SIGNATURE
+            return REFUSED_REPLAY  # rightly signed long ago: a capture from an earlier run
         # 3. Only now: remember it.
         self.streams[stream] = timestamp
         self._clock.timestamp = max(self._clock.timestamp, min(timestamp, CLOCK_CEILING))

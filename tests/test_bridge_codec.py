@@ -182,7 +182,8 @@ def test_a_replayed_signed_command_is_refused():
     frame = CommandEncoder(253, 1, signing_key=KEY).attitude(0.3)
     assert bridge.feed(frame) == 1
     assert bridge.feed(frame) == 0
-    assert bridge.counters["refused_bad_signature"] == 1
+    assert bridge.counters["refused_replay"] == 1  # a replay, not a forgery
+    assert bridge.counters["refused_bad_signature"] == 0
     assert len(sink.calls) == 1
 
 

@@ -108,12 +108,19 @@ def poll_until(bridge: MavlinkBridge, done, timeout_s: float = 2.0) -> None:
 
 def frames_seen(bridge: MavlinkBridge) -> int:
     c = bridge.counters
-    return c["messages_in"] + c["refused_unsigned"] + c["refused_bad_signature"]
+    return (
+        c["messages_in"]
+        + c["refused_unsigned"]
+        + c["refused_bad_signature"]
+        + c["refused_replay"]
+        + c["refused_unknown_peer"]
+    )
 
 
 def listening_bridge(**kwargs) -> tuple[MavlinkBridge, RecordingSink, int]:
     port = free_port()
     sink = RecordingSink()
+    kwargs.setdefault("ground_stations", [(GCS_SYSTEM, "127.0.0.1")])  # the tests' station
     bridge = MavlinkBridge(VEHICLE, FRAME, sink, link=f"udpin:127.0.0.1:{port}", **kwargs)
     return bridge, sink, port
 
@@ -174,16 +181,18 @@ def test_every_kind_of_bad_signature_is_a_refusal_even_on_messages_accepted_unsi
     # the same, wrongly signed: a forgery, refused and counted as such
     bridge.feed(forged_heartbeat(GCS_SYSTEM, GCS_COMPONENT))
     assert bridge.counters["refused_bad_signature"] == 1
-    # rightly signed, then replayed: the replay is refused
+    # rightly signed, then replayed: the replay is refused, and counted as a replay
     signed = Sender(GCS_SYSTEM, GCS_COMPONENT, KEY).pack(heartbeat())
     bridge.feed(signed)
     bridge.feed(signed)
     assert bridge.counters["messages_in"] == 2
-    assert bridge.counters["refused_bad_signature"] == 2
-    # a new stream dated more than a minute behind the bridge's clock: refused
+    assert bridge.counters["refused_bad_signature"] == 1
+    assert bridge.counters["refused_replay"] == 1
+    # a new stream dated more than a minute behind the bridge's clock: an old capture, refused
     stale = Sender(42, 1, KEY, timestamp=_wall_clock_timestamp() - 61 * 100_000)
     bridge.feed(stale.pack(heartbeat()))
-    assert bridge.counters["refused_bad_signature"] == 3
+    assert bridge.counters["refused_replay"] == 2
+    assert bridge.counters["refused_bad_signature"] == 1
     assert bridge.counters["ignored_messages"] == 2  # the two genuine heartbeats only
 
 
@@ -479,7 +488,8 @@ def test_frames_captured_in_one_run_are_refused_in_the_next(tmp_path):
 
     second, sink, port = listening_bridge(signing_key=KEY, signing_state=state)
     deliver(second, port, captured)
-    assert sink.calls == [] and second.counters["refused_bad_signature"] == 5
+    assert sink.calls == [] and second.counters["refused_replay"] == 5
+    assert second.counters["refused_bad_signature"] == 0
     deliver(second, port, signed_bank_frames(1))  # the station itself, newly started: obeyed
     assert second.counters["commands"] == 1
     second.close()
@@ -677,6 +687,7 @@ def fuzz_senders(rng, key: bytes | None) -> list[Sender]:
 
 COUNTED = (
     "messages_in", "malformed", "unknown_messages", "refused_unsigned", "refused_bad_signature",
+    "refused_replay", "refused_unknown_peer",
 )  # fmt: skip
 
 

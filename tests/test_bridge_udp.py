@@ -27,6 +27,8 @@ FRAME = LocalFrame(34.1230, 108.8370, 400.0)
 KEY = bytes.fromhex("5a" * 32)
 INTRUDERS = 3
 GCS_SYSTEM, GCS_COMPONENT = 255, 190
+# The ground station every test's peers speak as: without it the bridge obeys no one (issue 28).
+GROUND_STATIONS = [(GCS_SYSTEM, "127.0.0.1")]
 
 
 class RecordingSink:
@@ -98,6 +100,7 @@ def connected_pair(**bridge_kwargs):
     """A bridge listening on udpin and a ground station that has said hello."""
     port = free_port()
     sink = RecordingSink()
+    bridge_kwargs.setdefault("ground_stations", GROUND_STATIONS)
     bridge = MavlinkBridge(1, FRAME, sink, link=f"udpin:127.0.0.1:{port}", **bridge_kwargs)
     gcs = ground_station(f"udpout:127.0.0.1:{port}", bridge_kwargs.get("signing_key"))
     gcs.mav.heartbeat_send(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0)
@@ -220,7 +223,8 @@ def euler_quaternion(roll: float, pitch: float, yaw: float) -> list[float]:
 def test_peer_answering_on_udpout_commands_the_bank():
     gcs, port = listening_station()
     sink = RecordingSink()
-    with MavlinkBridge(1, FRAME, sink, link=f"udpout:127.0.0.1:{port}") as bridge:
+    link = f"udpout:127.0.0.1:{port}"
+    with MavlinkBridge(1, FRAME, sink, link=link, ground_stations=GROUND_STATIONS) as bridge:
         bridge.publish(traffic(0.0))
         assert gcs.recv_match(type="HEARTBEAT", blocking=True, timeout=2.0) is not None
 
@@ -366,7 +370,8 @@ def test_signing_refuses_unsigned_and_foreign_commands_and_signs_telemetry():
 def test_tcp_link_carries_commands_and_telemetry():
     port = free_port()
     sink = RecordingSink()
-    with MavlinkBridge(1, FRAME, sink, link=f"tcpin:127.0.0.1:{port}") as bridge:
+    link = f"tcpin:127.0.0.1:{port}"
+    with MavlinkBridge(1, FRAME, sink, link=link, ground_stations=GROUND_STATIONS) as bridge:
         gcs = ground_station(f"tcp:127.0.0.1:{port}")
         for k in range(3):  # several frames in one stream, parsed across reads
             gcs.write(CommandEncoder(GCS_SYSTEM, 1).encode(0.1 * k, 0.0))

@@ -87,6 +87,7 @@ def test_external_peer_banks_the_jsbsim_ownship(signed: bool) -> None:
         link=f"udpout:127.0.0.1:{port}",
         signing_key=KEY if signed else None,
         command_timeout_s=30.0,
+        ground_stations=[(255, "127.0.0.1")],  # the peer's system and host
     )
     try:
         peer.wait_heartbeat(world, bridge)
@@ -166,6 +167,7 @@ def test_mavproxy_sees_the_vehicle_online(tmp_path: Path) -> None:
         world,
         link=f"udpout:127.0.0.1:{port}",
         command_timeout_s=60.0,
+        ground_stations=[(255, "127.0.0.1")],  # MAVProxy's system: its parameter requests
     )
     log = (tmp_path / "mavproxy.log").open("w")
     proc = subprocess.Popen(

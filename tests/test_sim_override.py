@@ -58,6 +58,7 @@ def test_an_operator_override_holds_for_its_time_and_is_handed_back() -> None:
         ownship={"goal": [1900, 1900, 120]},
         avoidance={"max_steps": 150},
         log={"rerun": False},
+        bridge={"ground_stations": [[255, "127.0.0.1"]]},  # the operator's station
     )
     port = _port()
     op = Operator(port)

@@ -35,8 +35,9 @@ from uavxai.sim.observers import (
 console = Console(stderr=True, soft_wrap=True)
 
 
-def mavlink_path(scenario: Scenario, link: str | None):
-    """The command path of ``uavxai run``: encoder -> bytes -> bridge -> autopilot."""
+def mavlink_path(scenario: Scenario, link: str | None, tlog: Path | None = None):
+    """The command path of ``uavxai run``: encoder -> bytes -> bridge -> autopilot; ``tlog``,
+    a new file that records every frame in and out (MAVProxy's .tlog)."""
     from uavxai.bridges.bridge import MavlinkBridge
     from uavxai.bridges.protocol import CommandEncoder
     from uavxai.bridges.signing import default_state_path
@@ -76,6 +77,8 @@ def mavlink_path(scenario: Scenario, link: str | None):
             xy_limits_m=(tuple(sc.world.x), tuple(sc.world.y)),
             # the link's signing timestamps outlive the run: no replay into the next one
             signing_state=default_state_path(key) if key else None,
+            ground_stations=[(g.system_id, g.address) for g in sc.bridge.ground_stations],
+            tlog=tlog,
         )
         encoder = CommandEncoder(sc.bridge.system_id, sc.bridge.system_id, signing_key=key)
         return MavlinkPath(bridge, encoder)
@@ -134,7 +137,11 @@ def run_episode(
             planner,
             goal,
             dynamics="jsbsim",
-            path=mavlink_path(sc, mavlink if mavlink is not None else sc.bridge.mavlink),
+            path=mavlink_path(
+                sc,
+                mavlink if mavlink is not None else sc.bridge.mavlink,
+                out / "link.tlog" if sc.bridge.tlog else None,
+            ),
             observers=observers,
             mission=mission,
         )
