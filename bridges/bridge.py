@@ -334,6 +334,21 @@ class MavlinkBridge:
         aims taken."""
         return self._handle(self._script_reader.push(data), operator=True)
 
+    def mission_items_local(self) -> list[tuple]:
+        """The uploaded mission in the local frame: (seq, command, params, x, y, h) per item,
+        heights above home (the local origin's ground); x, y, h are 0 for items that are no
+        place (RTL, DO_CHANGE_SPEED)."""
+        out = []
+        for item in self.missions.items:
+            x = y = h = 0.0
+            if item.positional:
+                lx, ly, _ = self.frame.to_local(item.lat_deg, item.lon_deg, 0.0)
+                x, y = float(lx), float(ly)
+                h = float(item.height_above_home(self.frame.alt0) or 0.0)
+            params = tuple(p if math.isfinite(p) else 0.0 for p in item.params)
+            out.append((item.seq, item.command, params, x, y, h))
+        return out
+
     def take_operator_commands(self) -> list[OperatorCommand]:
         """The ground stations' aims received since the last call, oldest first."""
         out, self._operator_commands = self._operator_commands, []
@@ -490,6 +505,15 @@ class MavlinkBridge:
             self.counters["clamped_commands"] += 1
             for note in read.notes:
                 self.announce(f"clamped: {note}", mavlink.MAV_SEVERITY_WARNING)
+        if read.command.kind == "set_current":  # the mission's own business
+            try:
+                self.missions.set_current(read.command.seq)
+            except ValueError:
+                self.counters["operator_refused"] += 1
+                self.announce(f"no mission item {read.command.seq}", mavlink.MAV_SEVERITY_WARNING)
+                if acked:
+                    self._ack(msg, mavlink.MAV_RESULT_DENIED)
+                return 0
         if acked:
             self._ack(msg, mavlink.MAV_RESULT_ACCEPTED, ACK_CLAMPED if read.notes else 0)
         self.counters["operator_commands"] += 1

@@ -58,7 +58,8 @@ class Kind(StrEnum):
     ALTITUDE = "altitude"
     GOTO = "goto"  # GUIDED to a point (DO_REPOSITION, MAVProxy's `guided`)
     ORBIT = "orbit"  # GUIDED loiter about a point (DO_ORBIT)
-    MISSION_START = "mission_start"  # AUTO from an item (MISSION_START, MISSION_SET_CURRENT)
+    MISSION_START = "mission_start"  # AUTO from an item (MAV_CMD_MISSION_START)
+    SET_CURRENT = "set_current"  # the mission item to fly next (MAV_CMD_DO_SET_MISSION_CURRENT)
 
 
 @dataclass(frozen=True)
@@ -88,6 +89,8 @@ class OperatorCommand:
             return f"go to ({self.x:.0f}, {self.y:.0f}) at {self.h:.0f} m"
         if self.kind == Kind.ORBIT:
             return f"orbit ({self.x:.0f}, {self.y:.0f}) at {self.radius_m:.0f} m radius"
+        if self.kind == Kind.SET_CURRENT:
+            return f"mission item {self.seq} next"
         return f"mission from item {self.seq}"
 
 
@@ -189,6 +192,10 @@ def _command(
         return Decoded(OperatorCommand(Kind.MODE, src, mode=Mode.RTL))
     if c == mavlink.MAV_CMD_NAV_LOITER_UNLIM:
         return Decoded(OperatorCommand(Kind.MODE, src, mode=Mode.LOITER))
+    if c == mavlink.MAV_CMD_DO_SET_MISSION_CURRENT:
+        if not (_finite(param1) and 0 <= param1 < 65536):
+            return _refuse("DO_SET_MISSION_CURRENT: an item number")
+        return Decoded(OperatorCommand(Kind.SET_CURRENT, src, seq=int(param1)))
     if c == mavlink.MAV_CMD_MISSION_START:
         first = int(param1) if _finite(param1) and param1 >= 1 else None
         return Decoded(OperatorCommand(Kind.MISSION_START, src, seq=first))
@@ -288,10 +295,6 @@ def _mission_item(msg, frame: LocalFrame, limits: Limits) -> Decoded | None:
     return Decoded(OperatorCommand(Kind.GOTO, src, x=x, y=y, h=h), notes)
 
 
-def _mission_set_current(msg, frame: LocalFrame, limits: Limits) -> Decoded:
-    return Decoded(OperatorCommand(Kind.MISSION_START, msg.get_srcSystem(), seq=int(msg.seq)))
-
-
 def _setpoint(msg, frame: LocalFrame, limits: Limits) -> Decoded:
     return _refuse(SETPOINT_REFUSAL)
 
@@ -302,7 +305,6 @@ _DECODERS = {
     "COMMAND_INT": _command_int,
     "MISSION_ITEM": _mission_item,
     "MISSION_ITEM_INT": _mission_item,
-    "MISSION_SET_CURRENT": _mission_set_current,
     "SET_ATTITUDE_TARGET": _setpoint,
     "SET_POSITION_TARGET_LOCAL_NED": _setpoint,
     "SET_POSITION_TARGET_GLOBAL_INT": _setpoint,

@@ -91,6 +91,12 @@ class CommandPath(Protocol):
     def mission_items(self) -> list[tuple]:
         """The mission uploaded from a ground station, as (seq, command, params, x, y, h)."""
 
+    def mission_current(self) -> int:
+        """The uploaded mission's current item (0: none)."""
+
+    def mission_version(self) -> int:
+        """Changes whenever a ground station uploads or clears a mission."""
+
     def mission_reached(self, seq: int) -> None:
         """Tell the ground stations an item was reached (MISSION_ITEM_REACHED)."""
 
@@ -198,6 +204,12 @@ class DirectPath(_Cruise):
     def mission_items(self) -> list[tuple]:
         return []
 
+    def mission_current(self) -> int:
+        return 0
+
+    def mission_version(self) -> int:
+        return 0
+
     def mission_reached(self, seq: int) -> None:
         pass
 
@@ -260,6 +272,12 @@ class MavlinkPath(_Cruise):
 
     def mission_items(self) -> list[tuple]:
         return self.bridge.mission_items_local()
+
+    def mission_current(self) -> int:
+        return self.bridge.missions.current
+
+    def mission_version(self) -> int:
+        return self.bridge.missions.version
 
     def mission_reached(self, seq: int) -> None:
         self.bridge.missions.reached(seq)

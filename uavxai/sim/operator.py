@@ -178,8 +178,21 @@ class Operator(Observer):
     def on_sample(self, ep: Episode, state: TrafficState) -> None:
         for cmd in ep.path.operator_commands():
             self.apply(ep, cmd)
+        self._follow_uploads(ep)
         if self.route is not None:
             self.route.on_sample(ep, state)
+
+    def _follow_uploads(self, ep: Episode) -> None:
+        """Flying an uploaded mission, a ground station may upload another or pick the item
+        to fly next (MISSION_SET_CURRENT, ``wp set N``): fly on from the current item."""
+        route = self.route
+        if route is None or route.label != "AUTO":
+            return
+        leg = route.leg
+        current = ep.path.mission_current()
+        moved = leg is not None and leg.seq is not None and current != leg.seq
+        if ep.path.mission_version() != self._mission_version or moved:
+            self._auto(ep, current)
 
     def on_end(self, ep: Episode, summary: dict) -> None:
         if self.log:
@@ -213,6 +226,7 @@ class Operator(Observer):
             Kind.GOTO: self._goto,
             Kind.ORBIT: self._orbit,
             Kind.MISSION_START: self._mission_start,
+            Kind.SET_CURRENT: self._set_current,
         }[cmd.kind]
         handler(ep, cmd)
 
@@ -261,11 +275,17 @@ class Operator(Observer):
     def _mission_start(self, ep: Episode, cmd: OperatorCommand) -> None:
         self._auto(ep, cmd.seq)
 
+    def _set_current(self, ep: Episode, cmd: OperatorCommand) -> None:
+        pass  # the bridge set the mission's current item; _follow_uploads flies it in AUTO
+
     def _auto(self, ep: Episode, first: int | None) -> None:
         """AUTO: an uploaded mission if there is one (from ``first``, else its current item),
         else the scenario's own flight."""
         items = ep.path.mission_items()
+        if first is None:
+            first = ep.path.mission_current()
         legs = mission_legs(items, self.home, first, self.radius_m, self.loiter_speed_mps)
+        self._mission_version = ep.path.mission_version()
         if legs:
             self._fly(ep, Mode.AUTO, Route(self, legs, "AUTO"), "flying the uploaded mission")
             return
