@@ -34,15 +34,16 @@ HEAD_ON = {
 
 
 class Watch(Observer):
-    """Per decision: time, height, airspeed, planner, words; the bridge's counters at the end."""
+    """Per decision: time, height, airspeed, planner, words, (x, y)."""
 
     def __init__(self) -> None:
-        self.rows: list[tuple[float, float, float, str, str]] = []
+        self.rows: list[tuple] = []
 
     def on_decision(self, ep, event) -> None:
         s = event.truth
         self.rows.append((event.t, float(s.pos[0, 2]), float(s.airspeed[0]),
-                          event.decision.planner, event.decision.explanation))  # fmt: skip
+                          event.decision.planner, event.decision.explanation,
+                          (float(s.pos[0, 0]), float(s.pos[0, 1]))))  # fmt: skip
 
 
 def _fly(commands: list[dict], path=None, **changes):
@@ -74,7 +75,7 @@ def test_operator_height_and_speed_during_a_head_on_encounter_keep_avoidance_on(
     assert r.outcome is Outcome.GOAL
     assert r.min_separation_m > 50.0
     # every decision is the planner's own, none is advice
-    assert all(p == "mcts_fast" for *_, p, _ in watch.rows), {p for *_, p, _ in watch.rows}
+    assert all(row[3] == "mcts_fast" for row in watch.rows), {row[3] for row in watch.rows}
     assert len(watch.rows) == r.steps
     if via_mavlink:
         assert r.summary["bridge"]["failsafe_events"] == 0
@@ -84,7 +85,7 @@ def test_operator_height_and_speed_during_a_head_on_encounter_keep_avoidance_on(
     assert abs(h_end - 130.0) < 3.0, h_end
     assert abs(v_end - 22.0) < 1.5, v_end
     # the explanations open with the operator's aim
-    later = [w for t, *_, w in watch.rows if t >= 9]
+    later = [row[4] for row in watch.rows if row[0] >= 9]
     assert later and all(w.startswith("the operator asked for 130 m") for w in later), later[0]
     ops = r.summary["operator"]["commands"]
     assert [c["kind"] for c in ops] == ["speed", "altitude"]
@@ -97,10 +98,12 @@ def test_guided_goto_then_rtl_completes_at_home() -> None:
                     "max_steps": 300})  # fmt: skip
     assert r.outcome is Outcome.COMPLETED, r.outcome
     assert r.summary["operator"]["mode_end"] == "RTL"
-    # it went to the point, climbed to 150 m, and loitered about it until RTL
+    # it went to the point, climbed to 150 m, and loitered about it (the planner flying the
+    # circle) until RTL, every decision saying what the operator asked for
     near = [row for row in watch.rows if 40 <= row[0] <= 78]
-    assert near and all("GUIDED" in row[4] or "orbit" in row[4] for row in near[-5:])
-    assert any(abs(h - 150.0) < 5.0 for _, h, *_ in near)
+    assert near and all(row[4].startswith("the operator asked for go to") for row in near)
+    assert all(math.dist(row[5], (1400, 1000)) < 300 for row in near)
+    assert any(abs(row[1] - 150.0) < 5.0 for row in near)
     assert r.flight_time_s > 80.0
 
 
@@ -110,8 +113,10 @@ def test_a_goal_is_not_reached_in_passing_while_the_operator_flies_elsewhere() -
     r, watch = _fly(commands, intruders={"count": 0})
     assert r.outcome is Outcome.GOAL
     assert r.flight_time_s > 60.0
+    # it loitered about where it was at t = 1 s, passing nowhere near the goal 1.2 km north
     loitering = [row for row in watch.rows if 20 <= row[0] <= 59]
-    assert all(row[3] == "orbit" for row in loitering)
+    assert loitering and all(math.dist(row[5], (1000, 720)) < 300 for row in loitering)
+    assert all(row[4].startswith("the operator asked for mode LOITER") for row in loitering)
 
 
 def test_scripted_operator_commands_are_validated() -> None:

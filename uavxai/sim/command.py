@@ -123,9 +123,9 @@ def wire_values(bank_cmd_rad: float, accel_mps2: float) -> tuple[float, float]:
 
 
 class _Cruise:
-    """The operator's airspeed, which both paths re-send with every decision that holds
-    speed: the planner's along-track acceleration moves the speed target, holding keeps it,
-    so without this one avoidance manoeuvre would leave the operator's speed behind."""
+    """The operator's airspeed. Once asked for, the planner plans at it (the episode pins
+    ``Ownship.speed_band``) and avoids by bank and height; both paths send it with every
+    decision in place of an acceleration, so the autopilot holds it."""
 
     _cruise: float | None = None
 
@@ -136,8 +136,13 @@ class _Cruise:
         self._cruise = float(np.float32(speed_mps))
         self._speed(self._cruise, t)
 
+    def _accel(self, decision: Decision) -> float:
+        """The along-track acceleration sent: the planner's, or none under an operator's
+        airspeed (the planner then plans at that speed: ``Ownship.speed_band``)."""
+        return decision.accel_mps2 if self._cruise is None else 0.0
+
     def _hold_cruise(self, decision: Decision, t: float) -> None:
-        if self._cruise is not None and decision.accel_mps2 == 0.0:
+        if self._cruise is not None:
             self._speed(self._cruise, t)
 
     def _speed(self, speed_mps: float, t: float) -> None:
@@ -173,7 +178,7 @@ class DirectPath(_Cruise):
         self.commands += 1
 
     def send(self, decision: Decision, t: float) -> None:
-        bank, accel = wire_values(decision.bank_cmd_rad, decision.accel_mps2)
+        bank, accel = wire_values(decision.bank_cmd_rad, self._accel(decision))
         self._world.command_ownship(bank_cmd_rad=bank, accel_cmd_mps2=accel)
         self.commands += 2
         if decision.alt_target_m is not None:  # the vertical set's height command
@@ -245,7 +250,7 @@ class MavlinkPath(_Cruise):
         self._encoder = encoder
 
     def send(self, decision: Decision, t: float) -> None:
-        self.bridge.feed(self._encoder.encode(decision.bank_cmd_rad, decision.accel_mps2, t))
+        self.bridge.feed(self._encoder.encode(decision.bank_cmd_rad, self._accel(decision), t))
         if decision.alt_target_m is not None:  # the vertical set's height command
             self.altitude(decision.alt_target_m, t)
         self._hold_cruise(decision, t)

@@ -14,8 +14,9 @@ received since the last sample, and keeps the flight mode:
 
 A height (DO_CHANGE_ALTITUDE) changes the height of the leg flown now, a speed
 (DO_CHANGE_SPEED) the airspeed the autopilot holds whenever the planner does not ask for
-another. Every loiter is the mission's orbit (:func:`uavxai.sim.mission.orbit_step`): checked
-against the traffic every decision, left for the planner when an intruder would pass it.
+another. Every loiter is flown by the avoidance planner itself, steering for the point of the
+circle ahead (as the mission does when it avoids on station), so the search that keeps the
+ownship clear never hands the aircraft to an orbit it has not checked.
 
 With no command ever received the episode flies exactly as without an operator.
 """
@@ -30,7 +31,6 @@ from uavxai.avoidance.types import Decision, Intruder, Ownship
 from uavxai.bridges.operator import Kind, Mode, OperatorCommand
 from uavxai.dynamics.state import TrafficState
 from uavxai.sim.episode import Episode, Observer
-from uavxai.sim.mission import Orbit, orbit_step
 from uavxai.vocabulary import Outcome
 
 # MAV_CMD numbers of the mission items a Route flies (MAVLink common.xml).
@@ -68,7 +68,8 @@ class Route(Observer):
         self.outcome: Outcome | None = None
         self.serving = False
         self._loiter_from: float | None = None  # when the loiter of this leg began
-        self._avoiding = False
+        self._own: tuple[float, float] | None = None
+        self._horizon_s = 16.0
 
     @property
     def leg(self) -> Leg | None:
@@ -76,8 +77,17 @@ class Route(Observer):
 
     @property
     def goal(self) -> tuple[float, float, float]:
+        """The leg's point; loitering, the point of the circle the ownship would reach at the
+        end of the planner's horizon (the mission's rule when it avoids on station): the
+        planner flies the loiter itself, so its search keeps the ownship clear all along."""
         leg = self.leg or self.legs[-1]
-        return (leg.x, leg.y, leg.h)
+        if self._loiter_from is None or self._own is None:
+            return (leg.x, leg.y, leg.h)
+        r = self._radius(leg)
+        x, y, horizon = *self._own, self._horizon_s
+        ahead = (1.0 if leg.clockwise else -1.0) * self.op.loiter_speed_mps * horizon / r
+        b = math.atan2(x - leg.x, y - leg.y) + ahead
+        return (leg.x + r * math.sin(b), leg.y + r * math.cos(b), leg.h)
 
     def start(self, ep: Episode) -> None:
         self.leg_start_step = ep.steps
@@ -87,7 +97,7 @@ class Route(Observer):
         leg = self.leg
         if leg is None:
             return
-        self._loiter_from, self._avoiding = None, False
+        self._loiter_from = None
         if leg.speed_mps is not None:
             ep.path.set_cruise_speed(leg.speed_mps, ep.state.t)
         ep.path.altitude(leg.h, ep.state.t)
@@ -105,6 +115,9 @@ class Route(Observer):
 
     def on_sample(self, ep: Episode, state: TrafficState) -> None:
         leg, p, t = self.leg, state.pos[0], state.t
+        self._own = (float(p[0]), float(p[1]))
+        cfg = ep.planner.config
+        self._horizon_s = cfg.depth * cfg.action_hold_s
         if leg is None or self.outcome is not None:
             return
         d = math.hypot(p[0] - leg.x, p[1] - leg.y)
@@ -133,16 +146,8 @@ class Route(Observer):
         self._begin(ep)
 
     def decide(self, ep: Episode, own: Ownship, intruders: list[Intruder]) -> Decision | None:
-        leg = self.leg
-        if leg is None or leg.home or leg.loiter_s <= 0 or self._loiter_from is None:
-            return None  # the planner flies to the point
-        orbit = Orbit((leg.x, leg.y, leg.h), self._radius(leg), leg.clockwise,
-                      ep.path.cruise_speed(self.op.loiter_speed_mps))  # fmt: skip
-        step = orbit_step(ep, orbit, own, intruders, self._avoiding)
-        if step.conflict is not None and not self._avoiding:
-            ep.path.announce(f"{self.label}: avoiding, {step.conflict}", None)
-        self._avoiding = step.conflict is not None
-        return step.decision
+        """The avoidance planner flies every leg, loiters included (None)."""
+        return None
 
 
 def _with(leg: Leg, **changes) -> Leg:
