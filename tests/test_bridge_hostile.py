@@ -1,6 +1,7 @@
 """The bridge against hostile peers (issue 14): forged signed frames that try to poison the
-signing state, commands outside the world and the aircraft's limits, a fuzzed decoder, and
-signed frames replayed from an earlier run. Real pymavlink bytes; sockets on 127.0.0.1 only."""
+signing state, commands outside the world and the aircraft's limits (a ground station's aims
+and the planner's setpoints alike), a fuzzed decoder, and signed frames replayed from an
+earlier run. Real pymavlink bytes; sockets on 127.0.0.1 only."""
 
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
 from uavxai.bridges import CommandEncoder, MavlinkBridge
+from uavxai.bridges.operator import SETPOINT_REFUSAL, Kind
 from uavxai.bridges.protocol import new_codec
 from uavxai.dynamics.geodesy import LocalFrame
 
@@ -154,22 +156,38 @@ def test_forged_frame_on_the_planners_stream_cannot_silence_the_planner(planner_
     bridge.close()
 
 
+def change_altitude(h: float, frame: int = mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT):
+    return mavlink.MAVLink_command_long_message(
+        VEHICLE, 1, mavlink.MAV_CMD_DO_CHANGE_ALTITUDE, 0, h, frame, 0, 0, 0, 0, 0
+    )
+
+
 def test_forged_frame_cannot_poison_a_ground_stations_stream_either():
     """Verify before recording: a keyed ground station whose stream an attacker dated near the
-    end of time is still obeyed."""
+    end of time is still heard: its aim is taken, its setpoint refused as a setpoint (not as
+    a replay)."""
     bridge, sink, port = listening_bridge(signing_key=KEY)
     send_datagram(port, forged_heartbeat(GCS_SYSTEM, GCS_COMPONENT))
     poll_until(bridge, lambda: frames_seen(bridge) >= 1)
     assert bridge.counters["refused_bad_signature"] == 1
 
     gcs = Sender(GCS_SYSTEM, GCS_COMPONENT, KEY)
+    send_datagram(port, gcs.pack(change_altitude(150.0)))
+    poll_until(bridge, lambda: frames_seen(bridge) >= 2)
+    assert bridge.counters["refused_replay"] == 0
+    assert bridge.counters["operator_commands"] == 1
+    [aim] = bridge.take_operator_commands()
+    assert (aim.kind, aim.h, aim.source) == (Kind.ALTITUDE, 150.0, GCS_SYSTEM)
+
     bank = mavlink.MAVLink_set_attitude_target_message(
         0, VEHICLE, 1, 0b0100_0111, [math.cos(0.15), math.sin(0.15), 0.0, 0.0], 0, 0, 0, 0
     )
     send_datagram(port, gcs.pack(bank))
-    poll_until(bridge, lambda: frames_seen(bridge) >= 2)
-    assert bridge.counters["commands"] == 1
-    assert sink.calls == [{"bank_cmd_rad": pytest.approx(0.3, abs=1e-6)}]
+    poll_until(bridge, lambda: frames_seen(bridge) >= 3)
+    assert bridge.counters["refused_replay"] == 0
+    assert bridge.counters["messages_in"] == 2
+    assert bridge.counters["operator_refused"] == 1
+    assert sink.calls == [] and bridge.counters["commands"] == 0
     bridge.close()
 
 
@@ -248,8 +266,23 @@ def command_and_replies(bridge: MavlinkBridge, gcs, send) -> list:
     return replies(gcs, "COMMAND_ACK")
 
 
+def operator_says(bridge: MavlinkBridge, gcs, msg) -> list:
+    """``msg`` from the ground station: what it hears back, up to the COMMAND_ACK."""
+    return command_and_replies(bridge, gcs, lambda: gcs.mav.send(msg))
+
+
+def planner_says(bridge: MavlinkBridge, gcs, msg) -> list:
+    """``msg`` fed by the onboard planner, flown at once: what the ground station hears."""
+    assert bridge.feed(Sender(VEHICLE, PLANNER_COMPONENT).pack(msg)) == 1
+    return receive_all(gcs)
+
+
 def statustexts(messages: list) -> list[str]:
     return [m.text for m in messages if m.get_type() == "STATUSTEXT"]
+
+
+def acks(messages: list) -> list:
+    return [m for m in messages if m.get_type() == "COMMAND_ACK"]
 
 
 @pytest.fixture
@@ -265,7 +298,7 @@ def limited():
     gcs.close()
 
 
-@pytest.mark.parametrize(
+ALTITUDES = pytest.mark.parametrize(
     ("param1", "frame", "flown"),
     [
         (-1000.0, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT, 60.0),  # issue 14: into the ground
@@ -274,37 +307,48 @@ def limited():
         (1e30, mavlink.MAV_FRAME_GLOBAL, 250.0),
     ],
 )
-def test_altitude_outside_the_world_is_clamped_and_the_ack_says_so(limited, param1, frame, flown):
+
+
+def altitude_notice(param1: float, frame: int, flown: float) -> str:
+    h = param1 - FRAME.alt0 if frame == mavlink.MAV_FRAME_GLOBAL else param1  # local h
+    return f"clamped: h {h:.4g} -> {flown:.0f} m"
+
+
+@ALTITUDES
+def test_an_operators_altitude_outside_the_world_is_clamped_and_the_ack_says_so(
+    limited, param1, frame, flown
+):
     bridge, sink, gcs, clamped = limited
-    change = mavlink.MAV_CMD_DO_CHANGE_ALTITUDE
-    got = command_and_replies(
-        bridge,
-        gcs,
-        lambda: gcs.mav.command_long_send(1, 1, change, 0, param1, frame, 0, 0, 0, 0, 0),
-    )
+    got = operator_says(bridge, gcs, change_altitude(param1, frame))
     ack = got[-1]
     assert (ack.command, ack.result, ack.result_param2) == (
-        change,
+        mavlink.MAV_CMD_DO_CHANGE_ALTITUDE,
         mavlink.MAV_RESULT_ACCEPTED,
         clamped,
     )
+    [aim] = bridge.take_operator_commands()
+    assert (aim.kind, aim.h) == (Kind.ALTITUDE, flown)  # the aim, held to the world
+    assert sink.calls == []  # an aim for the planner, not a setpoint
+    assert statustexts(got) == [altitude_notice(param1, frame, flown)]
+    assert bridge.counters["clamped_commands"] == bridge.counters["operator_commands"] == 1
+
+
+@ALTITUDES
+def test_the_planners_altitude_outside_the_world_is_flown_at_the_limit(
+    limited, param1, frame, flown
+):
+    bridge, sink, gcs, _ = limited
+    got = planner_says(bridge, gcs, change_altitude(param1, frame))
     assert sink.calls == [{"alt_target_m": flown}]
-    [text] = statustexts(got)
-    h = param1 - FRAME.alt0 if frame == mavlink.MAV_FRAME_GLOBAL else param1  # local h
-    assert text == f"DO_CHANGE_ALTITUDE clamped: h {h:.4g} -> {flown:.0f} m"
+    assert statustexts(got) == [altitude_notice(param1, frame, flown)]
+    assert acks(got) == []  # the planner's commands are not acknowledged on the ground link
+    assert bridge.take_operator_commands() == []
     assert bridge.counters["clamped_commands"] == 1
 
 
-def test_commands_inside_the_limits_are_flown_as_given_without_a_clamp_notice(limited):
+def test_commands_inside_the_limits_are_taken_as_given_without_a_clamp_notice(limited):
     bridge, sink, gcs, _ = limited
-    change = mavlink.MAV_CMD_DO_CHANGE_ALTITUDE
-    got = command_and_replies(
-        bridge,
-        gcs,
-        lambda: gcs.mav.command_long_send(
-            1, 1, change, 0, 180.0, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT, 0, 0, 0, 0, 0
-        ),
-    )
+    got = operator_says(bridge, gcs, change_altitude(180.0))
     assert (got[-1].result, got[-1].result_param2) == (mavlink.MAV_RESULT_ACCEPTED, 0)
     assert statustexts(got) == []
     speed = mavlink.MAV_CMD_DO_CHANGE_SPEED
@@ -312,44 +356,79 @@ def test_commands_inside_the_limits_are_flown_as_given_without_a_clamp_notice(li
         bridge, gcs, lambda: gcs.mav.command_long_send(1, 1, speed, 0, 0, 22.0, -1, 0, 0, 0, 0)
     )
     assert (got[-1].result, got[-1].result_param2) == (mavlink.MAV_RESULT_ACCEPTED, 0)
-    assert sink.calls == [{"alt_target_m": 180.0}, {"speed_target_mps": 22.0}]
+    assert statustexts(got) == []
+    aims = bridge.take_operator_commands()
+    assert [(a.kind, a.h, a.speed_mps) for a in aims] == [
+        (Kind.ALTITUDE, 180.0, None),
+        (Kind.SPEED, None, 22.0),
+    ]
+    assert sink.calls == []
     assert bridge.counters["clamped_commands"] == 0
 
 
-@pytest.mark.parametrize(("asked", "flown"), [(200.0, 30.0), (0.5, 12.0)])
-def test_speed_outside_the_aircrafts_range_is_clamped(limited, asked, flown):
-    bridge, sink, gcs, clamped = limited
-    speed = mavlink.MAV_CMD_DO_CHANGE_SPEED
-    got = command_and_replies(
-        bridge, gcs, lambda: gcs.mav.command_long_send(1, 1, speed, 0, 0, asked, -1, 0, 0, 0, 0)
+def change_speed(v: float):
+    return mavlink.MAVLink_command_long_message(
+        VEHICLE, 1, mavlink.MAV_CMD_DO_CHANGE_SPEED, 0, 0, v, -1, 0, 0, 0, 0
     )
-    assert (got[-1].result, got[-1].result_param2) == (mavlink.MAV_RESULT_ACCEPTED, clamped)
-    assert sink.calls == [{"speed_target_mps": flown}]
-    assert any("DO_CHANGE_SPEED clamped" in t for t in statustexts(got))
 
 
-def test_an_orbit_outside_the_world_is_pulled_in(limited):
+@pytest.mark.parametrize("via", ["operator", "planner"])
+@pytest.mark.parametrize(("asked", "flown"), [(200.0, 30.0), (0.5, 12.0)])
+def test_speed_outside_the_aircrafts_range_is_clamped(limited, asked, flown, via):
     bridge, sink, gcs, clamped = limited
+    if via == "operator":
+        got = operator_says(bridge, gcs, change_speed(asked))
+        assert (got[-1].result, got[-1].result_param2) == (mavlink.MAV_RESULT_ACCEPTED, clamped)
+        [aim] = bridge.take_operator_commands()
+        assert (aim.kind, aim.speed_mps) == (Kind.SPEED, flown)
+        assert sink.calls == []
+    else:
+        got = planner_says(bridge, gcs, change_speed(asked))
+        assert acks(got) == [] and bridge.take_operator_commands() == []
+        assert sink.calls == [{"speed_target_mps": flown}]
+    assert statustexts(got) == [f"clamped: speed {asked:.4g} -> {flown:.0f} m/s"]
+    assert bridge.counters["clamped_commands"] == 1
+
+
+def far_orbit():
+    """DO_ORBIT about a point outside the world, of radius 10,000 km, at -20 m, at 500 m/s."""
     lat, lon, _ = FRAME.to_geodetic(5000.0, -300.0, 0.0)
-    got = command_and_replies(
-        bridge,
-        gcs,
-        lambda: gcs.mav.command_int_send(
-            1, 1, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT, mavlink.MAV_CMD_DO_ORBIT, 0, 0,
-            1e7, 500.0, 0, 0, round(lat * 1e7), round(lon * 1e7), -20.0,
-        ),
+    return mavlink.MAVLink_command_int_message(
+        VEHICLE, 1, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT, mavlink.MAV_CMD_DO_ORBIT, 0, 0,
+        1e7, 500.0, 0, 0, round(lat * 1e7), round(lon * 1e7), -20.0,
     )  # fmt: skip
+
+
+FAR_ORBIT_NOTICES = [
+    "clamped: point (5000, -300) -> (1500, 0)",
+    "clamped: h -20 -> 60 m",
+    "clamped: radius 1e+07 -> 750 m",
+    "clamped: speed 500 -> 30 m/s",
+]
+
+
+def test_an_operators_orbit_outside_the_world_is_pulled_in(limited):
+    bridge, sink, gcs, clamped = limited
+    got = operator_says(bridge, gcs, far_orbit())
     assert (got[-1].result, got[-1].result_param2) == (mavlink.MAV_RESULT_ACCEPTED, clamped)
+    [aim] = bridge.take_operator_commands()
+    assert aim.kind == Kind.ORBIT
+    assert (aim.x, aim.y, aim.radius_m, aim.clockwise) == (1500.0, 0.0, 750.0, True)
+    assert (aim.h, aim.speed_mps) == (60.0, 30.0)
+    assert sink.calls == [] and sink.orbits == []
+    assert statustexts(got) == FAR_ORBIT_NOTICES
+    assert bridge.counters["clamped_commands"] == 1
+
+
+def test_the_planners_orbit_outside_the_world_is_pulled_in(limited):
+    bridge, sink, gcs, _ = limited
+    got = planner_says(bridge, gcs, far_orbit())
     assert sink.calls == [{"alt_target_m": 60.0, "speed_target_mps": 30.0}]
     [(x, y, radius, clockwise)] = sink.orbits
     assert (x, y) == (1500.0, 0.0)
     assert radius == 750.0 and clockwise
-    assert statustexts(got) == [
-        "DO_ORBIT clamped: centre (1500, 0)",
-        "DO_ORBIT clamped: radius 1e+07 -> 750 m",
-        "DO_ORBIT clamped: h -20 -> 60 m",
-        "DO_ORBIT clamped: speed 500 -> 30 m/s",
-    ]
+    assert statustexts(got) == FAR_ORBIT_NOTICES
+    assert acks(got) == [] and bridge.take_operator_commands() == []
 
 
 def test_an_orbit_at_nan_height_or_off_the_globe_is_denied(limited):
@@ -365,13 +444,33 @@ def test_an_orbit_at_nan_height_or_off_the_globe_is_denied(limited):
         )  # fmt: skip
         assert got[-1].result == mavlink.MAV_RESULT_DENIED
     assert sink.calls == [] and sink.orbits == []
+    assert bridge.take_operator_commands() == []
+    assert bridge.counters["operator_refused"] == 2
 
 
-def test_setpoints_beyond_bank_and_acceleration_limits_are_clamped_and_announced(limited):
+def test_the_planners_setpoints_beyond_bank_and_acceleration_limits_are_clamped_and_announced(
+    limited,
+):
+    bridge, sink, gcs, _ = limited
+    planner = CommandEncoder(VEHICLE, VEHICLE)
+    for k in range(20):  # 2 s of 10 Hz setpoints at 80 deg of bank and 1000 m/s^2
+        bridge.tick(k / 10)
+        assert bridge.feed(planner.encode(math.radians(-80), 1000.0, k / 10)) == 2
+    banks = [c["bank_cmd_rad"] for c in sink.calls if "bank_cmd_rad" in c]
+    accels = [c["accel_cmd_mps2"] for c in sink.calls if "accel_cmd_mps2" in c]
+    assert banks == [pytest.approx(math.radians(-35.0))] * 20
+    assert accels == [2.0] * 20
+    assert bridge.counters["clamped_commands"] == 40
+    texts = [m.text for m in receive_all(gcs) if m.get_type() == "STATUSTEXT"]
+    assert texts == ["bank -80 deg clamped to -35", "accel 1e+03 m/s2 clamped to 2"]
+
+
+def ground_setpoints(bridge: MavlinkBridge, gcs, seconds: float = 2.0) -> None:
+    """A ground station's setpoints at 10 Hz for ``seconds`` of simulated time, at 80 deg of
+    bank and 1000 m/s^2, each pair read by the bridge before the next."""
     from uavxai.bridges.protocol import ATTITUDE_ONLY_MASK, roll_quaternion
 
-    bridge, sink, gcs, _ = limited
-    for k in range(20):  # 2 s of 10 Hz setpoints at 80 deg of bank and 1000 m/s^2
+    for k in range(round(seconds * 10)):
         bridge.tick(k / 10)
         gcs.mav.set_attitude_target_send(
             0, 1, 1, ATTITUDE_ONLY_MASK, roll_quaternion(math.radians(-80)), 0, 0, 0, 0
@@ -380,14 +479,31 @@ def test_setpoints_beyond_bank_and_acceleration_limits_are_clamped_and_announced
             0, 1, 1, mavlink.MAV_FRAME_BODY_FRD, 0b110_000_111_111_111 & ~(1 << 6),
             0, 0, 0, 0, 0, 0, 1000.0, 0, 0, 0, 0,
         )  # fmt: skip
-        poll_until(bridge, lambda k=k: bridge.counters["commands"] >= 2 * (k + 1))
-    banks = [c["bank_cmd_rad"] for c in sink.calls if "bank_cmd_rad" in c]
-    accels = [c["accel_cmd_mps2"] for c in sink.calls if "accel_cmd_mps2" in c]
-    assert banks == [pytest.approx(math.radians(-35.0))] * 20
-    assert accels == [2.0] * 20
-    assert bridge.counters["clamped_commands"] == 40
-    texts = [m.text for m in receive_all(gcs) if m.get_type() == "STATUSTEXT"]
-    assert texts == ["bank -80 deg clamped to -35", "accel 1e+03 m/s2 clamped to 2"]
+        poll_until(bridge, lambda k=k: bridge.counters["operator_refused"] >= 2 * (k + 1))
+
+
+def test_a_ground_stations_setpoints_are_refused_and_explained(limited):
+    bridge, sink, gcs, _ = limited
+    ground_setpoints(bridge, gcs)
+    assert bridge.counters["operator_refused"] == 40
+    assert sink.calls == [] and bridge.counters["commands"] == 0
+    assert bridge.take_operator_commands() == []
+    texts = statustexts(receive_all(gcs))
+    assert texts and set(texts) == {SETPOINT_REFUSAL[:50]}  # what one STATUSTEXT carries
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="product bug: SETPOINT_REFUSAL is longer than 50 characters, decode() cuts it, so "
+    "MavlinkBridge._operator never recognises it and announces every refused setpoint",
+)
+def test_a_ground_stations_setpoints_are_explained_once_every_few_seconds(limited):
+    """At 10 Hz, one notice per CLAMP_NOTICE_PERIOD_S, not one per setpoint; and a refused
+    setpoint is not counted as a clamped (obeyed) command."""
+    bridge, _, gcs, _ = limited
+    ground_setpoints(bridge, gcs)
+    assert statustexts(receive_all(gcs)) == [SETPOINT_REFUSAL[:50]]
+    assert bridge.counters["clamped_commands"] == 0
 
 
 def receive_all(conn, quiet_s: float = 0.1) -> list:
@@ -460,6 +576,12 @@ def test_planner_commands_carry_simulated_time_boot_ms(t):
 
 
 # ------------------------------------------------------------------ replay from an earlier run
+def signed_altitude_commands(count: int) -> list[bytes]:
+    """A keyed ground station's DO_CHANGE_ALTITUDE to 100, 101, ... m."""
+    gcs = Sender(GCS_SYSTEM, GCS_COMPONENT, KEY)
+    return [gcs.pack(change_altitude(100.0 + k)) for k in range(count)]
+
+
 def signed_bank_frames(count: int) -> list[bytes]:
     gcs = Sender(GCS_SYSTEM, GCS_COMPONENT, KEY)
     q = [math.cos(0.1), math.sin(0.1), 0.0, 0.0]
@@ -479,29 +601,33 @@ def deliver(bridge: MavlinkBridge, port: int, frames: list[bytes]) -> None:
 
 def test_frames_captured_in_one_run_are_refused_in_the_next(tmp_path):
     state = tmp_path / "signing.json"
-    captured = signed_bank_frames(5)
+    captured = signed_altitude_commands(5)
     first, _, port = listening_bridge(signing_key=KEY, signing_state=state)
     deliver(first, port, captured)
-    assert first.counters["commands"] == 5
+    assert first.counters["operator_commands"] == 5
+    assert [a.h for a in first.take_operator_commands()] == [100.0, 101.0, 102.0, 103.0, 104.0]
     first.close()
     assert state.exists() and KEY.hex() not in state.read_text()  # the key is never written
 
     second, sink, port = listening_bridge(signing_key=KEY, signing_state=state)
     deliver(second, port, captured)
-    assert sink.calls == [] and second.counters["refused_replay"] == 5
+    assert second.take_operator_commands() == [] and second.counters["refused_replay"] == 5
+    assert second.counters["operator_commands"] == 0 and sink.calls == []
     assert second.counters["refused_bad_signature"] == 0
-    deliver(second, port, signed_bank_frames(1))  # the station itself, newly started: obeyed
-    assert second.counters["commands"] == 1
+    deliver(second, port, signed_altitude_commands(1))  # the station, newly started: heard
+    assert second.counters["operator_commands"] == 1
+    assert [a.h for a in second.take_operator_commands()] == [100.0]
     second.close()
 
 
 def test_without_saved_state_the_new_stream_window_lets_a_fresh_capture_in(tmp_path):
     """Why the state file exists: MAVLink accepts a stream it has not seen if it is at most a
-    minute old, so a capture replayed into a new bridge without state is obeyed."""
-    captured = signed_bank_frames(3)
+    minute old, so a capture replayed into a new bridge without state is taken."""
+    captured = signed_altitude_commands(3)
     bridge, sink, port = listening_bridge(signing_key=KEY)
     deliver(bridge, port, captured)
-    assert bridge.counters["commands"] == 3
+    assert bridge.counters["operator_commands"] == 3
+    assert [a.h for a in bridge.take_operator_commands()] == [100.0, 101.0, 102.0]
     bridge.close()
 
 
@@ -708,7 +834,8 @@ def test_fuzzed_frames_never_raise_are_counted_and_the_planner_is_still_obeyed(k
         before = sum(bridge.counters[c] for c in COUNTED)
         bridge.feed(data)  # must not raise
         assert sum(bridge.counters[c] for c in COUNTED) > before, data.hex()
-    # ... and over a real socket, in bursts
+    # ... and over a real socket, in bursts: a ground station's aims at most, never a setpoint
+    fed = sink.calls
     sent = 0
     for _ in range(10):
         burst = [hostile_datagram(rng, senders) for _ in range(50)]
@@ -718,7 +845,16 @@ def test_fuzzed_frames_never_raise_are_counted_and_the_planner_is_still_obeyed(k
         sent += len(burst)
         poll_until(bridge, lambda seen=seen: sum(bridge.counters[c] for c in COUNTED) >= seen + 50)
 
+    assert sink.calls == fed  # nothing from the link reached the autopilot
+    aims = bridge.take_operator_commands()
+    assert aims  # the listed (and keyed) station's commands that came through intact
+    for aim in aims:  # every aim held to LIMITS
+        assert aim.h is None or 60.0 <= aim.h <= 250.0, aim
+        assert aim.speed_mps is None or 12.0 <= aim.speed_mps <= 30.0, aim
+        assert aim.x is None or (0.0 <= aim.x <= 1500.0 and 0.0 <= aim.y <= 1000.0), aim
+        assert aim.radius_m is None or 1.0 <= aim.radius_m <= 750.0, aim
     c = bridge.counters
+    assert c["operator_refused"] > 0  # the listed station's setpoints and bad commands
     assert c["malformed"] > 500 and c["messages_in"] > 500
     assert c["commands"] > 20 and c["clamped_commands"] > 10 and c["rejected_commands"] > 10
     if key is not None:

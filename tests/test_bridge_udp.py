@@ -1,5 +1,6 @@
 """The bridge on real sockets: pymavlink peers on 127.0.0.1 receive its telemetry, send it
-commands, download its parameters, flood it with damaged packets and test its signing."""
+commands (aims for the planner, never setpoints: issue 28), download its parameters, flood it
+with damaged packets and test its signing."""
 
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
 from uavxai.bridges import CommandEncoder, MavlinkBridge
+from uavxai.bridges.operator import ARDUPLANE_MODES, SETPOINT_REFUSAL, Kind
 from uavxai.bridges.protocol import ATTITUDE_ONLY_MASK
 from uavxai.bridges.telemetry import ICAO_BLOCK
 from uavxai.dynamics.geodesy import LocalFrame
@@ -138,14 +140,18 @@ def test_vehicle_telemetry_at_its_rates_in_simulated_time(session):
         assert counts[kind] == 21, kind  # 10 Hz over 0..2 s
     assert counts["ADSB_VEHICLE"] == 5 * INTRUDERS  # 2 Hz
     assert counts["HOME_POSITION"] == 1
+    assert counts["MISSION_CURRENT"] == 3  # with every heartbeat
     assert bridge.counters["messages_out"] == len(messages)
     assert {(m.get_srcSystem(), m.get_srcComponent()) for m in messages} == {(1, 1)}
 
     heartbeat = of_type(messages, "HEARTBEAT")[0]
     assert heartbeat.type == mavlink.MAV_TYPE_FIXED_WING
-    assert heartbeat.autopilot == mavlink.MAV_AUTOPILOT_GENERIC
+    # ArduPlane's autopilot and mode numbers, so ground stations name the mode
+    assert heartbeat.autopilot == mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA
     assert heartbeat.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED
     assert heartbeat.base_mode & mavlink.MAV_MODE_FLAG_GUIDED_ENABLED
+    assert heartbeat.base_mode & mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+    assert heartbeat.custom_mode == ARDUPLANE_MODES["AUTO"] == ARDUPLANE_MODES[bridge.mode]
     assert heartbeat.get_header().mlen and heartbeat.get_msgbuf()[0] == 0xFD
 
 
@@ -220,7 +226,9 @@ def euler_quaternion(roll: float, pitch: float, yaw: float) -> list[float]:
     ]
 
 
-def test_peer_answering_on_udpout_commands_the_bank():
+def test_peer_answering_on_udpout_aims_but_never_commands_the_bank():
+    """A listed station's bank setpoint is refused (the sink gets nothing, the station is told
+    why); its DO_CHANGE_ALTITUDE becomes an aim, acknowledged. The planner's bank is flown."""
     gcs, port = listening_station()
     sink = RecordingSink()
     link = f"udpout:127.0.0.1:{port}"
@@ -231,27 +239,52 @@ def test_peer_answering_on_udpout_commands_the_bank():
         q = euler_quaternion(math.radians(-25), 0.1, 2.0)
         gcs.mav.set_attitude_target_send(0, 2, 1, ATTITUDE_ONLY_MASK, q, 0, 0, 0, 0)
         gcs.mav.set_attitude_target_send(0, 1, 1, ATTITUDE_ONLY_MASK, q, 0, 0, 0, 0)
-        poll_until(bridge, lambda: sink.calls)
-
-        assert sink.calls == [{"bank_cmd_rad": pytest.approx(math.radians(-25), abs=1e-6)}]
+        poll_until(bridge, lambda: bridge.counters["operator_refused"] == 1)
+        assert sink.calls == [] and bridge.counters["commands"] == 0
         assert bridge.counters["ignored_other_target"] == 1  # the one sent to system 2
+        # why, as one STATUSTEXT carries it (50 characters)
+        assert [m.text for m in of_type(receive(gcs), "STATUSTEXT")] == [SETPOINT_REFUSAL[:50]]
+
+        change = mavlink.MAV_CMD_DO_CHANGE_ALTITUDE
+        relative = mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT
+        gcs.mav.command_long_send(1, 1, change, 0, 180.0, relative, 0, 0, 0, 0, 0)
+        ack = poll_and_ack(bridge, gcs)
+        assert (ack.command, ack.result) == (change, mavlink.MAV_RESULT_ACCEPTED)
+        [aim] = bridge.take_operator_commands()
+        assert (aim.kind, aim.h, aim.source) == (Kind.ALTITUDE, 180.0, GCS_SYSTEM)
+        assert sink.calls == [] and bridge.counters["operator_commands"] == 1
+
+        # the same bank, from the onboard planner, is flown
+        assert bridge.feed(CommandEncoder(1, 1).attitude(math.radians(-25))) == 1
+        assert sink.calls == [{"bank_cmd_rad": pytest.approx(math.radians(-25), abs=1e-6)}]
     gcs.close()
 
 
-def test_change_speed_is_acknowledged_and_obeyed():
+def test_change_speed_from_a_station_is_acknowledged_and_becomes_an_aim():
     bridge, sink, gcs, _ = connected_pair()
     gcs.mav.command_long_send(1, 1, mavlink.MAV_CMD_DO_CHANGE_SPEED, 0, 0, 24.5, -1, 0, 0, 0, 0)
     ack = poll_and_ack(bridge, gcs)
     assert ack.command == mavlink.MAV_CMD_DO_CHANGE_SPEED
-    assert ack.result == mavlink.MAV_RESULT_ACCEPTED
+    assert (ack.result, ack.result_param2) == (mavlink.MAV_RESULT_ACCEPTED, 0)
     assert (ack.target_system, ack.target_component) == (GCS_SYSTEM, GCS_COMPONENT)
-    assert sink.calls == [{"speed_target_mps": pytest.approx(24.5)}]
+    [aim] = bridge.take_operator_commands()
+    assert (aim.kind, aim.speed_mps) == (Kind.SPEED, pytest.approx(24.5))
+    assert sink.calls == []  # an aim for the planner, not a setpoint
 
     gcs.mav.command_long_send(1, 1, mavlink.MAV_CMD_DO_CHANGE_SPEED, 0, 0, -5, -1, 0, 0, 0, 0)
     assert poll_and_ack(bridge, gcs).result == mavlink.MAV_RESULT_DENIED
     gcs.mav.command_long_send(1, 1, mavlink.MAV_CMD_NAV_LAND, 0, 0, 0, 0, 0, 0, 0, 0)
     assert poll_and_ack(bridge, gcs).result == mavlink.MAV_RESULT_UNSUPPORTED
-    assert len(sink.calls) == 1
+    assert bridge.take_operator_commands() == [] and sink.calls == []
+    c = bridge.counters
+    assert (c["operator_commands"], c["operator_refused"]) == (1, 1)
+
+    # the planner's own DO_CHANGE_SPEED is flown, and not acknowledged onto the ground link
+    receive(gcs)
+    assert bridge.feed(CommandEncoder(1, 1).change_speed(21.0)) == 1
+    assert sink.calls == [{"speed_target_mps": pytest.approx(21.0)}]
+    assert of_type(receive(gcs, quiet_s=0.2), "COMMAND_ACK") == []
+    assert bridge.take_operator_commands() == []
     bridge.close()
     gcs.close()
 
@@ -312,7 +345,7 @@ def test_parameter_download_is_consistent():
 def test_five_hundred_damaged_packets_are_dropped_counted_and_never_obeyed():
     rng = random.Random(12)
     bridge, sink, gcs, port = connected_pair()
-    encoder = CommandEncoder(GCS_SYSTEM, 1)
+    encoder = CommandEncoder(GCS_SYSTEM, 1)  # the listed station's system, from its host
     valid = [encoder.attitude(0.7), encoder.acceleration(2.0), encoder.change_speed(25.0)]
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as attacker:
         for i in range(500):
@@ -328,13 +361,17 @@ def test_five_hundred_damaged_packets_are_dropped_counted_and_never_obeyed():
             attacker.sendto(packet, ("127.0.0.1", port))
             if i % 50 == 49:
                 bridge.poll()
-        attacker.sendto(encoder.attitude(0.7), ("127.0.0.1", port))
-        poll_until(bridge, lambda: sink.calls)
+        attacker.sendto(encoder.change_altitude(140.0), ("127.0.0.1", port))
+        poll_until(bridge, lambda: bridge.counters["operator_commands"])
 
     dropped = bridge.counters["malformed"] + bridge.counters["unknown_messages"]
     assert dropped >= 500
-    assert sink.calls == [{"bank_cmd_rad": pytest.approx(0.7, abs=1e-6)}]
-    assert bridge.counters["commands"] == 1
+    # only the one intact command was taken: no damaged frame became an aim or a refusal
+    [aim] = bridge.take_operator_commands()
+    assert (aim.kind, aim.h) == (Kind.ALTITUDE, pytest.approx(140.0))
+    assert bridge.counters["operator_commands"] == 1
+    assert bridge.counters["operator_refused"] == 0
+    assert sink.calls == [] and bridge.counters["commands"] == 0
     bridge.close()
     gcs.close()
 
@@ -346,17 +383,25 @@ def test_signing_refuses_unsigned_and_foreign_commands_and_signs_telemetry():
     foreign = ground_station(f"udpout:127.0.0.1:{port}", key=bytes(32))
     q = euler_quaternion(0.35, 0.0, 0.0)
 
+    speed = mavlink.MAV_CMD_DO_CHANGE_SPEED
+
     unsigned.mav.heartbeat_send(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0)
-    unsigned.mav.set_attitude_target_send(0, 1, 1, ATTITUDE_ONLY_MASK, q, 0, 0, 0, 0)
-    foreign.mav.set_attitude_target_send(0, 1, 1, ATTITUDE_ONLY_MASK, q, 0, 0, 0, 0)
+    unsigned.mav.command_long_send(1, 1, speed, 0, 0, 15.0, -1, 0, 0, 0, 0)
+    foreign.mav.command_long_send(1, 1, speed, 0, 0, 16.0, -1, 0, 0, 0, 0)
     poll_until(bridge, lambda: bridge.counters["refused_bad_signature"] == 1)
     assert bridge.counters["refused_unsigned"] == 1
-    assert sink.calls == []
+    assert bridge.take_operator_commands() == [] and sink.calls == []
+    assert bridge.counters["operator_commands"] == bridge.counters["operator_refused"] == 0
     assert bridge.counters["messages_in"] == 2  # the keyed and the unsigned heartbeats
 
+    keyed.mav.command_long_send(1, 1, speed, 0, 0, 24.0, -1, 0, 0, 0, 0)
+    assert poll_and_ack(bridge, keyed).result == mavlink.MAV_RESULT_ACCEPTED
+    [aim] = bridge.take_operator_commands()
+    assert (aim.kind, aim.speed_mps) == (Kind.SPEED, pytest.approx(24.0))
+    # even signed, a setpoint from the ground is refused: the sink never hears the link
     keyed.mav.set_attitude_target_send(0, 1, 1, ATTITUDE_ONLY_MASK, q, 0, 0, 0, 0)
-    poll_until(bridge, lambda: sink.calls)
-    assert sink.calls == [{"bank_cmd_rad": pytest.approx(0.35, abs=1e-6)}]
+    poll_until(bridge, lambda: bridge.counters["operator_refused"] == 1)
+    assert sink.calls == []
 
     bridge.publish(traffic(0.0))
     heartbeat = keyed.recv_match(type="HEARTBEAT", blocking=True, timeout=2.0)
@@ -373,10 +418,16 @@ def test_tcp_link_carries_commands_and_telemetry():
     link = f"tcpin:127.0.0.1:{port}"
     with MavlinkBridge(1, FRAME, sink, link=link, ground_stations=GROUND_STATIONS) as bridge:
         gcs = ground_station(f"tcp:127.0.0.1:{port}")
+        station = CommandEncoder(GCS_SYSTEM, 1)
         for k in range(3):  # several frames in one stream, parsed across reads
-            gcs.write(CommandEncoder(GCS_SYSTEM, 1).encode(0.1 * k, 0.0))
-        poll_until(bridge, lambda: len(sink.calls) == 6)
-        assert [c.get("bank_cmd_rad") for c in sink.calls[::2]] == pytest.approx([0, 0.1, 0.2])
+            gcs.write(station.change_altitude(100.0 + 10 * k) + station.change_speed(20.0 + k))
+        poll_until(bridge, lambda: bridge.counters["operator_commands"] == 6)
+        aims = bridge.take_operator_commands()
+        assert [a.h for a in aims[::2]] == pytest.approx([100.0, 110.0, 120.0])
+        assert [a.speed_mps for a in aims[1::2]] == pytest.approx([20.0, 21.0, 22.0])
+        assert sink.calls == []
+        acks = [gcs.recv_match(type="COMMAND_ACK", blocking=True, timeout=2.0) for _ in range(6)]
+        assert [a.result for a in acks if a is not None] == [mavlink.MAV_RESULT_ACCEPTED] * 6
         bridge.publish(traffic(0.0))
         assert gcs.recv_match(type="GLOBAL_POSITION_INT", blocking=True, timeout=2.0)
         gcs.close()
