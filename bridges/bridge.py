@@ -43,7 +43,7 @@ from uavxai.dynamics.state import TrafficState
 from uavxai.errors import UserError
 
 from . import telemetry
-from .framing import FrameReader, Parsed
+from .framing import FrameReader, Parsed, split_frames
 from .link import Link, Peer
 from .missions import MissionServer
 from .operator import SETPOINT_REFUSAL, Decoded, Limits, OperatorCommand, decode
@@ -421,8 +421,8 @@ class MavlinkBridge:
         """Forward frames packed elsewhere to the link: the ADS-B receiver's ADSB_VEHICLE
         reports, which the ground station then shows as traffic (with ``truth_adsb`` off,
         they replace the exact traffic the bridge would otherwise publish)."""
-        if frames:
-            self._write(frames)
+        for frame in split_frames(frames):
+            self._write(frame)
 
     @property
     def failsafe_active(self) -> bool:

@@ -138,3 +138,23 @@ def _frame_length(buf: bytes, i: int) -> int | None:
     if incompat & ~_SIGNED:
         return _NOT_A_FRAME  # unknown incompatibility flags: not a frame we can read
     return _HEADER_V2 + payload + _CRC + (_SIGNATURE if incompat & _SIGNED else 0)
+
+
+def split_frames(data: bytes) -> list[bytes]:
+    """Whole frames packed back to back (by our own codecs) as a list of frames: a .tlog
+    stamps each frame, and a counter counts frames, not chunks. Bytes that are no frame end
+    the split (they are dropped: nothing of ours writes them)."""
+    out, i, n = [], 0, len(data)
+    while i < n:
+        magic = data[i]
+        if magic == _MAGIC_V2 and i + 3 <= n:
+            size = _HEADER_V2 + data[i + 1] + _CRC + (_SIGNATURE if data[i + 2] & _SIGNED else 0)
+        elif magic == _MAGIC_V1 and i + 2 <= n:
+            size = _HEADER_V1 + data[i + 1] + _CRC
+        else:
+            break
+        if i + size > n:
+            break
+        out.append(bytes(data[i : i + size]))
+        i += size
+    return out

@@ -86,23 +86,29 @@ def speed_and_height(mav) -> None:
                           135.0, mavutil.mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT, 0, 0, 0, 0, 0)  # fmt: skip
 
 
-def _fly(station: GroundStation | None, port: int, **changes):
+def _fly(station: GroundStation | None, port: int, dynamics: str = "kinematic", **changes):
     sc = default_scenario("link", **{**HEAD_ON, **changes})
     planner = make_planner("mcts_fast", PlannerConfig.from_scenario(sc))
     observers = [station] if station else []
     path = mavlink_path(sc, f"udpout:127.0.0.1:{port}")
-    return fly(sc, planner, GOAL, dynamics="kinematic", path=path, observers=observers)
+    return fly(sc, planner, GOAL, dynamics=dynamics, path=path, observers=observers)
 
 
-@pytest.mark.parametrize("signed", [False, True], ids=["allowed-peer", "signed"])
-def test_operator_commands_during_a_head_on_encounter_leave_avoidance_on(signed: bool) -> None:
+@pytest.mark.parametrize(
+    ("signed", "dynamics"),
+    [(False, "kinematic"), (True, "kinematic"), (True, "jsbsim")],
+    ids=["allowed-peer", "signed", "signed-jsbsim"],
+)
+def test_operator_commands_during_a_head_on_encounter_leave_avoidance_on(
+    signed: bool, dynamics: str
+) -> None:
     """The issue's measured defect: one DO_CHANGE_SPEED (unsigned from anyone, or signed from
     the ground station) turned avoidance off and the encounter collided at 48-50 m."""
     port = _port()
     key = bytes.fromhex(KEY_HEX) if signed else None
     gcs = GroundStation(port, {4.0: speed_and_height}, key=key)
     bridge = {"signing_key_hex": KEY_HEX} if signed else {"ground_stations": STATION}
-    r = _fly(gcs, port, bridge=bridge)
+    r = _fly(gcs, port, dynamics, bridge=bridge)
     counters = r.summary["bridge"]
     assert counters["operator_commands"] == 2, counters
     assert r.outcome is Outcome.GOAL
@@ -210,3 +216,31 @@ def test_a_mission_uploaded_from_a_waypoint_file_is_flown_and_reported(tmp_path)
         closest = float(np.min(np.hypot(pts[:, 0] - x, pts[:, 1] - y)))
         assert closest < (160.0 if cmd == 19 else 60.0), (cmd, x, y, closest)
     assert math.isfinite(r.flight_time_s)
+
+
+def test_the_runs_tlog_holds_every_frame_the_counters_count(tmp_path) -> None:
+    """`uavxai run`'s link.tlog, read back with pymavlink: every frame decoded (the planner's,
+    the station's) and every frame sent (telemetry, the ADS-B receiver's relayed reports,
+    acknowledgements) is there, one stamped frame each, in time order."""
+    port = _port()
+    gcs = GroundStation(port, {3.0: speed_and_height})
+    sc = default_scenario("tlog", **{**HEAD_ON, "surveillance": {"model": "adsb"}},
+                          bridge={"ground_stations": STATION})  # fmt: skip
+    planner = make_planner("mcts_fast", PlannerConfig.from_scenario(sc))
+    tlog = tmp_path / "link.tlog"
+    path = mavlink_path(sc, f"udpout:127.0.0.1:{port}", tlog)
+    r = fly(sc, planner, GOAL, dynamics="kinematic", path=path, observers=[gcs])
+    counters = r.summary["bridge"]
+    log = mavutil.mavlink_connection(str(tlog))
+    kinds: dict[str, int] = {}
+    stamps = []
+    while (m := log.recv_match()) is not None:
+        assert m.get_type() != "BAD_DATA"
+        kinds[m.get_type()] = kinds.get(m.get_type(), 0) + 1
+        stamps.append(m._timestamp)
+    log.close()
+    assert sum(kinds.values()) == counters["messages_in"] + counters["messages_out"]
+    assert kinds["ADSB_VEHICLE"] > 0 and kinds["SET_ATTITUDE_TARGET"] == r.steps
+    assert kinds["COMMAND_ACK"] == 2 and kinds["HEARTBEAT"] >= r.flight_time_s - 1
+    assert stamps == sorted(stamps)
+    assert stamps[-1] - stamps[0] == pytest.approx(r.flight_time_s, abs=1.0)
