@@ -13,6 +13,7 @@ os.environ.setdefault("MAVLINK20", "1")
 
 import numpy as np
 import pytest
+from head_on import GOAL, HEAD_ON
 from pymavlink import mavutil, mavwp
 
 from uavxai.avoidance.planners import make_planner
@@ -25,18 +26,6 @@ from uavxai.sim.run import mavlink_path
 from uavxai.vocabulary import Outcome
 
 KEY_HEX = "5a" * 32
-GOAL = (1000.0, 1900.0, 120.0)
-HEAD_ON = {
-    "ownship": {
-        "start": {"x": 1000, "y": 700, "h": 120, "heading_deg": 0, "speed_mps": 20},
-        "goal": list(GOAL),
-    },
-    "intruders": {"list": [{"x": 1000, "y": 1500, "h": 120, "heading_deg": 180,
-                            "speed_mps": 20}]},  # fmt: skip
-    "surveillance": {"model": "truth"},
-    "avoidance": {"planner": "mcts_fast", "max_steps": 150},
-    "log": {"rerun": False},
-}
 STATION = [{"system_id": 255, "address": "127.0.0.1"}]
 
 
@@ -82,8 +71,9 @@ class GroundStation(Observer):
 def speed_and_height(mav) -> None:
     mav.command_long_send(1, 1, mavutil.mavlink.MAV_CMD_DO_CHANGE_SPEED, 0,
                           0, 22.0, -1, 0, 0, 0, 0)  # fmt: skip
+    relative = mavutil.mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT
     mav.command_long_send(1, 1, mavutil.mavlink.MAV_CMD_DO_CHANGE_ALTITUDE, 0,
-                          135.0, mavutil.mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT, 0, 0, 0, 0, 0)  # fmt: skip
+                          135.0, relative, 0, 0, 0, 0, 0)  # fmt: skip
 
 
 def _fly(station: GroundStation | None, port: int, dynamics: str = "kinematic", **changes):

@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 
 import pytest
+from head_on import GOAL, HEAD_ON
 
 from uavxai.avoidance.planners import make_planner
 from uavxai.avoidance.types import PlannerConfig
@@ -17,20 +18,6 @@ from uavxai.sim.build import fly
 from uavxai.sim.episode import Observer
 from uavxai.sim.run import mavlink_path
 from uavxai.vocabulary import Outcome
-
-GOAL = (1000.0, 1900.0, 120.0)
-# Head-on: the ownship flies north from (1000, 700); the intruder comes south at it, 800 m ahead.
-HEAD_ON = {
-    "ownship": {
-        "start": {"x": 1000, "y": 700, "h": 120, "heading_deg": 0, "speed_mps": 20},
-        "goal": list(GOAL),
-    },
-    "intruders": {"list": [{"x": 1000, "y": 1500, "h": 120, "heading_deg": 180,
-                            "speed_mps": 20}]},  # fmt: skip
-    "surveillance": {"model": "truth"},
-    "avoidance": {"planner": "mcts_fast", "max_steps": 150},
-    "log": {"rerun": False},
-}
 
 
 class Watch(Observer):

@@ -23,6 +23,7 @@ With no command ever received the episode flies exactly as without an operator.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -151,9 +152,7 @@ class Route(Observer):
 
 
 def _with(leg: Leg, **changes) -> Leg:
-    from dataclasses import replace
-
-    return replace(leg, **changes)
+    return dataclasses.replace(leg, **changes)
 
 
 class Operator(Observer):
@@ -262,7 +261,7 @@ class Operator(Observer):
                   f"orbit ({cmd.x:.0f}, {cmd.y:.0f}) r {cmd.radius_m:.0f} m")  # fmt: skip
 
     def _mode(self, ep: Episode, cmd: OperatorCommand) -> None:
-        p, t = ep.state.pos[0], ep.state.t
+        p = ep.state.pos[0]
         if cmd.mode == Mode.AUTO:
             self._auto(ep, None)
         elif cmd.mode == Mode.RTL:
@@ -275,7 +274,6 @@ class Operator(Observer):
         else:  # GUIDED with no point: loiter where it is, as ArduPlane does
             leg = Leg(float(p[0]), float(p[1]), float(p[2]), loiter_s=math.inf)
             self._fly(ep, Mode.GUIDED, Route(self, [leg], "GUIDED"), "loitering here")
-        del t
 
     def _mission_start(self, ep: Episode, cmd: OperatorCommand) -> None:
         self._auto(ep, cmd.seq)
