@@ -495,7 +495,7 @@ class MavlinkBridge:
         if read.command is None:
             self.counters["operator_refused"] += 1
             if read.refused == SETPOINT_REFUSAL:
-                self._clamped("setpoint", read.refused)  # at most one notice every few s
+                self._notice("setpoint", read.refused)  # at most one notice every few s
             else:
                 self.announce(read.refused or "command refused", mavlink.MAV_SEVERITY_WARNING)
             if acked:
@@ -695,6 +695,11 @@ class MavlinkBridge:
     def _clamped(self, kind: str, text: str) -> None:
         """A setpoint flown at a limit: counted; announced at most every few seconds."""
         self.counters["clamped_commands"] += 1
+        self._notice(kind, text)
+
+    def _notice(self, kind: str, text: str) -> None:
+        """A warning about setpoints, which come at 10 Hz or more: said at most once every
+        few simulated seconds per kind, logged otherwise."""
         now = self._now if self._now is not None else 0.0
         last = self._clamp_noticed.get(kind)
         if last is None or not 0 <= now - last < CLAMP_NOTICE_PERIOD_S:

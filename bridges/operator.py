@@ -47,9 +47,9 @@ MODE_NAMES = {number: name for name, number in ARDUPLANE_MODES.items()}
 FAILSAFE_MODE = ARDUPLANE_MODES["FBWA"]
 FLYABLE = ", ".join(m.value for m in Mode)
 
-SETPOINT_REFUSAL = (
-    "setpoint refused: avoidance flies; send a mode, height, speed or position"
-)  # <= 50 characters: one STATUSTEXT
+# One STATUSTEXT holds 50 characters.
+SETPOINT_REFUSAL = "setpoint refused: send mode/height/speed/point"
+assert len(SETPOINT_REFUSAL) <= 50
 
 
 class Kind(StrEnum):

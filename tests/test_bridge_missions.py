@@ -5,7 +5,6 @@ and with MAVProxy itself when the `gcs` extra is installed."""
 
 from __future__ import annotations
 
-import contextlib
 import copy
 import logging
 import math
@@ -26,6 +25,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from uavxai.bridges import MavlinkBridge
 from uavxai.bridges.missions import MissionItem, MissionServer, item_from_message
+from uavxai.bridges.operator import Kind
 from uavxai.bridges.telemetry import autopilot_version
 from uavxai.dynamics.geodesy import LocalFrame
 from uavxai.dynamics.state import TrafficState
@@ -457,6 +457,8 @@ def test_no_field_value_makes_the_server_raise_or_grow(caplog):
 
 # ------------------------------------------------------------------ over loopback UDP
 FRAME = LocalFrame(34.1230, 108.8370, HOME_MSL_M)
+# The ground station every test's peer speaks as: the bridge hears no one else (issue 28).
+GROUND_STATIONS = [(GCS[0], "127.0.0.1")]
 WAIT_S = 20.0  # the longest any step below waits: a lost reply fails the test, never hangs it
 
 
@@ -502,7 +504,9 @@ def answer(bridge: MavlinkBridge, gcs, kinds: tuple[str, ...]):
 
 def test_a_pymavlink_station_uploads_and_downloads_over_udp(wpl_file):
     port = free_port()
-    bridge = MavlinkBridge(1, FRAME, IdleSink(), link=f"udpin:127.0.0.1:{port}")
+    bridge = MavlinkBridge(
+        1, FRAME, IdleSink(), link=f"udpin:127.0.0.1:{port}", ground_stations=GROUND_STATIONS
+    )
     gcs = mavutil.mavlink_connection(
         f"udpout:127.0.0.1:{port}", source_system=GCS[0], source_component=GCS[1]
     )
@@ -539,7 +543,9 @@ def test_a_pymavlink_station_uploads_and_downloads_over_udp(wpl_file):
 def test_a_station_broadcasting_an_upload_is_not_obeyed(wpl_file):
     """A write addressed to every system (target 0) is ignored; a read is answered."""
     port = free_port()
-    bridge = MavlinkBridge(1, FRAME, IdleSink(), link=f"udpin:127.0.0.1:{port}")
+    bridge = MavlinkBridge(
+        1, FRAME, IdleSink(), link=f"udpin:127.0.0.1:{port}", ground_stations=GROUND_STATIONS
+    )
     gcs = mavutil.mavlink_connection(
         f"udpout:127.0.0.1:{port}", source_system=GCS[0], source_component=GCS[1]
     )
@@ -624,8 +630,9 @@ def fly_until(
 def test_mavproxy_wp_load_list_save_set_and_clear(wpl_file, tmp_path):
     port = free_port()
     bridge = MavlinkBridge(
-        1, FRAME, IdleSink(), link=f"udpout:127.0.0.1:{port}", command_timeout_s=600.0
-    )
+        1, FRAME, IdleSink(), link=f"udpout:127.0.0.1:{port}", command_timeout_s=600.0,
+        ground_stations=GROUND_STATIONS,  # MAVProxy's system id is 255, as GCS's
+    )  # fmt: skip
     gcs = MAVProxy(port, tmp_path)
     clock = [0.0]
     try:
@@ -647,13 +654,13 @@ def test_mavproxy_wp_load_list_save_set_and_clear(wpl_file, tmp_path):
         # what the vehicle sent back, as MAVProxy writes it (6 decimals: 1e-6 degrees)
         assert_matches_loader(bridge.missions.items, load(saved), deg=0.6e-6)
 
-        # `wp set` first tries COMMAND_LONG DO_SET_MISSION_CURRENT and, if the vehicle says
-        # UNSUPPORTED, uses MISSION_SET_CURRENT from then on: typed until it takes (twice).
-        for _ in range(2):
-            gcs.type("wp set 3")
-            with contextlib.suppress(AssertionError):
-                fly_until(bridge, clock, lambda: bridge.missions.current == 3, "set", gcs, 3.0)
-        assert bridge.missions.current == 3
+        # `wp set` sends COMMAND_LONG DO_SET_MISSION_CURRENT first (MISSION_SET_CURRENT only
+        # after an UNSUPPORTED): the ground station's aim, taken and acknowledged at once.
+        bridge.take_operator_commands()
+        gcs.type("wp set 3")
+        fly_until(bridge, clock, lambda: bridge.missions.current == 3, "wp set", gcs)
+        aims = [a for a in bridge.take_operator_commands() if a.kind == Kind.SET_CURRENT]
+        assert [(a.seq, a.source) for a in aims] == [(3, GCS[0])]
 
         gcs.type("wp clear")
         fly_until(bridge, clock, lambda: bridge.missions.version == 2, "wp clear", gcs)

@@ -1,6 +1,7 @@
-"""Who the bridge obeys and who hears it (issue 28): ground stations by (system, host), peers
-bounded and expiring, nothing for spoofed senders, and a flood that leaves the link as it was.
-Real UDP sockets on loopback only (all of 127.0.0.0/8 is this machine on Linux)."""
+"""Who the bridge hears and who hears it (issue 28): ground stations by (system, host), whose
+commands become aims for the planner (never setpoints), peers bounded and expiring, nothing
+for spoofed senders, and a flood that leaves the link as it was. Real UDP sockets on loopback
+only (all of 127.0.0.0/8 is this machine on Linux)."""
 
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from uavxai.bridges import CommandEncoder, MavlinkBridge
 from uavxai.bridges.link import Link
+from uavxai.bridges.operator import Kind
 from uavxai.bridges.protocol import MessagePacker, new_codec
 from uavxai.dynamics.geodesy import LocalFrame
 from uavxai.dynamics.state import TrafficState
@@ -60,6 +62,13 @@ def received(sock: socket.socket, window_s: float = 0.2) -> list[bytes]:
 def decoded(datagrams: list[bytes]) -> list:
     codec = new_codec(None, GCS, 190)
     return [m for d in datagrams for m in codec.parse_buffer(d) or []]
+
+
+def speeds_aimed(bridge: MavlinkBridge) -> list[float]:
+    """The speeds ground stations have asked for since the last call (the queued aims)."""
+    aims = bridge.take_operator_commands()
+    assert all(a.kind == Kind.SPEED for a in aims), aims
+    return [a.speed_mps for a in aims]
 
 
 def poll_until(bridge: MavlinkBridge, done, timeout_s: float = 2.0) -> None:
@@ -233,6 +242,7 @@ def test_without_a_key_or_ground_stations_nobody_on_the_link_commands(caplog):
             gcs.sendto(CommandEncoder(GCS, 1).change_speed(25.0), address)
             poll_until(bridge, lambda: bridge.counters["refused_unknown_peer"] == 2)
         assert sink.calls == [] and bridge.counters["messages_in"] == 0
+        assert bridge.take_operator_commands() == []
         assert received(gcs, 0.1) == []  # not even an acknowledgement
         warnings = [r.getMessage() for r in caplog.records]
         assert len(warnings) == 1  # the first refusal only; the rest are counted
@@ -243,19 +253,21 @@ def test_without_a_key_or_ground_stations_nobody_on_the_link_commands(caplog):
 
 
 def test_a_listed_ground_station_is_obeyed_and_another_system_on_its_host_is_not():
+    """Obeyed: its command is taken as an aim (queued for the planner) and acknowledged."""
     bridge, sink, address = listening(ground_stations=STATION)
     gcs = peer_socket()
     try:
         gcs.sendto(CommandEncoder(GCS, 1).change_speed(24.0), address)
-        poll_until(bridge, lambda: sink.calls)
-        assert sink.calls == [{"speed_target_mps": pytest.approx(24.0)}]
+        poll_until(bridge, lambda: bridge.counters["operator_commands"])
+        assert speeds_aimed(bridge) == [pytest.approx(24.0)]
+        assert sink.calls == []  # an aim, never a setpoint
         acks = [m for m in decoded(received(gcs)) if m.get_type() == "COMMAND_ACK"]
         assert [a.result for a in acks] == [mavlink.MAV_RESULT_ACCEPTED]
 
         impostor = peer_socket()  # the same host, another system id
         impostor.sendto(CommandEncoder(GCS - 1, 1).change_speed(13.0), address)
         poll_until(bridge, lambda: bridge.counters["refused_unknown_peer"] == 1)
-        assert len(sink.calls) == 1
+        assert speeds_aimed(bridge) == [] and bridge.counters["operator_commands"] == 1
         assert received(impostor, 0.1) == []
         impostor.close()
     finally:
@@ -295,12 +307,13 @@ def test_with_a_key_a_signed_peer_is_admitted_and_obeyed_an_unsigned_one_is_not_
         unsigned.sendto(heartbeat(), address)
         unsigned.sendto(CommandEncoder(GCS, 1).change_speed(20.0), address)
         signed.sendto(CommandEncoder(GCS, 1, signing_key=KEY).change_speed(24.0), address)
-        poll_until(bridge, lambda: sink.calls)
+        poll_until(bridge, lambda: bridge.counters["operator_commands"])
         poll_until(bridge, lambda: bridge.counters["refused_unsigned"] == 1)
-        assert sink.calls == [{"speed_target_mps": pytest.approx(24.0)}]
+        assert speeds_aimed(bridge) == [pytest.approx(24.0)] and sink.calls == []
         assert bridge.counters["refused_unknown_peer"] == 1  # the unsigned heartbeat
         bridge.publish(state(0.0))
-        assert any(m.get_type() == "HEARTBEAT" for m in decoded(received(signed)))
+        kinds = [m.get_type() for m in decoded(received(signed))]
+        assert "HEARTBEAT" in kinds and "COMMAND_ACK" in kinds
         assert received(unsigned, 0.1) == []
     finally:
         bridge.close()
@@ -314,9 +327,11 @@ def test_with_a_key_and_ground_stations_a_signed_command_must_also_come_from_one
     try:
         elsewhere.sendto(CommandEncoder(GCS, 1, signing_key=KEY).change_speed(15.0), address)
         poll_until(bridge, lambda: bridge.counters["refused_unknown_peer"] == 1)
+        assert received(elsewhere, 0.1) == []  # refused: not even acknowledged
+        assert speeds_aimed(bridge) == []
         listed.sendto(CommandEncoder(GCS, 1, signing_key=KEY).change_speed(24.0), address)
-        poll_until(bridge, lambda: sink.calls)
-        assert sink.calls == [{"speed_target_mps": pytest.approx(24.0)}]
+        poll_until(bridge, lambda: bridge.counters["operator_commands"])
+        assert speeds_aimed(bridge) == [pytest.approx(24.0)] and sink.calls == []
     finally:
         bridge.close()
         listed.close()
@@ -332,7 +347,7 @@ def test_a_replayed_signed_command_on_the_link_is_counted_as_a_replay():
         gcs.sendto(frame, address)
         poll_until(bridge, lambda: bridge.counters["refused_replay"] == 1)
         assert bridge.counters["refused_bad_signature"] == 0
-        assert len(sink.calls) == 1
+        assert speeds_aimed(bridge) == [pytest.approx(24.0)] and sink.calls == []
     finally:
         bridge.close()
         gcs.close()
@@ -341,6 +356,7 @@ def test_a_replayed_signed_command_on_the_link_is_counted_as_a_replay():
 def test_the_planners_feed_needs_no_ground_station():
     bridge, sink, _ = listening()
     assert bridge.feed(CommandEncoder(1, 1).encode(0.2, 0.0)) == 2
+    assert sink.calls == [{"bank_cmd_rad": pytest.approx(0.2)}, {"accel_cmd_mps2": 0.0}]
     assert bridge.counters["refused_unknown_peer"] == 0
     bridge.close()
 
@@ -374,8 +390,8 @@ def test_a_flood_from_many_addresses_leaves_the_peers_bounded_and_the_station_ob
         assert bridge.counters["malformed"] == 0
         assert any(m.get_type() == "HEARTBEAT" for m in decoded(received(gcs)))
         gcs.sendto(CommandEncoder(GCS, 1).change_speed(22.0), address)
-        poll_until(bridge, lambda: sink.calls)
-        assert sink.calls == [{"speed_target_mps": pytest.approx(22.0)}]
+        poll_until(bridge, lambda: bridge.counters["operator_commands"])
+        assert speeds_aimed(bridge) == [pytest.approx(22.0)] and sink.calls == []
     finally:
         bridge.close()
         gcs.close()

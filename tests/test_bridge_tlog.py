@@ -79,6 +79,8 @@ def test_a_runs_frames_in_and_out_are_all_in_the_tlog_in_order(tmp_path):
         for k in range(30):  # three simulated seconds
             t = k / 10
             bridge.feed(planner.encode(0.1, 0.0, t))
+            if k == 15:  # the planner's own command: flown, not acknowledged on the link
+                bridge.feed(planner.change_speed(21.0))
             if k == 10:
                 gcs.mav.param_request_list_send(1, 1)
             if k == 20:
@@ -101,7 +103,9 @@ def test_a_runs_frames_in_and_out_are_all_in_the_tlog_in_order(tmp_path):
         bridge.close()
         gcs.close()
     c = bridge.counters
-    assert c["param_requests"] == 1 and c["commands"] == 61
+    assert c["param_requests"] == 1 and c["commands"] == 61  # the planner's 60 + 1
+    assert c["operator_commands"] == 1  # the station's DO_CHANGE_SPEED: an aim
+    assert c["messages_in"] == 61 + 3  # the planner's frames, the station's three
     messages = read_tlog(path)
     assert len(messages) == c["messages_in"] + c["messages_out"]
     stamps = [m._timestamp for m in messages]
@@ -109,6 +113,11 @@ def test_a_runs_frames_in_and_out_are_all_in_the_tlog_in_order(tmp_path):
     assert started - 1 <= stamps[0] and stamps[-1] <= started + 3.0 + 1
     kinds = {m.get_type() for m in messages}
     assert {"SET_ATTITUDE_TARGET", "PARAM_VALUE", "COMMAND_ACK", "GLOBAL_POSITION_INT"} <= kinds
+    # both DO_CHANGE_SPEEDs are in, the one acknowledgement (the station's) is out
+    speeds = [m for m in messages if m.get_type() == "COMMAND_LONG"]
+    assert [(m.get_srcSystem(), m.param2) for m in speeds] == [(1, 21.0), (GCS, 22.0)]
+    [ack] = [m for m in messages if m.get_type() == "COMMAND_ACK"]
+    assert (ack.target_system, ack.result) == (GCS, mavlink.MAV_RESULT_ACCEPTED)
 
 
 def test_an_existing_tlog_is_never_overwritten(tmp_path):

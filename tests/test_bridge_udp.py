@@ -335,8 +335,12 @@ def test_parameter_download_is_consistent():
     gcs.mav.param_request_read_send(1, 1, b"D_MIN_M", -1)
     gcs.mav.param_set_send(1, 1, b"D_MIN_M", 5.0, mavlink.MAV_PARAM_TYPE_REAL32)
     poll_until(bridge, lambda: bridge.counters["param_sets_refused"] == 1)
-    replies = of_type(receive(gcs), "PARAM_VALUE")
+    got = receive(gcs)
+    replies = of_type(got, "PARAM_VALUE")
     assert [(r.param_id, r.param_value) for r in replies] == [("D_MIN_M", 50.0)] * 2
+    # the set did not take, and the station is told why
+    why = [m.text for m in of_type(got, "STATUSTEXT")]
+    assert why == ["D_MIN_M read-only: set it in the scenario"]
     bridge.close()
     gcs.close()
 

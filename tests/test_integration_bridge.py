@@ -1,6 +1,7 @@
-"""The bridge in front of the real JSBSim ownship: external MAVLink peers over loopback UDP
-command it, silence triggers the failsafe, unsigned commands are refused with a key, and a real
-MAVProxy ground station sees the vehicle come online."""
+"""The bridge in front of the real JSBSim ownship: the onboard planner's MAVLink banks it while
+a ground station over loopback UDP only sets aims (its setpoints are refused), silence triggers
+the failsafe, unsigned commands are refused with a key, and a real MAVProxy ground station sees
+the vehicle come online."""
 
 from __future__ import annotations
 
@@ -19,6 +20,7 @@ import pytest
 from pymavlink import mavutil
 
 from uavxai.bridges.bridge import MavlinkBridge
+from uavxai.bridges.operator import SETPOINT_REFUSAL, Kind
 from uavxai.bridges.protocol import CommandEncoder
 from uavxai.dynamics.geodesy import LocalFrame
 from uavxai.dynamics.world import JSBSimWorld
@@ -71,12 +73,26 @@ class Peer:
         q = [math.cos(bank_rad / 2), math.sin(bank_rad / 2), 0.0, 0.0]
         self.conn.mav.set_attitude_target_send(0, target, 1, 0b00000111 | 0b01000000, q, 0, 0, 0, 0)
 
+    def climb(self, target: int, h: float) -> None:
+        """MAVProxy's `alt`: DO_CHANGE_ALTITUDE to a height above home."""
+        self.conn.mav.command_long_send(
+            target, 1, mavutil.mavlink.MAV_CMD_DO_CHANGE_ALTITUDE, 0,
+            h, mavutil.mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT, 0, 0, 0, 0, 0,
+        )  # fmt: skip
+
+    def heard(self) -> list:
+        """Everything received and not yet read."""
+        got = []
+        while (msg := self.conn.recv_match(blocking=False)) is not None:
+            got.append(msg)
+        return got
+
     def close(self) -> None:
         self.conn.close()
 
 
 @pytest.mark.parametrize("signed", [False, True])
-def test_external_peer_banks_the_jsbsim_ownship(signed: bool) -> None:
+def test_the_planner_banks_the_jsbsim_ownship_and_a_ground_station_only_aims(signed: bool) -> None:
     world, sc = make_world()
     port = free_udp_port()
     peer = Peer(port, KEY if signed else None)
@@ -92,9 +108,31 @@ def test_external_peer_banks_the_jsbsim_ownship(signed: bool) -> None:
     try:
         peer.wait_heartbeat(world, bridge)
         assert abs(math.degrees(world.state().att[0, 0])) < 2.0
-        peer.bank(1, math.radians(20))
+        peer.heard()
+        target_h = world.ownship_command()["alt_target_m"]
+
+        # the ground station's bank is refused, its climb queued as an aim: JSBSim flies on
+        peer.bank(1, math.radians(-25))
+        peer.climb(1, 200.0)
+        fly(world, bridge, 3.0)
+        assert bridge.counters["operator_refused"] == 1
+        assert bridge.counters["commands"] == 0
+        assert world.ownship_command()["bank_cmd_rad"] == 0.0
+        assert world.ownship_command()["alt_target_m"] == target_h
+        assert abs(math.degrees(world.state().att[0, 0])) < 2.0
+        [aim] = bridge.take_operator_commands()
+        assert (aim.kind, aim.h) == (Kind.ALTITUDE, 200.0)
+        heard = peer.heard()
+        assert SETPOINT_REFUSAL[:50] in [m.text for m in heard if m.get_type() == "STATUSTEXT"]
+        acks = [(m.command, m.result) for m in heard if m.get_type() == "COMMAND_ACK"]
+        climb = mavutil.mavlink.MAV_CMD_DO_CHANGE_ALTITUDE
+        assert acks == [(climb, mavutil.mavlink.MAV_RESULT_ACCEPTED)]
+
+        # the onboard planner's bank, fed in process (signed like the link when there's a key)
+        planner = CommandEncoder(1, 1, signing_key=KEY if signed else None)
+        assert bridge.feed(planner.attitude(math.radians(20))) == 1
         fly(world, bridge, 4.0)
-        assert bridge.counters["commands"] >= 1
+        assert bridge.counters["commands"] == 1
         assert world.ownship_command()["bank_cmd_rad"] == pytest.approx(math.radians(20))
         assert math.degrees(world.state().att[0, 0]) == pytest.approx(20.0, abs=3.0)
     finally:
@@ -120,6 +158,7 @@ def test_unsigned_command_refused_with_a_key() -> None:
         peer.bank(1, math.radians(25))
         fly(world, bridge, 3.0)
         assert bridge.counters["refused_unsigned"] >= 1
+        assert bridge.counters["operator_refused"] == 0  # refused unread, at the signature
         assert world.ownship_command()["bank_cmd_rad"] == 0.0
         assert abs(math.degrees(world.state().att[0, 0])) < 2.0
     finally:
