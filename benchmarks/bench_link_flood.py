@@ -173,7 +173,7 @@ def main() -> None:
         intruders={"count": args.intruders},
         ownship={"goal": [1900, 1900, 120]},  # far: every run flies all its decisions
         avoidance={"max_steps": args.steps},
-        bridge={"ground_stations": [[GCS_SYSTEM, "127.0.0.1"]]},
+        bridge={"ground_stations": [{"system_id": GCS_SYSTEM, "address": "127.0.0.1"}]},
         log={"rerun": False},
     )
     best: dict[str, tuple[float, float, dict, int, float | None]] = {}
