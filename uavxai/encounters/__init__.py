@@ -1,0 +1,1 @@
+"""Statistical airspace encounters: the MIT LL uncorrelated encounter model (docs/encounters.md)."""
