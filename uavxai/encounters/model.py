@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -97,6 +97,7 @@ class EncounterModel:
     temporal_map: tuple[tuple[int, int], ...]  # (variable at t, variable at t+1), 0-based
     zero_bins: tuple[int | None, ...]  # the bin straddling 0, whose value is 0
     prior: float | str = 0.0
+    _cumulative: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     @property
     def labels(self) -> tuple[str, ...]:
@@ -121,6 +122,13 @@ class EncounterModel:
             return n + 1.0 / n.size
         return n + float(self.prior)
 
+    def cumulative(self, net: Network, i: int) -> np.ndarray:
+        """Cumulative weights down each column, computed once per network and variable."""
+        key = (net is self.transition, i)
+        if key not in self._cumulative:
+            self._cumulative[key] = np.cumsum(self.weights(net, i), axis=0)
+        return self._cumulative[key]
+
     def sample_initial(self, rng: np.random.Generator, n: int,
                        start: dict[str, int] | None = None) -> InitialSample:
         """bn_sample: n ancestral draws of the initial network, then dediscretize.
@@ -139,7 +147,7 @@ class EncounterModel:
             if i in preset:
                 bins[:, i] = preset[i]
             else:
-                bins[:, i] = select_random(rng, self.weights(net, i), net.column(i, bins))
+                bins[:, i] = select_random(rng, self.cumulative(net, i), net.column(i, bins))
         values = np.column_stack([self.dediscretize(rng, i, bins[:, i])
                                   for i in range(len(net.labels))])
         return InitialSample(net.labels, bins, values)
@@ -161,10 +169,9 @@ class EncounterModel:
         bins = np.zeros((n, seconds, len(src)), dtype=np.int64)
         values = np.zeros((n, seconds, len(src)))
         bins[:, 0], values[:, 0] = initial.bins[:, src], initial.values[:, src]
-        tables = {i: self.weights(net, i) for i in moving}
         for t in range(1, seconds):
             for i in moving:
-                state[:, i] = select_random(rng, tables[i], net.column(i, state))
+                state[:, i] = select_random(rng, self.cumulative(net, i), net.column(i, state))
             state[:, src] = state[:, dst]
             bins[:, t] = state[:, src]
             for m, v in enumerate(src):
@@ -172,7 +179,7 @@ class EncounterModel:
                     rng.random(n) < self.resample_rates[v])
                 values[:, t, m] = np.where(redraw, self.dediscretize(rng, v, bins[:, t, m]),
                                            values[:, t - 1, m])
-        return Transitions(tuple(net.labels[i] for i in src), bins, values)
+        return Transitions(tuple(net.labels[i].removesuffix("(t)") for i in src), bins, values)
 
     def dediscretize(self, rng: np.random.Generator, i: int, bins: np.ndarray) -> np.ndarray:
         """dediscretize.m: a value uniform within each bin of initial variable i; the bin
@@ -214,11 +221,11 @@ class EncounterModel:
         return [joint.sum(axis=others(i)) for i in range(len(net.bins))]
 
 
-def select_random(rng: np.random.Generator, weights: np.ndarray,
+def select_random(rng: np.random.Generator, cumulative: np.ndarray,
                   columns: np.ndarray) -> np.ndarray:
-    """select_random.m for many draws: in column ``columns[k]`` of ``weights`` (bins, q), the
-    first bin whose cumulative weight reaches u * total, u uniform in [0, 1)."""
-    cum = np.cumsum(weights, axis=0)[:, columns]
+    """select_random.m for many draws: in column ``columns[k]`` of the cumulative weights
+    (bins, q), the first bin whose cumulative weight reaches u * total, u uniform in [0, 1)."""
+    cum = cumulative[:, columns]
     threshold = cum[-1] * rng.random(len(columns))
     return (cum < threshold).sum(axis=0)
 
