@@ -346,6 +346,7 @@ def _network(blocks: dict[str, list[str]], which: str, labels: tuple[str, ...],
     if np.any(r != np.round(r)) or np.any(r < 1) or np.any(r > MAX_BINS):
         raise UserError(f"{name}: r_{which} must be whole numbers of bins in 1..{MAX_BINS}")
     bins = tuple(int(b) for b in r)
+    order = _topological_order(graph, name)
     parents = tuple(tuple(int(p) for p in np.flatnonzero(graph[:, i])) for i in range(n))
     dims = {}
     for i in sampled:
@@ -366,7 +367,7 @@ def _network(blocks: dict[str, list[str]], which: str, labels: tuple[str, ...],
     for i, (ri, q) in dims.items():
         counts[i] = flat[at:at + ri * q].reshape((ri, q), order="F")
         at += ri * q
-    return Network(labels, parents, bins, tuple(counts), _topological_order(graph, name))
+    return Network(labels, parents, bins, tuple(counts), order)
 
 
 def _topological_order(graph: np.ndarray, name: str) -> tuple[int, ...]:
