@@ -163,7 +163,8 @@ def test_mavlink_telemetry_matches_trajectory(flown) -> None:
         assert msgs[kind], f"no {kind} received"
     hb = msgs["HEARTBEAT"][0]
     assert hb.type == mavutil.mavlink.MAV_TYPE_FIXED_WING
-    assert hb.autopilot == mavutil.mavlink.MAV_AUTOPILOT_GENERIC
+    assert hb.autopilot == mavutil.mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA
+    assert mavutil.mode_string_v10(hb) == "AUTO"  # the scenario's own flight
     assert hb.get_srcSystem() == sc.bridge.system_id
     frame = LocalFrame.from_origin(sc.world.origin)
     traj = read_trajectory(out)
@@ -275,3 +276,23 @@ def test_several_episodes(tmp_path: Path) -> None:
     for i in range(2):
         assert (out / f"episode-{i:03d}" / "trajectory.csv").is_file()
         assert (out / f"episode-{i:03d}" / "run.rrd").is_file()
+
+
+def test_the_run_writes_its_link_to_a_tlog_a_ground_station_can_replay(flown) -> None:
+    """`uavxai run` (JSBSim, a real link): RUN/link.tlog, read back with pymavlink, holds one
+    stamped frame for every frame the bridge counted, in and out, in time order."""
+    sc, out, msgs = flown
+    counters = json.loads((out / "summary.json").read_text())["bridge"]
+    log = mavutil.mavlink_connection(str(out / "link.tlog"))
+    n, stamps, kinds = 0, [], defaultdict(int)
+    while (m := log.recv_match()) is not None:
+        assert m.get_type() != "BAD_DATA"
+        n += 1
+        kinds[m.get_type()] += 1
+        stamps.append(m._timestamp)
+    log.close()
+    assert n == counters["messages_in"] + counters["messages_out"]
+    assert {"HEARTBEAT", "SET_ATTITUDE_TARGET", "GLOBAL_POSITION_INT", "ADSB_VEHICLE"} <= set(kinds)
+    assert stamps == sorted(stamps)
+    # what the listener heard on loopback is what the tlog says was sent
+    assert 0.9 * kinds["HEARTBEAT"] <= len(msgs["HEARTBEAT"]) <= kinds["HEARTBEAT"]
