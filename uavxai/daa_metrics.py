@@ -225,16 +225,17 @@ def _weights(weights: ArrayLike, n: int) -> np.ndarray:
     return w
 
 
-def _boot_sums(cols: np.ndarray, n_boot: int, seed: int) -> np.ndarray:
-    """(n_boot, k) sums of the k columns of ``cols`` (n, k) over encounters resampled with
-    replacement; chunks keep the index matrix near 4 M entries for large campaigns."""
-    n = cols.shape[0]
+def _boot_sums(cols: Sequence[np.ndarray], n_boot: int, seed: int) -> np.ndarray:
+    """(n_boot, k) sums of the k arrays ``cols`` (n,) each over encounters resampled with
+    replacement, the same resamples for all k; chunks keep the index matrix near 4 M entries
+    for large campaigns."""
+    n = cols[0].size
     rng = np.random.default_rng(seed)
     chunk = max(1, (1 << 22) // max(n, 1))
     out = []
     for start in range(0, n_boot, chunk):
-        idx = rng.integers(0, n, size=(min(chunk, n_boot - start), n))
-        out.append(cols[idx].sum(axis=1))
+        idx = rng.integers(0, n, size=(min(chunk, n_boot - start), n), dtype=np.int64)
+        out.append(np.stack([c[idx].sum(axis=1) for c in cols], axis=1))
     return np.concatenate(out, axis=0)
 
 
@@ -250,7 +251,7 @@ def _ratio(a: np.ndarray, b: np.ndarray, events: int, n_boot: int, seed: int,
     if sa <= 0:
         n_eff = sb * sb / float((b * b).sum())
         return Estimate(0.0, 0.0, min(RULE_OF_THREE / n_eff, cap), n, events)
-    sums = _boot_sums(np.stack([a, b], axis=1), n_boot, seed)
+    sums = _boot_sums([a, b], n_boot, seed)
     with np.errstate(divide="ignore", invalid="ignore"):
         num, den = sums[:, 0], sums[:, 1]
         boot = np.where(den > 0, num / np.where(den > 0, den, 1.0), np.inf)
