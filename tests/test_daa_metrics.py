@@ -84,6 +84,9 @@ def test_lowc_severity_is_the_deepest_penetration():
         0.25, abs=1e-9
     )
     assert lowc_severity(HOVER, crossing(700.0, 0.0)) == 0.0
+    # the closest point a fifth of the way along the piece, not at a sample nor half-way
+    skew = np.array([[-2000.0, 152.4, 100.0], [8000.0, 152.4, 100.0]])
+    assert lowc_severity(HOVER, skew) == pytest.approx(0.75, abs=1e-9)
 
 
 def test_hmd_vmd_at_the_closest_horizontal_approach_between_samples():
