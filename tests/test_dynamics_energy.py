@@ -174,3 +174,14 @@ def test_energy_is_the_integral_of_the_motor_power_jsbsim_reports() -> None:
     sampled_wh = float(np.trapezoid(samples, dx=SAMPLE_TICKS * DT) / J_PER_WH)
     assert battery.energy_wh == pytest.approx(sampled_wh, rel=1e-12)
     assert battery.soc == pytest.approx(1 - reference_wh / 222.0, rel=1e-4)
+
+
+def test_the_reported_voltage_falls_with_the_charge_and_sags_under_load() -> None:
+    """SYS_STATUS voltage_battery: a 6S LiPo (22.2 V nominal) reads 25.2 V full, about 22.9 V
+    half-empty, and lower under load; a package without a voltage reports 0 (unknown)."""
+    spec = BatterySpec(capacity_wh=222.0, reserve_soc=0.2, voltage_v=22.2)
+    full, half, low = (spec.terminal_voltage_v(s, 0.0) for s in (1.0, 0.5, 0.05))
+    assert full == pytest.approx(6 * 4.20) and half == pytest.approx(6 * 3.82)
+    assert full > half > low > 6 * 3.5
+    assert spec.terminal_voltage_v(0.5, 20.0) == pytest.approx(half - 6 * 0.004 * 20.0)
+    assert BatterySpec(capacity_wh=100.0, reserve_soc=0.2).terminal_voltage_v(0.5, 5.0) == 0.0

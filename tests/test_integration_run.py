@@ -296,3 +296,17 @@ def test_the_run_writes_its_link_to_a_tlog_a_ground_station_can_replay(flown) ->
     assert stamps == sorted(stamps)
     # what the listener heard on loopback is what the tlog says was sent
     assert 0.9 * kinds["HEARTBEAT"] <= len(msgs["HEARTBEAT"]) <= kinds["HEARTBEAT"]
+
+
+def test_sys_status_reports_the_battery_as_it_drains(flown) -> None:
+    """SYS_STATUS voltage and current come from the battery model (not a constant nominal
+    22.2 V): the voltage of the 6S pack falls with its charge, the current follows the load."""
+    _, _, msgs = flown
+    status = msgs["SYS_STATUS"]
+    assert len(status) > 50
+    volts = np.array([m.voltage_battery for m in status]) / 1000.0
+    amps = np.array([m.current_battery for m in status]) / 100.0
+    assert 6 * 3.7 < volts.min() and volts.max() <= 6 * 4.2 + 1e-9
+    assert len(set(volts.round(3))) > 5  # not a constant
+    assert volts[:10].mean() > volts[-10:].mean()  # drains
+    assert 1.0 < amps.mean() < 60.0 and amps.std() > 0

@@ -267,13 +267,24 @@ class Energy(Observer):
         self._own = aircraft[0]
         self.spec = self._own.battery_spec()
         self.battery = Battery.from_spec(self.spec)
-        self.battery.draw(self._own.electric_power_w(), 0.0)
+        power = self._own.electric_power_w()
+        self.battery.draw(power, 0.0)
+        self._report(ep, power)  # before the first telemetry goes out
 
     def on_sample(self, ep: Episode, state: TrafficState) -> None:
         if self.battery is None:
             return
         power = self._own.electric_power_w()
         self.battery.draw(power, ep.clock.sample_s)
+        self._report(ep, power)
+        if ep.mission is not None and self.battery.at_reserve:
+            ep.mission.battery_reserve(ep)
+        if self.battery.empty and ep.mission is not None:
+            ep.mission.outcome = ep.mission.outcome or Outcome.BATTERY
+
+    def _report(self, ep: Episode, power: float) -> None:
+        """What SYS_STATUS and VFR_HUD carry: the pack's voltage under this load at this
+        charge, the current, the charge left, the throttle."""
         bridge = getattr(ep.path, "bridge", None)
         if bridge is not None:
             current = self.spec.current_a(power)
@@ -281,10 +292,6 @@ class Energy(Observer):
             bridge.power.current_a = current
             bridge.power.soc = self.battery.soc
             bridge.power.throttle = self._own.throttle()
-        if ep.mission is not None and self.battery.at_reserve:
-            ep.mission.battery_reserve(ep)
-        if self.battery.empty and ep.mission is not None:
-            ep.mission.outcome = ep.mission.outcome or Outcome.BATTERY
 
     def on_end(self, ep: Episode, summary: dict) -> None:
         if self.battery is None:
