@@ -156,7 +156,9 @@ def _add_run(sub: argparse._SubParsersAction) -> None:
         "--mavlink",
         type=_mavlink_url,
         metavar="URL",
-        help="telemetry/commands link, e.g. udpout:127.0.0.1:14550",
+        help="link to ground stations, e.g. udpout:127.0.0.1:14550 (default: the scenario's "
+        "bridge.mavlink); they command only if listed in bridge.ground_stations or signed "
+        "with bridge.signing_key_hex, and avoidance stays on; every frame goes to OUT/link.tlog",
     )
     r.add_argument(
         "--realtime",
