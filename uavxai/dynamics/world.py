@@ -26,15 +26,16 @@ from uavxai.dynamics.loiter import ScheduledWorld
 from uavxai.dynamics.state import OWNSHIP_ID, TrafficState, intruder_id
 from uavxai.dynamics.traffic import draw_intruders
 from uavxai.errors import UserError
-from uavxai.scenario import IntruderSpec, Scenario
+from uavxai.scenario import IntruderSpec, Scenario, aircraft_speed_range
 
 log = logging.getLogger(__name__)
 
 # The end of a run. The ground: below this height the aircraft is on or in the terrain (its
 # wheels hang 0.22 m below the centre of gravity). The envelope: far outside anything the
-# autopilot flies (stall 10 m/s, bank limit 30 deg), i.e. the aircraft is out of control.
+# autopilot flies (bank limit 30 deg; airspeed half the aircraft's slowest autopilot speed to
+# twice its fastest: 6-60 m/s for uav_fw, whose stall is 10 m/s), i.e. out of control.
 GROUND_M = 1.0
-ENVELOPE_AIRSPEED_MPS = (6.0, 60.0)
+ENVELOPE_AIRSPEED_FACTORS = (0.5, 2.0)  # times the aircraft's (speed-min, speed-max)
 ENVELOPE_BANK_RAD = math.radians(80.0)
 ENVELOPE_PITCH_RAD = math.radians(60.0)
 
@@ -136,6 +137,7 @@ class JSBSimWorld(ScheduledWorld):
 
     @staticmethod
     def _check_speed(field: str, speed: float, aircraft: str, flyable: tuple[float, float]) -> None:
+        """A UserError if ``speed`` is outside the aircraft's ``flyable`` range."""
         if not flyable[0] <= speed <= flyable[1]:
             raise UserError(
                 f"{field} = {speed:g} m/s: aircraft '{aircraft}' flies between "
@@ -206,7 +208,7 @@ class JSBSimWorld(ScheduledWorld):
                 done += 1
                 if (start + done) % keep == 0 or done == ticks:
                     raw = self._kept[start + done] = _read(rows)
-                    if not _raw_healthy(raw):
+                    if not _raw_healthy(raw, self._envelope()[:, 1:]):
                         break
         except jsbsim.BaseError as exc:
             self._ahead_error = exc
@@ -323,11 +325,12 @@ class JSBSimWorld(ScheduledWorld):
         if self._failure is not None or s is self._checked:
             return self._failure is not None
         self._checked = s  # step() and failure() both ask of the same sample: test it once
-        if _all_healthy(s):
+        envelope = self._envelope()
+        if _all_healthy(s, envelope):
             return False
         lost = []
         for i, who in enumerate(s.ids):
-            reason = _diagnose(who, s.pos[i], s.att[i], s.airspeed[i])
+            reason = _diagnose(who, s.pos[i], s.att[i], s.airspeed[i], envelope[:, i])
             if reason and i > 0 and self._flow is not None:
                 lost.append(i - 1)
                 self.lost_intruders.append(f"{reason} at t = {s.t:.2f} s")
@@ -340,6 +343,17 @@ class JSBSimWorld(ScheduledWorld):
             keep_clear = s.pos[:1]
             self._replace(self._flow.enter(lost, keep_clear, min_distance_m=self._clearance))
         return False
+
+    def _envelope(self) -> np.ndarray:
+        """Airspeed bounds of each row's envelope (2 x n, m/s), from its aircraft's speed
+        range as its package declares it (:data:`ENVELOPE_AIRSPEED_FACTORS`, not narrowed by
+        avoidance.speed_mps): the intruders may fly another aircraft than the ownship."""
+        key = tuple(a.name for a in self.aircraft)
+        if getattr(self, "_envelope_key", None) != key:
+            ranges = np.array([aircraft_speed_range(a.name) for a in self.aircraft]).T
+            self._envelope_cache = ranges * np.array(ENVELOPE_AIRSPEED_FACTORS)[:, None]
+            self._envelope_key = key
+        return self._envelope_cache
 
     def step(self, n: int = 1) -> None:
         super().step(n)
@@ -364,19 +378,21 @@ def _read(aircraft: list[Aircraft]) -> np.ndarray:
     return np.array([a.raw_state() for a in aircraft])
 
 
-def _all_healthy(s: TrafficState) -> bool:
-    """Every aircraft inside the envelope, in one vectorised test (the common case: then
-    nobody needs :func:`_diagnose`)."""
-    return _within_envelope(s.pos, s.att, s.airspeed)
+def _all_healthy(s: TrafficState, envelope: np.ndarray) -> bool:
+    """Every aircraft inside the envelope (airspeed bounds, 2 x n), in one vectorised test
+    (the common case: then nobody needs :func:`_diagnose`)."""
+    return _within_envelope(s.pos, s.att, s.airspeed, envelope)
 
 
-def _raw_healthy(raw: np.ndarray) -> bool:
+def _raw_healthy(raw: np.ndarray, envelope: np.ndarray) -> bool:
     """:func:`_all_healthy` of raw states (JSBSim units, STATE_PROPERTIES)."""
-    return _within_envelope(raw[:, :3] * (1.0, 1.0, FT), raw[:, 6:9], raw[:, 9] * FT)
+    return _within_envelope(raw[:, :3] * (1.0, 1.0, FT), raw[:, 6:9], raw[:, 9] * FT, envelope)
 
 
-def _within_envelope(pos: np.ndarray, att: np.ndarray, airspeed: np.ndarray) -> bool:
-    lo, hi = ENVELOPE_AIRSPEED_MPS
+def _within_envelope(
+    pos: np.ndarray, att: np.ndarray, airspeed: np.ndarray, envelope: np.ndarray
+) -> bool:
+    lo, hi = envelope
     with np.errstate(invalid="ignore"):  # NaN compares False, which is what we want
         inside = (
             (pos[:, 2] >= GROUND_M)
@@ -388,13 +404,15 @@ def _within_envelope(pos: np.ndarray, att: np.ndarray, airspeed: np.ndarray) -> 
     return bool(inside.all() and np.isfinite(pos).all())  # two reductions, not five: per sample
 
 
-def _diagnose(who: str, pos: np.ndarray, att: np.ndarray, airspeed: float) -> str | None:
+def _diagnose(
+    who: str, pos: np.ndarray, att: np.ndarray, airspeed: float, envelope: np.ndarray
+) -> str | None:
     """What is wrong with one aircraft's state, in words, or None."""
     if not (np.all(np.isfinite(pos)) and np.all(np.isfinite(att)) and math.isfinite(airspeed)):
         return f"NaN in {who} state"
     if pos[2] < GROUND_M:
         return f"{who} hit the ground"
-    lo, hi = ENVELOPE_AIRSPEED_MPS
+    lo, hi = envelope
     if not lo <= airspeed <= hi:
         return f"{who} left the flight envelope (airspeed {airspeed:.1f} m/s)"
     if abs(att[0]) > ENVELOPE_BANK_RAD:
