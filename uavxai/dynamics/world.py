@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 
 import jsbsim
 import numpy as np
@@ -24,6 +24,7 @@ from uavxai.dynamics.flow import Entry
 from uavxai.dynamics.geodesy import LocalFrame
 from uavxai.dynamics.loiter import ScheduledWorld
 from uavxai.dynamics.state import OWNSHIP_ID, TrafficState, intruder_id
+from uavxai.dynamics.track_pilot import TrackLike
 from uavxai.dynamics.traffic import draw_intruders
 from uavxai.errors import UserError
 from uavxai.scenario import IntruderSpec, Scenario, aircraft_speed_range
@@ -55,7 +56,9 @@ class JSBSimWorld(ScheduledWorld):
     """Ownship (row 0) and intruders (rows 1..N) flown by JSBSim.
 
     ``intruders`` None draws them from the scenario with ``seed`` (default: the scenario's
-    seed), exactly as the kinematic model does.
+    seed), exactly as the kinematic model does. ``tracks`` (intruder index -> trajectory)
+    flies those intruders along a track (:mod:`uavxai.dynamics.track_pilot`), from t = 0;
+    start such an intruder on its track's first point and heading.
     """
 
     def __init__(
@@ -63,6 +66,7 @@ class JSBSimWorld(ScheduledWorld):
         scenario: Scenario,
         intruders: list[IntruderSpec] | None = None,
         seed: int | None = None,
+        tracks: Mapping[int, TrackLike] | None = None,
     ) -> None:
         self.scenario = scenario
         self.seed = scenario.seed if seed is None else int(seed)
@@ -73,7 +77,7 @@ class JSBSimWorld(ScheduledWorld):
             intruders = draw_intruders(scenario, np.random.default_rng(self.seed))
         self.intruders = list(intruders)
         self.ids = (OWNSHIP_ID, *(intruder_id(i + 1) for i in range(len(self.intruders))))
-        self._pilots = make_pilots(scenario, self.intruders, self.seed)
+        self._pilots = make_pilots(scenario, self.intruders, self.seed, tracks)
         self._init_schedule(scenario, self.seed, len(self.intruders))
         self._cached: TrafficState | None = None
         self._failure: str | None = None
@@ -229,8 +233,10 @@ class JSBSimWorld(ScheduledWorld):
         # The pilots see the state every second; the same read tells whether anyone diverged.
         return self._check(state)
 
-    def _command_intruder(self, row: int, bank: float, speed: float) -> None:
-        self.aircraft[row].command(bank_cmd_rad=bank, speed_target_mps=speed)
+    def _command_intruder(
+        self, row: int, bank: float, speed: float, alt: float | None = None
+    ) -> None:
+        self.aircraft[row].command(bank_cmd_rad=bank, speed_target_mps=speed, alt_target_m=alt)
 
     def _replace(self, entries: list[Entry]) -> None:
         """Intruders that left the area make way for newcomers entering at the edge."""
