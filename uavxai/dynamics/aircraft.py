@@ -142,6 +142,8 @@ class Aircraft:
         turbulence = f[TURB_TYPE]
         f[TURB_TYPE] = 0
         f.run_ic()
+        # Every engine running (a piston engine starts stopped; the electric one is unchanged)
+        f["propulsion/set-running"] = -1
         f["fcs/throttle-cmd-norm"] = _SPIN_UP_THROTTLE
         for _ in range(round(_SPIN_UP_S / self.dt)):
             f.run()

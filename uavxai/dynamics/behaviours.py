@@ -1,4 +1,5 @@
-"""How intruders fly: `straight`, `random_turns`, `goal_seeking`.
+"""How intruders fly: `straight`, `random_turns`, `goal_seeking` (and a given track:
+:mod:`uavxai.dynamics.track_pilot`, attached with ``make_pilots(..., tracks=)``).
 
 A pilot turns the intruder's situation into autopilot commands (bank angle, airspeed); the
 altitude drawn for it is held by the autopilot. Nothing here depends on the dynamics, so
@@ -9,12 +10,13 @@ a scenario + seed gives the same traffic in both (see :func:`make_pilots`).
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from uavxai.dynamics.track_pilot import TrackLike, TrackPilot
 from uavxai.geometry import bearing, wrap_angle
-from uavxai.scenario import IntruderSpec, Scenario
+from uavxai.scenario import IntruderSpec, Scenario, aircraft_speed_range
 
 BEHAVIOURS = ("straight", "random_turns", "goal_seeking")
 PILOT_PERIOD_S = 1.0  # how often intruder pilots decide, in every world
@@ -58,6 +60,10 @@ class IntruderPilot:
             return self._goal_seeking(pos, psi), self.speed_mps
         return 0.0, self.speed_mps
 
+    def alt_target(self, t: float) -> float | None:
+        """The height target at time t, or None: these behaviours hold the height drawn."""
+        return None
+
     def _random_turns(self, t: float) -> float:
         if t >= self._next_change_t:
             if self._rng.random() < LEVEL_SHARE:
@@ -81,15 +87,38 @@ class IntruderPilot:
 
 
 def make_pilots(
-    scenario: Scenario, specs: Sequence[IntruderSpec], seed: int
-) -> list[IntruderPilot]:
+    scenario: Scenario,
+    specs: Sequence[IntruderSpec],
+    seed: int,
+    tracks: Mapping[int, TrackLike] | None = None,
+) -> list[IntruderPilot | TrackPilot]:
     """One pilot per intruder, each with its own random stream derived from ``seed``
-    (independent of the stream that drew the intruders)."""
+    (independent of the stream that drew the intruders). ``tracks`` maps an intruder's index
+    (0-based, in ``specs``) to a trajectory its :class:`TrackPilot` follows from t = 0
+    instead of its behaviour."""
     streams = np.random.SeedSequence(seed).spawn(len(specs))
-    return [
+    pilots: list[IntruderPilot | TrackPilot] = [
         IntruderPilot(spec, np.random.default_rng(stream), scenario)
         for spec, stream in zip(specs, streams, strict=True)
     ]
+    for i, track in (tracks or {}).items():
+        if not 0 <= i < len(pilots):
+            raise ValueError(f"a track for intruder index {i}; there are {len(pilots)}")
+        pilots[i] = track_pilot(scenario, track)
+    return pilots
+
+
+def track_pilot(scenario: Scenario, track: TrackLike, t0: float = 0.0) -> TrackPilot:
+    """A :class:`TrackPilot` for ``track`` within the scenario's bank limit and the speed
+    range of its intruder aircraft."""
+    lo, hi = aircraft_speed_range(scenario.intruders.aircraft)
+    return TrackPilot(
+        track,
+        bank_limit_rad=math.radians(scenario.avoidance.bank_limit_deg),
+        speed_range=(lo, hi),
+        t0=t0,
+        period_s=PILOT_PERIOD_S,
+    )
 
 
 def newcomer_pilot(scenario: Scenario, spec: IntruderSpec, seed: int, number: int) -> IntruderPilot:

@@ -58,7 +58,8 @@ class ScheduledWorld(LoiterAutopilot):
     """What both worlds share: a clock in integrator ticks, the intruders' pilots every
     ``PILOT_PERIOD_S``, persistent traffic (``intruders.flow``) at the same instants, and the
     ownship's loiter law every ``GUIDANCE_PERIOD_S``. A world provides ``_integrate(ticks)``,
-    ``_halted()``, ``_command_intruder(row, bank, speed)`` and ``_replace(entries)``."""
+    ``_halted()``, ``_command_intruder(row, bank, speed, alt)`` (``alt`` None: hold the height)
+    and ``_replace(entries)``."""
 
     def _init_schedule(self, scenario: Scenario, seed: int, n_intruders: int) -> None:
         from uavxai.dynamics.behaviours import PILOT_PERIOD_S
@@ -128,4 +129,4 @@ class ScheduledWorld(LoiterAutopilot):
                 s = self.state()
         for i, pilot in enumerate(self._pilots, start=1):
             bank, speed = pilot.command(s.t, s.pos[i], s.vel[i], float(s.att[i, 2]))
-            self._command_intruder(i, bank, speed)
+            self._command_intruder(i, bank, speed, pilot.alt_target(s.t))

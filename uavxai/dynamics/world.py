@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 
 import jsbsim
 import numpy as np
@@ -24,17 +24,19 @@ from uavxai.dynamics.flow import Entry
 from uavxai.dynamics.geodesy import LocalFrame
 from uavxai.dynamics.loiter import ScheduledWorld
 from uavxai.dynamics.state import OWNSHIP_ID, TrafficState, intruder_id
+from uavxai.dynamics.track_pilot import TrackLike
 from uavxai.dynamics.traffic import draw_intruders
 from uavxai.errors import UserError
-from uavxai.scenario import IntruderSpec, Scenario
+from uavxai.scenario import IntruderSpec, Scenario, aircraft_speed_range
 
 log = logging.getLogger(__name__)
 
 # The end of a run. The ground: below this height the aircraft is on or in the terrain (its
 # wheels hang 0.22 m below the centre of gravity). The envelope: far outside anything the
-# autopilot flies (stall 10 m/s, bank limit 30 deg), i.e. the aircraft is out of control.
+# autopilot flies (bank limit 30 deg; airspeed half the aircraft's slowest autopilot speed to
+# twice its fastest: 6-60 m/s for uav_fw, whose stall is 10 m/s), i.e. out of control.
 GROUND_M = 1.0
-ENVELOPE_AIRSPEED_MPS = (6.0, 60.0)
+ENVELOPE_AIRSPEED_FACTORS = (0.5, 2.0)  # times the aircraft's (speed-min, speed-max)
 ENVELOPE_BANK_RAD = math.radians(80.0)
 ENVELOPE_PITCH_RAD = math.radians(60.0)
 
@@ -54,7 +56,9 @@ class JSBSimWorld(ScheduledWorld):
     """Ownship (row 0) and intruders (rows 1..N) flown by JSBSim.
 
     ``intruders`` None draws them from the scenario with ``seed`` (default: the scenario's
-    seed), exactly as the kinematic model does.
+    seed), exactly as the kinematic model does. ``tracks`` (intruder index -> trajectory)
+    flies those intruders along a track (:mod:`uavxai.dynamics.track_pilot`), from t = 0;
+    start such an intruder on its track's first point and heading.
     """
 
     def __init__(
@@ -62,6 +66,7 @@ class JSBSimWorld(ScheduledWorld):
         scenario: Scenario,
         intruders: list[IntruderSpec] | None = None,
         seed: int | None = None,
+        tracks: Mapping[int, TrackLike] | None = None,
     ) -> None:
         self.scenario = scenario
         self.seed = scenario.seed if seed is None else int(seed)
@@ -72,7 +77,7 @@ class JSBSimWorld(ScheduledWorld):
             intruders = draw_intruders(scenario, np.random.default_rng(self.seed))
         self.intruders = list(intruders)
         self.ids = (OWNSHIP_ID, *(intruder_id(i + 1) for i in range(len(self.intruders))))
-        self._pilots = make_pilots(scenario, self.intruders, self.seed)
+        self._pilots = make_pilots(scenario, self.intruders, self.seed, tracks)
         self._init_schedule(scenario, self.seed, len(self.intruders))
         self._cached: TrafficState | None = None
         self._failure: str | None = None
@@ -136,6 +141,7 @@ class JSBSimWorld(ScheduledWorld):
 
     @staticmethod
     def _check_speed(field: str, speed: float, aircraft: str, flyable: tuple[float, float]) -> None:
+        """A UserError if ``speed`` is outside the aircraft's ``flyable`` range."""
         if not flyable[0] <= speed <= flyable[1]:
             raise UserError(
                 f"{field} = {speed:g} m/s: aircraft '{aircraft}' flies between "
@@ -206,7 +212,7 @@ class JSBSimWorld(ScheduledWorld):
                 done += 1
                 if (start + done) % keep == 0 or done == ticks:
                     raw = self._kept[start + done] = _read(rows)
-                    if not _raw_healthy(raw):
+                    if not _raw_healthy(raw, self._envelope()[:, 1:]):
                         break
         except jsbsim.BaseError as exc:
             self._ahead_error = exc
@@ -227,8 +233,10 @@ class JSBSimWorld(ScheduledWorld):
         # The pilots see the state every second; the same read tells whether anyone diverged.
         return self._check(state)
 
-    def _command_intruder(self, row: int, bank: float, speed: float) -> None:
-        self.aircraft[row].command(bank_cmd_rad=bank, speed_target_mps=speed)
+    def _command_intruder(
+        self, row: int, bank: float, speed: float, alt: float | None = None
+    ) -> None:
+        self.aircraft[row].command(bank_cmd_rad=bank, speed_target_mps=speed, alt_target_m=alt)
 
     def _replace(self, entries: list[Entry]) -> None:
         """Intruders that left the area make way for newcomers entering at the edge."""
@@ -323,11 +331,12 @@ class JSBSimWorld(ScheduledWorld):
         if self._failure is not None or s is self._checked:
             return self._failure is not None
         self._checked = s  # step() and failure() both ask of the same sample: test it once
-        if _all_healthy(s):
+        envelope = self._envelope()
+        if _all_healthy(s, envelope):
             return False
         lost = []
         for i, who in enumerate(s.ids):
-            reason = _diagnose(who, s.pos[i], s.att[i], s.airspeed[i])
+            reason = _diagnose(who, s.pos[i], s.att[i], s.airspeed[i], envelope[:, i])
             if reason and i > 0 and self._flow is not None:
                 lost.append(i - 1)
                 self.lost_intruders.append(f"{reason} at t = {s.t:.2f} s")
@@ -340,6 +349,17 @@ class JSBSimWorld(ScheduledWorld):
             keep_clear = s.pos[:1]
             self._replace(self._flow.enter(lost, keep_clear, min_distance_m=self._clearance))
         return False
+
+    def _envelope(self) -> np.ndarray:
+        """Airspeed bounds of each row's envelope (2 x n, m/s), from its aircraft's speed
+        range as its package declares it (:data:`ENVELOPE_AIRSPEED_FACTORS`, not narrowed by
+        avoidance.speed_mps): the intruders may fly another aircraft than the ownship."""
+        key = tuple(a.name for a in self.aircraft)
+        if getattr(self, "_envelope_key", None) != key:
+            ranges = np.array([aircraft_speed_range(a.name) for a in self.aircraft]).T
+            self._envelope_cache = ranges * np.array(ENVELOPE_AIRSPEED_FACTORS)[:, None]
+            self._envelope_key = key
+        return self._envelope_cache
 
     def step(self, n: int = 1) -> None:
         super().step(n)
@@ -364,19 +384,21 @@ def _read(aircraft: list[Aircraft]) -> np.ndarray:
     return np.array([a.raw_state() for a in aircraft])
 
 
-def _all_healthy(s: TrafficState) -> bool:
-    """Every aircraft inside the envelope, in one vectorised test (the common case: then
-    nobody needs :func:`_diagnose`)."""
-    return _within_envelope(s.pos, s.att, s.airspeed)
+def _all_healthy(s: TrafficState, envelope: np.ndarray) -> bool:
+    """Every aircraft inside the envelope (airspeed bounds, 2 x n), in one vectorised test
+    (the common case: then nobody needs :func:`_diagnose`)."""
+    return _within_envelope(s.pos, s.att, s.airspeed, envelope)
 
 
-def _raw_healthy(raw: np.ndarray) -> bool:
+def _raw_healthy(raw: np.ndarray, envelope: np.ndarray) -> bool:
     """:func:`_all_healthy` of raw states (JSBSim units, STATE_PROPERTIES)."""
-    return _within_envelope(raw[:, :3] * (1.0, 1.0, FT), raw[:, 6:9], raw[:, 9] * FT)
+    return _within_envelope(raw[:, :3] * (1.0, 1.0, FT), raw[:, 6:9], raw[:, 9] * FT, envelope)
 
 
-def _within_envelope(pos: np.ndarray, att: np.ndarray, airspeed: np.ndarray) -> bool:
-    lo, hi = ENVELOPE_AIRSPEED_MPS
+def _within_envelope(
+    pos: np.ndarray, att: np.ndarray, airspeed: np.ndarray, envelope: np.ndarray
+) -> bool:
+    lo, hi = envelope
     with np.errstate(invalid="ignore"):  # NaN compares False, which is what we want
         inside = (
             (pos[:, 2] >= GROUND_M)
@@ -388,13 +410,15 @@ def _within_envelope(pos: np.ndarray, att: np.ndarray, airspeed: np.ndarray) -> 
     return bool(inside.all() and np.isfinite(pos).all())  # two reductions, not five: per sample
 
 
-def _diagnose(who: str, pos: np.ndarray, att: np.ndarray, airspeed: float) -> str | None:
+def _diagnose(
+    who: str, pos: np.ndarray, att: np.ndarray, airspeed: float, envelope: np.ndarray
+) -> str | None:
     """What is wrong with one aircraft's state, in words, or None."""
     if not (np.all(np.isfinite(pos)) and np.all(np.isfinite(att)) and math.isfinite(airspeed)):
         return f"NaN in {who} state"
     if pos[2] < GROUND_M:
         return f"{who} hit the ground"
-    lo, hi = ENVELOPE_AIRSPEED_MPS
+    lo, hi = envelope
     if not lo <= airspeed <= hi:
         return f"{who} left the flight envelope (airspeed {airspeed:.1f} m/s)"
     if abs(att[0]) > ENVELOPE_BANK_RAD:

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Mapping
 
 import numpy as np
 
@@ -27,6 +28,7 @@ from uavxai.dynamics.environment import EnvironmentConfig
 from uavxai.dynamics.flow import Entry
 from uavxai.dynamics.loiter import ScheduledWorld
 from uavxai.dynamics.state import OWNSHIP_ID, TrafficState, intruder_id
+from uavxai.dynamics.track_pilot import TrackLike
 from uavxai.dynamics.traffic import draw_intruders
 from uavxai.scenario import IntruderSpec, Scenario
 from uavxai.vocabulary import HOLD
@@ -43,6 +45,7 @@ class KinematicWorld(ScheduledWorld):
         scenario: Scenario,
         intruders: list[IntruderSpec] | None = None,
         seed: int | None = None,
+        tracks: Mapping[int, TrackLike] | None = None,
     ) -> None:
         self.scenario = scenario
         self.seed = scenario.seed if seed is None else int(seed)
@@ -69,7 +72,7 @@ class KinematicWorld(ScheduledWorld):
         self._accel = 0.0
         self._speed_target: float | None = None
         self._alt_target = float(start.h)
-        self._pilots = make_pilots(scenario, self.intruders, self.seed)
+        self._pilots = make_pilots(scenario, self.intruders, self.seed, tracks)
         self._init_schedule(scenario, self.seed, len(self.intruders))
         self._cached: TrafficState | None = None
         self._fly_pilots()
@@ -117,7 +120,10 @@ class KinematicWorld(ScheduledWorld):
                 self._traffic, self._traffic[:, PHI_CMD], duration
             )
 
-    def _command_intruder(self, row: int, bank: float, speed: float) -> None:
+    def _command_intruder(
+        self, row: int, bank: float, speed: float, alt: float | None = None
+    ) -> None:
+        # ``alt`` is not flown: the model's intruders hold their height (no vertical channel)
         self._traffic[row - 1, PHI_CMD] = bank
         self._traffic[row - 1, V] = speed  # the pilot's speed target, held
 
