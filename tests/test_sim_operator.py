@@ -128,3 +128,31 @@ def test_the_same_scripted_flight_repeats_exactly() -> None:
     assert a.outcome == b.outcome and a.steps == b.steps
     assert [r[:3] for r in wa.rows] == [r[:3] for r in wb.rows]
     assert math.isfinite(a.min_separation_m)
+
+
+def test_the_recording_shows_the_operators_modes_as_phases(tmp_path) -> None:
+    """rerun (a real .rrd read back): while the operator's mode flies, the phase log and the
+    phase plot say so ("GUIDED (operator)", then "RTL (operator)")."""
+    import numpy as np
+    from rerun.chunk import RrdReader
+
+    from uavxai.recording.recorder import RunRecorder
+    from uavxai.sim.observers import Rerun
+
+    sc = default_scenario("operator", **{**HEAD_ON, "intruders": {"count": 0}},
+                          operator={"commands": [{"t": 2, "goto": [1400, 1000, 150]},
+                                                 {"t": 40, "mode": "RTL"}]})  # fmt: skip
+    planner = make_planner("mcts_fast", PlannerConfig.from_scenario(sc))
+    rrd = tmp_path / "run.rrd"
+    setup = {"bounds": {"x": sc.world.x, "y": sc.world.y, "h": sc.world.h}, "origin": None,
+             "users": np.zeros((0, 3)), "service_point": None, "search_path": None}  # fmt: skip
+    rec = Rerun(RunRecorder(rrd), setup)
+    fly(sc, planner, GOAL, dynamics="kinematic", observers=[rec])
+    texts = []
+    for chunk in RrdReader(str(rrd)).stream().to_chunks():
+        if chunk.entity_path == "/mission/phase":
+            batch = chunk.to_record_batch()
+            for name in batch.schema.names:
+                if name.endswith("TextLog:text"):
+                    texts += [v for row in batch.column(name).to_pylist() for v in (row or [])]
+    assert texts == ["phase: GUIDED (operator)", "phase: RTL (operator)"], texts

@@ -201,8 +201,12 @@ class Rerun(Observer):
             qos = ep.sample_metrics.get("qos_bps", 0.0)
             rates = ep.sample_metrics["user_rates_bps"]
             rec.log_users(t, ep.sample_metrics["users_xyz"], rates, qos, state.pos[0])
-        if m is not None:
+        route = ep.operator.route if ep.operator is not None else None
+        if route is not None:  # the operator's mode flies, the mission waits
+            rec.log_phase(t, f"{ep.operator.mode.value} (operator)")
+        elif m is not None:
             rec.log_phase(t, m.phase.value)
+        if m is not None:
             c = m.config
             rec.log_orbit(t, c.station if m.serving else None, c.radius_m)
             while self._points < len(m.service_points):
