@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import io
 import math
 import multiprocessing
 import os
@@ -42,6 +43,7 @@ import numpy as np
 
 from uavxai.avoidance.planners import PLANNERS
 from uavxai.errors import UserError
+from uavxai.outputs import csv_cell, write_output
 from uavxai.scenario import Scenario
 from uavxai.sim.build import DYNAMICS as _DYNAMICS
 
@@ -441,11 +443,14 @@ def _summary_row(method: str, n: int, rs: list[dict], baseline: list[dict] | Non
 
 
 def write_csv(path: Path, columns: Sequence[str], rows: Iterable[dict]) -> None:
-    with path.open("w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(columns)
-        for r in rows:
-            w.writerow([_cell(r[c]) for c in columns])
+    """A CSV file written whole (temporary file + rename, never through a link); text cells a
+    spreadsheet would run as a formula are made inert (:func:`uavxai.outputs.csv_cell`)."""
+    buf = io.StringIO(newline="")
+    w = csv.writer(buf)
+    w.writerow(columns)
+    for r in rows:
+        w.writerow([csv_cell(_cell(r[c])) for c in columns])
+    write_output(path, buf.getvalue())
 
 
 def _cell(v):
@@ -509,8 +514,10 @@ def plot_results(results: Sequence[dict], out: Path, title: str = "") -> list[Pa
         if title:
             ax.set_title(title, fontsize=9)
         fig.tight_layout()
-        fig.savefig(out / name)
+        png = io.BytesIO()
+        fig.savefig(png, format="png")
         plt.close(fig)
+        write_output(out / name, png.getvalue())
         paths.append(out / name)
     return paths
 

@@ -1,0 +1,140 @@
+"""Hostile output folders and campaign files (issue 30, "Hostile inputs"): each case ends with
+exit 2 and one paragraph naming what is wrong and what is allowed, no traceback, and nothing
+outside ``--out`` touched."""
+
+from __future__ import annotations
+
+import os
+import shutil
+from pathlib import Path
+
+import pytest
+
+from uavxai import cli
+from uavxai.cli import MARKER, main
+from uavxai.outputs import write_output
+
+
+@pytest.fixture(autouse=True)
+def _release_locks():
+    yield
+    for lock in cli._HELD_LOCKS.values():
+        lock.close()
+    cli._HELD_LOCKS.clear()
+
+
+@pytest.fixture(scope="module")
+def campaign(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """One real, tiny campaign (`uavxai evaluate`, kinematic, one episode), copied by tests."""
+    root = tmp_path_factory.mktemp("campaign")
+    scenario = root / "s.yaml"
+    scenario.write_text("name: hostile-merge\nownship:\n  goal: [900, 900, 120]\n")
+    out = root / "campaign"
+    argv = ["evaluate", str(scenario), "--methods", "none,mvp", "--intruders", "3",
+            "--episodes", "2", "--out", str(out)]  # fmt: skip
+    assert main(argv) == 0
+    for lock in cli._HELD_LOCKS.values():
+        lock.close()
+    cli._HELD_LOCKS.clear()
+    return out
+
+
+def _copy(campaign: Path, to: Path) -> Path:
+    shutil.copytree(campaign, to)
+    return to
+
+
+def _snapshot(root: Path, skip: Path | None = None) -> dict[str, tuple[str, bytes | str]]:
+    """Every path under root (links not followed) with its content, except under ``skip``."""
+    seen = {}
+    for dirpath, dirnames, filenames in os.walk(root):
+        for name in dirnames + filenames:
+            p = Path(dirpath) / name
+            if skip is not None and (p == skip or skip in p.parents):
+                continue
+            if p.is_symlink():
+                seen[str(p)] = ("link", os.readlink(p))
+            elif p.is_file():
+                seen[str(p)] = ("file", p.read_bytes())
+            else:
+                seen[str(p)] = ("dir", "")
+    return seen
+
+
+def _refused(capsys: pytest.CaptureFixture[str], *words: str) -> str:
+    err = capsys.readouterr().err
+    assert err.startswith("uavxai: error: "), err
+    assert "Traceback" not in err and "internal error" not in err, err
+    assert len(err.strip().splitlines()) == 1, err  # one paragraph
+    for w in words:
+        assert w in err, f"{w!r} not in {err}"
+    return err
+
+
+# ---------------------------------------------------------------- 1. links in an output folder
+@pytest.mark.parametrize("force", [False, True])
+def test_symlinked_marker_never_overwrites_a_file_outside_out(
+    tmp_path: Path, campaign: Path, capsys: pytest.CaptureFixture[str], force: bool
+) -> None:
+    src = _copy(campaign, tmp_path / "campaign")
+    precious = tmp_path / "precious.txt"
+    precious.write_text("the user's own words\n")
+    trap = tmp_path / "trap"
+    trap.mkdir()
+    (trap / MARKER).symlink_to("../precious.txt")
+    before = _snapshot(tmp_path)
+    argv = ["merge", str(src), "--out", str(trap)] + (["--force"] if force else [])
+    assert main(argv) == 2
+    _refused(capsys, "symbolic link", str(trap), "never follows links")
+    assert precious.read_text() == "the user's own words\n"
+    assert _snapshot(tmp_path) == before  # nothing touched, the link itself left in place
+
+
+def test_marker_that_is_a_fifo_is_refused_not_opened(
+    tmp_path: Path, campaign: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    src = _copy(campaign, tmp_path / "campaign")
+    out = tmp_path / "out"
+    out.mkdir()
+    os.mkfifo(out / MARKER)
+    assert main(["merge", str(src), "--out", str(out)]) == 2
+    _refused(capsys, "not a plain file")
+    # a source whose marker is a FIFO: refused, not read (which would block for ever)
+    (src / MARKER).unlink()
+    os.mkfifo(src / MARKER)
+    assert main(["merge", str(src), "--out", str(tmp_path / "fresh")]) == 2
+    _refused(capsys, str(src / MARKER), "plain file")
+    assert not (tmp_path / "fresh").exists()
+
+
+def test_force_removes_links_in_a_marked_folder_not_what_they_point_to(
+    tmp_path: Path, campaign: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    src = _copy(campaign, tmp_path / "campaign")
+    precious = tmp_path / "precious"
+    precious.mkdir()
+    (precious / "results.csv").write_text("mine\n")
+    out = tmp_path / "out"
+    assert main(["merge", str(src), "--out", str(out)]) == 0
+    cli._HELD_LOCKS.pop(out.resolve()).close()
+    (out / "results.csv").unlink()
+    (out / "results.csv").symlink_to(precious / "results.csv")
+    (out / "linked-folder").symlink_to(precious)
+    assert main(["merge", str(src), "--out", str(out), "--force"]) == 0
+    assert (precious / "results.csv").read_text() == "mine\n"
+    assert not (out / "results.csv").is_symlink() and not (out / "linked-folder").exists()
+
+
+def test_an_output_written_where_a_link_was_planted_replaces_the_link(tmp_path: Path) -> None:
+    """write_output renames a whole temporary file over the target: a link planted there after
+    the folder was prepared is replaced, and the file it pointed to keeps its content."""
+    precious = tmp_path / "precious.txt"
+    precious.write_text("keep\n")
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "summary.json").symlink_to(precious)
+    write_output(out / "summary.json", "{}\n")
+    assert precious.read_text() == "keep\n"
+    assert not (out / "summary.json").is_symlink()
+    assert (out / "summary.json").read_text() == "{}\n"
+    assert sorted(p.name for p in out.iterdir()) == ["summary.json"]  # no temporary left
