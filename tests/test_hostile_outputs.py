@@ -138,3 +138,18 @@ def test_an_output_written_where_a_link_was_planted_replaces_the_link(tmp_path: 
     assert not (out / "summary.json").is_symlink()
     assert (out / "summary.json").read_text() == "{}\n"
     assert sorted(p.name for p in out.iterdir()) == ["summary.json"]  # no temporary left
+
+
+# ------------------------------------------------------------ 2. --force without a marker
+def test_merge_force_into_a_folder_of_pngs_without_a_marker_is_refused(
+    tmp_path: Path, campaign: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    src = _copy(campaign, tmp_path / "campaign")
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    (photos / "goal_rate.png").write_bytes(b"\x89PNG the user's")
+    (photos / "summary.json").write_text('{"mine": true}')
+    before = _snapshot(tmp_path)
+    assert main(["merge", str(src), "--out", str(photos), "--force"]) == 2
+    _refused(capsys, "refusing --force", "no .uavxai-run marker", str(photos))
+    assert _snapshot(tmp_path) == before

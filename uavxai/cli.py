@@ -11,7 +11,6 @@ import argparse
 import contextlib
 import errno
 import fcntl
-import fnmatch
 import io
 import json
 import os
@@ -268,13 +267,6 @@ def _version() -> str:
 
 
 MARKER = ".uavxai-run"  # in every output folder uavxai creates; also its lock file
-# What uavxai writes into an output folder: a folder made before the marker existed, holding
-# nothing but these, is taken as ours (so `make demo` keeps working on an older runs/demo).
-OUR_OUTPUTS = (
-    "summary.json", "trajectory.csv", "decisions.jsonl", "*.rrd", "users.csv", "service.csv",
-    "results.csv", "episodes.csv", "*.png", "model.pt", "model.json", "learning_curve.csv",
-    "train_report.json",
-)
 MARKER_MAX_BYTES = 64_000  # a marker is one short JSON line; a bigger one is not ours
 _HELD_LOCKS: dict[Path, Any] = {}  # folder -> its open, locked marker: held until we exit
 # folder -> (did this process create the folder, did it create the marker): what to remove
@@ -405,11 +397,7 @@ def prepare_out_dir(out: Path, force: bool, argv: Sequence[str] | None = None) -
                     f"--out {out}: the folder exists and is not empty; choose another folder or "
                     "pass --force to overwrite it."
                 )
-            legacy = all(
-                p.is_file() and any(fnmatch.fnmatch(p.name, g) for g in OUR_OUTPUTS)
-                for p in others
-            )
-            if not (had_marker or legacy):
+            if not had_marker:
                 raise UserError(
                     f"--out {out}: refusing --force, this folder was not written by uavxai (it "
                     f"has no {MARKER} marker); --force empties only folders uavxai made. Empty "
