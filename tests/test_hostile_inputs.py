@@ -263,3 +263,28 @@ def test_schema_fuzz_gives_a_scenario_or_a_scenario_error(tmp_path: Path) -> Non
             except ScenarioError as exc:
                 assert str(path) in str(exc)
     assert outcomes["valid"] > 25 and outcomes["error"] > 1000, outcomes
+
+
+def test_a_1_gb_scenario_is_refused_by_its_size_before_it_is_read(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A sparse 1 GB file: refused with the size message, and the reader allocates far less
+    than the file (tracemalloc's peak, not the wall clock)."""
+    import tracemalloc
+
+    path = tmp_path / "huge.yaml"
+    with path.open("wb") as f:
+        f.write(b"name: x\n")
+        f.truncate(1 << 30)
+    tracemalloc.start()
+    try:
+        with pytest.raises(ScenarioError, match="1073741824 bytes is too large") as err:
+            load_scenario(path)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert str(path) in str(err.value) and "at most 256000 characters" in str(err.value)
+    assert peak < 100 * 2**20, f"peak {peak / 2**20:.0f} MB"
+    assert main(["validate", str(path)]) == 2
+    assert "too large" in capsys.readouterr().err
+

@@ -14,8 +14,10 @@ from __future__ import annotations
 
 import difflib
 import math
+import os
 import re
 import reprlib
+import stat
 import xml.etree.ElementTree as ET
 from functools import cache
 from pathlib import Path
@@ -957,15 +959,43 @@ def _absolute_paths(data: Any, folder: Path) -> Any:
     return data
 
 
+# UTF-8 takes at most 4 bytes a character: a file of more bytes has too many characters.
+MAX_READ_BYTES = 4 * MAX_FILE_BYTES
+
+
+def _too_large(p: Path, size: str) -> ScenarioError:
+    return ScenarioError(
+        f"{p}: {size} is too large for a scenario file (at most {MAX_FILE_BYTES} characters); "
+        f"see {REFERENCE}."
+    )
+
+
+def read_scenario_text(p: Path) -> str:
+    """A scenario file's text, never reading more than :data:`MAX_READ_BYTES` + 1 bytes: a
+    file is refused by its size (stat) before a byte is read, and the read itself is bounded
+    (a file that grows meanwhile)."""
+    try:
+        with p.open("rb") as f:
+            st = os.fstat(f.fileno())
+            if stat.S_ISREG(st.st_mode) and st.st_size > MAX_READ_BYTES:
+                raise _too_large(p, f"{st.st_size} bytes")
+            raw = f.read(MAX_READ_BYTES + 1)
+    except OSError as exc:
+        raise ScenarioError(f"{p}: cannot read the scenario file ({exc}).") from None
+    if len(raw) > MAX_READ_BYTES:
+        raise _too_large(p, f"more than {MAX_READ_BYTES} bytes")
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ScenarioError(f"{p}: cannot read the scenario file ({exc}).") from None
+
+
 def load_scenario(path: str | Path) -> Scenario:
     """Read and validate a scenario YAML file; raises :class:`ScenarioError` on any problem.
 
     ``path`` may also be the name of a shipped scenario (``demo``, ``head_on``, ...)."""
     p = resolve_scenario(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ScenarioError(f"{p}: cannot read the scenario file ({exc}).") from None
+    text = read_scenario_text(p)
     data = safe_yaml(text, str(p))
     return parse_scenario(_absolute_paths(data, p.resolve().parent), str(p))
 
