@@ -4,6 +4,8 @@ outside ``--out`` touched."""
 
 from __future__ import annotations
 
+import csv
+import json
 import os
 import shutil
 from pathlib import Path
@@ -153,3 +155,96 @@ def test_merge_force_into_a_folder_of_pngs_without_a_marker_is_refused(
     assert main(["merge", str(src), "--out", str(photos), "--force"]) == 2
     _refused(capsys, "refusing --force", "no .uavxai-run marker", str(photos))
     assert _snapshot(tmp_path) == before
+
+
+# ------------------------------------------------------------------- 5. forged campaign files
+def _forge(src: Path, column: str, value: str) -> None:
+    """Set ``column`` of the first row of src/episodes.csv to ``value`` (text, as forged)."""
+    with (src / "episodes.csv").open(newline="") as f:
+        reader = csv.DictReader(f)
+        columns, rows = list(reader.fieldnames or []), list(reader)
+    rows[0][column] = value
+    with (src / "episodes.csv").open("w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=columns)
+        w.writeheader()
+        w.writerows(rows)
+
+
+@pytest.mark.parametrize(
+    ("column", "value", "allowed"),
+    [
+        ("steps", "-1e308", "a whole number from 0"),
+        ("steps", "inf", "a whole number from 0"),
+        ("steps", "12.5", "a whole number from 0"),
+        ("nmac", "inf", "0 or 1"),
+        ("nmac", "7", "0 or 1"),
+        ("intruders", "1e308", "a whole number from 0"),
+        ("seed", "-1", "a whole number from 0"),
+        ("outcome", "teleported", "one of goal, completed, collision"),
+        ("min_separation_m", "-5", "a distance >= 0"),
+        ("min_separation_m", "nan", "a distance >= 0"),
+        ("flight_time_s", "-inf", "a time >= 0"),
+        ("decision_ms_p50", "nan", "a time >= 0"),
+        ("goal_x", "inf", "a coordinate"),
+        ("method", "=HYPERLINK(\"http://evil\",\"x\")", "a planner name, one of mcts"),
+        ("method", "none ", "a planner name"),
+    ],
+)
+def test_merge_refuses_forged_numbers_and_names(
+    tmp_path: Path, campaign: Path, capsys: pytest.CaptureFixture[str], column: str, value: str,
+    allowed: str,
+) -> None:
+    src = _copy(campaign, tmp_path / "campaign")
+    _forge(src, column, value)
+    out = tmp_path / "out"
+    assert main(["merge", str(src), "--out", str(out)]) == 2
+    _refused(capsys, str(src / "episodes.csv"), "line 2", column, allowed)
+    assert not out.exists()  # the refused merge leaves no folder behind
+
+
+def test_merge_of_a_real_campaign_keeps_its_numbers(tmp_path: Path, campaign: Path) -> None:
+    """The checks refuse only what a campaign never writes: 'inf' separation (no intruder
+    met), empty timing and goal are kept, and numbers are written back as numbers."""
+    src = _copy(campaign, tmp_path / "campaign")
+    _forge(src, "min_separation_m", "inf")
+    _forge(src, "decision_ms_p50", "")
+    out = tmp_path / "out"
+    assert main(["merge", str(src), "--out", str(out)]) == 0
+    with (out / "episodes.csv").open() as f:
+        merged = list(csv.DictReader(f))
+    with (campaign / "episodes.csv").open() as f:
+        original = list(csv.DictReader(f))
+    assert merged[0]["min_separation_m"] == "inf" and merged[0]["decision_ms_p50"] == ""
+    for a, b in zip(merged[1:], original[1:], strict=True):
+        assert a == b
+
+
+def test_csv_cells_that_a_spreadsheet_would_run_are_made_inert(tmp_path: Path) -> None:
+    from uavxai.campaign import write_csv
+
+    path = tmp_path / "x.csv"
+    cells = ["=1+1", "+cmd", "-2+3", "@SUM(A1)", "\tx", "-12.5", "-inf", "none", 3, -4.0]
+    write_csv(path, [str(i) for i in range(len(cells))], [{str(i): c for i, c in enumerate(cells)}])
+    rows = list(csv.reader(path.open()))
+    written = rows[1]
+    assert written[:5] == ["'=1+1", "'+cmd", "'-2+3", "'@SUM(A1)", "'\tx"]
+    assert written[5:] == ["-12.5", "-inf", "none", "3", "-4"]  # numbers stay numbers
+
+
+@pytest.mark.parametrize("argv", [["--help"], ["evaluate", "--help"], ["--version"], ["-h"],
+                                  ["evaluate", "--bogus"], "not a list", []])  # fmt: skip
+def test_merge_refuses_a_source_marker_that_records_no_campaign(
+    tmp_path: Path, campaign: Path, capsys: pytest.CaptureFixture[str], argv
+) -> None:
+    """Before: a recorded `--help` made merge print its help and exit 0, writing nothing."""
+    src = _copy(campaign, tmp_path / "campaign")
+    marker = json.loads((src / MARKER).read_text())
+    marker["argv"] = argv
+    (src / MARKER).write_text(json.dumps(marker))
+    out = tmp_path / "out"
+    assert main(["merge", str(src), "--out", str(out)]) == 2
+    assert capsys.readouterr().out == ""  # no help printed
+    main(["merge", str(src), "--out", str(out)])
+    _refused(capsys, str(src / MARKER))
+    assert not out.exists()
+
