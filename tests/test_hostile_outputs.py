@@ -8,6 +8,7 @@ import csv
 import json
 import os
 import shutil
+import subprocess
 from pathlib import Path
 
 import pytest
@@ -248,3 +249,55 @@ def test_merge_refuses_a_source_marker_that_records_no_campaign(
     _refused(capsys, str(src / MARKER))
     assert not out.exists()
 
+
+# ------------------------------------------------------------------------------ 6. disk full
+@pytest.fixture
+def tiny_disk(tmp_path: Path):
+    """A 64 kB tmpfs (needs root and mount); skipped with the reason otherwise."""
+    disk = tmp_path / "disk"
+    disk.mkdir()
+    if os.geteuid() != 0 or shutil.which("mount") is None:
+        pytest.skip("a tiny tmpfs needs root and mount(8)")
+    proc = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=64k", "tmpfs", str(disk)],
+                          capture_output=True, text=True)  # fmt: skip
+    if proc.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs here: {proc.stderr.strip()}")
+    try:
+        yield disk
+    finally:
+        for lock in cli._HELD_LOCKS.values():
+            lock.close()
+        cli._HELD_LOCKS.clear()
+        subprocess.run(["umount", str(disk)], check=False)
+
+
+def test_a_full_disk_says_no_space_left_and_marks_the_folder_incomplete(
+    tmp_path: Path, campaign: Path, tiny_disk: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Before: "internal error ... a bug" and a 0-byte plot beside whole CSVs."""
+    src = _copy(campaign, tmp_path / "campaign")
+    out = tiny_disk / "merged"
+    before = _snapshot(tmp_path, skip=tiny_disk)
+    assert main(["merge", str(src), "--out", str(out)]) == 2
+    err = _refused(capsys, f"no space left on {out}", "incomplete")
+    assert "bug" not in err
+    marker = json.loads((out / MARKER).read_text())
+    assert "no space left" in marker["incomplete"]
+    for p in out.iterdir():  # every file there is whole: no 0-byte plot, no temporary
+        assert not p.name.endswith(".part"), p
+        assert p.stat().st_size > 0, p
+    with (out / "episodes.csv").open() as f:
+        assert len(list(csv.DictReader(f))) == 4  # the CSVs fitted, and are whole
+    assert _snapshot(tmp_path, skip=tiny_disk) == before
+
+
+def test_an_unwritable_output_is_a_clear_error_not_a_bug(tmp_path: Path) -> None:
+    """The same error path without a tiny disk: a folder where an output file goes."""
+    from uavxai.outputs import OutputError
+
+    out = tmp_path / "out"
+    (out / "results.csv").mkdir(parents=True)
+    with pytest.raises(OutputError, match="cannot write .*results.csv") as err:
+        write_output(out / "results.csv", "a,b\n")
+    assert err.value.folder == out
+    assert sorted(p.name for p in out.iterdir()) == ["results.csv"]  # no temporary left
