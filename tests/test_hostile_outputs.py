@@ -301,3 +301,31 @@ def test_an_unwritable_output_is_a_clear_error_not_a_bug(tmp_path: Path) -> None
         write_output(out / "results.csv", "a,b\n")
     assert err.value.folder == out
     assert sorted(p.name for p in out.iterdir()) == ["results.csv"]  # no temporary left
+
+
+# ------------------------------------------------------- 8. a refused command leaves nothing
+def test_a_rejected_evaluate_leaves_no_folder_nor_marker(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """evaluate refuses a scenario with intruders.list after the output folder is prepared:
+    the folder it created goes again; a folder that was there stays, without our marker."""
+    scenario = tmp_path / "listed.yaml"
+    scenario.write_text("name: listed\nintruders: {list: [{x: 500, y: 500, h: 120, "
+                        "heading_deg: 0, speed_mps: 20}]}\n")  # fmt: skip
+    argv = ["evaluate", str(scenario), "--methods", "none", "--intruders", "3", "--episodes", "1"]
+    new = tmp_path / "a" / "new"
+    assert main([*argv, "--out", str(new)]) == 2
+    _refused(capsys, "intruders.list")
+    assert not new.exists() and (tmp_path / "a").is_dir()  # only what it created is removed
+    there = tmp_path / "there"
+    there.mkdir()
+    assert main([*argv, "--out", str(there)]) == 2
+    _refused(capsys, "intruders.list")
+    assert there.is_dir() and list(there.iterdir()) == []
+    # a folder of an earlier run keeps its marker (it was not this command's)
+    old = tmp_path / "old"
+    old.mkdir()
+    (old / MARKER).write_text('{"uavxai": "0", "pid": 1, "argv": ["run", "x"]}\n')
+    assert main([*argv, "--out", str(old), "--force"]) == 2
+    _refused(capsys, "intruders.list")
+    assert sorted(p.name for p in old.iterdir()) == [MARKER]
