@@ -234,7 +234,7 @@ def test_merge_refuses_what_is_not_a_campaign(tmp_path: Path) -> None:
     (tmp_path / "a" / "episodes.csv").write_text(
         (tmp_path / "a" / "episodes.csv").read_text().replace("none,3,0,0,", "none,3,0,seven,")
     )
-    with pytest.raises(UserError, match="line 2: intruders, seed, .* must be numbers"):
+    with pytest.raises(UserError, match="line 2: seed .seven. is not allowed; seed must be a"):
         merge_campaigns([tmp_path / "a"], tmp_path / "m")
 
 

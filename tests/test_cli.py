@@ -207,18 +207,20 @@ def test_train_prints_a_short_table_and_writes_the_json(
     assert "train_report.json" in text
 
 
-def test_force_takes_an_older_run_folder_of_only_our_files(tmp_path: Path) -> None:
-    """A runs/demo from before the marker existed (`make demo` passes --force) holds only
-    files uavxai writes: it may be replaced; one more file of the user's and it may not."""
-    old = tmp_path / "demo"
-    old.mkdir()
-    for name in ("summary.json", "trajectory.csv", "decisions.jsonl", "run.rrd"):
-        (old / name).write_text("old")
-    assert sorted(p.name for p in prepare_out_dir(old, force=True).iterdir()) == [MARKER]
-    mixed = tmp_path / "mixed"
-    mixed.mkdir()
-    (mixed / "summary.json").write_text("old")
-    (mixed / "analysis.ipynb").write_text("mine")
-    with pytest.raises(UserError, match="not written by uavxai"):
-        prepare_out_dir(mixed, force=True)
-    assert (mixed / "analysis.ipynb").read_text() == "mine"
+def test_force_never_empties_a_folder_without_a_marker(tmp_path: Path) -> None:
+    """Files named like uavxai's outputs (a user's PNGs, a summary.json) do not make a folder
+    uavxai's: without the marker, --force is refused and every file stays."""
+    for name, files in (
+        ("photos", ("holiday.png", "cat.png")),
+        ("summary", ("summary.json",)),
+        ("old-demo", ("summary.json", "trajectory.csv", "decisions.jsonl", "run.rrd")),
+    ):
+        folder = tmp_path / name
+        folder.mkdir()
+        for f in files:
+            (folder / f).write_text(f"the user's {f}")
+        with pytest.raises(UserError, match="refusing --force.*no .uavxai-run marker"):
+            prepare_out_dir(folder, force=True)
+        assert sorted(p.name for p in folder.iterdir()) == sorted(files)
+        for f in files:
+            assert (folder / f).read_text() == f"the user's {f}"

@@ -113,6 +113,22 @@ CORPUS: list[tuple[str, str | bytes, tuple[str, ...]]] = [
     ("mobility-walk-at-0", "name: x\ncomms: {users: {mobility: {model: random_waypoint, "
      "speed_mps: 0}}}\n", ("comms.users.mobility", "> 0")),
     ("binary", b"\xff\xfe\x00garbage", ("cannot read",)),
+    # unflyable (issue 30): each field valid alone, the whole not
+    ("wind-80-for-12-30-aircraft", "name: x\nenvironment: {wind: {speed_mps: 80}}\n",
+     ("environment.wind.speed_mps = 80", "below 12 m/s")),
+    ("orbit-9000-in-2-km", "name: x\nmission: {orbit_radius_m: 9000}\n",
+     ("mission.orbit_radius_m = 9000", "at most 1000 m")),
+    ("blind-planner", "name: x\nsurveillance: {noncooperative: 1.0, sensor: null}\n",
+     ("surveillance.noncooperative", "surveillance.sensor null", "see no intruder")),
+    # text is never converted to a number or a boolean, nor a number to a boolean
+    ("quoted-seed", "name: x\nseed: '9'\n", ("'seed'", "text where a number")),
+    ("quoted-bool", "name: x\nlog: {rerun: 'yes'}\n", ("'log.rerun'", "text where")),
+    ("number-as-bool", "name: x\nlog: {rerun: 1}\n", ("'log.rerun'", "where true or false")),
+    ("bool-as-number", "name: x\nseed: true\n", ("'seed'", "a boolean where a number")),
+    ("quoted-in-list", "name: x\nworld: {x: ['0', 2000]}\n", ("'world.x'", "text where")),
+    # field errors name the cross-field checks still to come
+    ("field-and-cross", "name: x\nseed: -1\nenvironment: {wind: {speed_mps: 80}}\n",
+     ("'seed'", "checks across fields", "run once these are fixed")),
 ]
 
 
@@ -263,3 +279,43 @@ def test_schema_fuzz_gives_a_scenario_or_a_scenario_error(tmp_path: Path) -> Non
             except ScenarioError as exc:
                 assert str(path) in str(exc)
     assert outcomes["valid"] > 25 and outcomes["error"] > 1000, outcomes
+
+
+def test_a_1_gb_scenario_is_refused_by_its_size_before_it_is_read(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A sparse 1 GB file: refused with the size message, and the reader allocates far less
+    than the file (tracemalloc's peak, not the wall clock)."""
+    import tracemalloc
+
+    path = tmp_path / "huge.yaml"
+    with path.open("wb") as f:
+        f.write(b"name: x\n")
+        f.truncate(1 << 30)
+    tracemalloc.start()
+    try:
+        with pytest.raises(ScenarioError, match="1073741824 bytes is too large") as err:
+            load_scenario(path)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert str(path) in str(err.value) and "at most 256000 characters" in str(err.value)
+    assert peak < 100 * 2**20, f"peak {peak / 2**20:.0f} MB"
+    assert main(["validate", str(path)]) == 2
+    assert "too large" in capsys.readouterr().err
+
+
+
+def test_unquoted_exponent_numbers_are_numbers_and_the_shipped_scenarios_validate(
+    tmp_path: Path,
+) -> None:
+    """YAML 1.2 numbers such as 1e3 (PyYAML would read text) stay numbers under the strict
+    schema; every shipped scenario still validates."""
+    path = tmp_path / "exp.yaml"
+    path.write_text("name: x\navoidance: {goal_radius_m: 5e1}\nmission: {service_s: 1.2E2}\n")
+    sc = load_scenario(path)
+    assert sc.avoidance.goal_radius_m == 50.0 and sc.mission.service_s == 120.0
+    shipped = sorted(scenarios_dir().glob("*.yaml"))
+    assert shipped
+    for f in shipped:
+        load_scenario(f)

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import io
 import math
 import multiprocessing
 import os
@@ -42,8 +43,10 @@ import numpy as np
 
 from uavxai.avoidance.planners import PLANNERS
 from uavxai.errors import UserError
+from uavxai.outputs import csv_cell, write_output
 from uavxai.scenario import Scenario
 from uavxai.sim.build import DYNAMICS as _DYNAMICS
+from uavxai.vocabulary import OUTCOMES
 
 METHODS = tuple(PLANNERS)  # the planner registry's names, not a copy of them
 DYNAMICS = tuple(_DYNAMICS)
@@ -441,11 +444,14 @@ def _summary_row(method: str, n: int, rs: list[dict], baseline: list[dict] | Non
 
 
 def write_csv(path: Path, columns: Sequence[str], rows: Iterable[dict]) -> None:
-    with path.open("w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(columns)
-        for r in rows:
-            w.writerow([_cell(r[c]) for c in columns])
+    """A CSV file written whole (temporary file + rename, never through a link); text cells a
+    spreadsheet would run as a formula are made inert (:func:`uavxai.outputs.csv_cell`)."""
+    buf = io.StringIO(newline="")
+    w = csv.writer(buf)
+    w.writerow(columns)
+    for r in rows:
+        w.writerow([csv_cell(_cell(r[c])) for c in columns])
+    write_output(path, buf.getvalue())
 
 
 def _cell(v):
@@ -509,8 +515,10 @@ def plot_results(results: Sequence[dict], out: Path, title: str = "") -> list[Pa
         if title:
             ax.set_title(title, fontsize=9)
         fig.tight_layout()
-        fig.savefig(out / name)
+        png = io.BytesIO()
+        fig.savefig(png, format="png")
         plt.close(fig)
+        write_output(out / name, png.getvalue())
         paths.append(out / name)
     return paths
 
@@ -532,16 +540,9 @@ def merge_campaigns(sources: Sequence[str | Path], out: str | Path, title: str =
     for src in map(Path, sources):
         # files written before the goal was recorded lack its columns, and are taken on trust
         rows = _read_rows(src / "episodes.csv", EPISODE_COLUMNS[: -len(GOAL_COLUMNS)])
-        for i, r in enumerate(rows, start=2):
-            try:
-                key = (r["method"], int(r["intruders"]), int(r["seed"]))
-                for column in ("steps", "min_separation_m", "nmac"):  # summarise reads these
-                    float(r[column] or 0)
-            except (TypeError, ValueError):
-                raise UserError(
-                    f"{src / 'episodes.csv'} line {i}: intruders, seed, steps, "
-                    "min_separation_m and nmac must be numbers."
-                ) from None
+        rows = [_checked_row(r, src / "episodes.csv", i) for i, r in enumerate(rows, start=2)]
+        for r in rows:
+            key = (r["method"], r["intruders"], r["seed"])
             if key in flown_by:
                 raise UserError(
                     f"{key[0]} at {key[1]} intruders, seed {key[2]}: flown in both "
@@ -549,16 +550,18 @@ def merge_campaigns(sources: Sequence[str | Path], out: str | Path, title: str =
                     "intruder counts."
                 )
             flown_by[key] = src
-            goal = tuple(r.setdefault(k, "") for k in GOAL_COLUMNS)
-            if any(goal):
+            goal = tuple(r[k] for k in GOAL_COLUMNS)
+            if any(g != "" for g in goal):
                 goals.setdefault(goal, src)
         episodes.extend(rows)
         for r in _read_rows(src / "results.csv", RESULT_COLUMNS):
             # garbage timing: nothing to keep, the row's own median of medians stands
-            with contextlib.suppress(ValueError):
-                p50[(r["method"], int(r["intruders"]))] = float(r["decision_ms_p50"] or "nan")
+            with contextlib.suppress(ValueError, OverflowError):
+                ms = float(r["decision_ms_p50"] or "nan")
+                if math.isfinite(ms) and ms >= 0:
+                    p50[(r["method"], int(r["intruders"]))] = ms
     if len(goals) > 1:
-        what = "; ".join(f"{src}: ({', '.join(g)})" for g, src in goals.items())
+        what = "; ".join(f"{src}: ({', '.join(map(str, g))})" for g, src in goals.items())
         raise UserError(
             f"these campaigns flew to different goals ({what}), so the same seed is not the same "
             "encounter; a scenario without ownship.goal flies to the service point of its seed."
@@ -575,6 +578,59 @@ def merge_campaigns(sources: Sequence[str | Path], out: str | Path, title: str =
     write_csv(out / "episodes.csv", EPISODE_COLUMNS, episodes)
     plot_results(results, out, title)
     return results
+
+
+MAX_STEPS = 10**7  # decisions in one episode: far beyond any scenario's max_steps
+MAX_SEED = 2**31 - 1
+MAX_INTRUDERS = 10_000
+
+
+def _checked_row(r: dict, path: Path, line: int) -> dict:
+    """One ``episodes.csv`` row of a source campaign, every value within what a campaign
+    writes, typed (so that the merged files hold numbers, not the source's text)."""
+
+    def bad(column: str, allowed: str) -> UserError:
+        value = str(r.get(column))
+        shown = value if len(value) <= 40 else value[:37] + "..."
+        return UserError(
+            f"{path} line {line}: {column} {shown!r} is not allowed; {column} must be {allowed}. "
+            "The file was not written by `uavxai evaluate` as it stands."
+        )
+
+    def number(column: str, lo: float, hi: float, allowed: str, empty=None, whole=False):
+        text = (r.get(column) or "").strip()
+        if text == "" and empty is not None:
+            return empty
+        try:
+            v = float(text)
+        except ValueError:
+            raise bad(column, allowed) from None
+        if math.isnan(v) or not lo <= v <= hi or (whole and v != int(v)):
+            raise bad(column, allowed)
+        return int(v) if whole else v
+
+    out = dict(r)
+    if r.get("method") not in METHODS:
+        raise bad("method", f"a planner name, one of {', '.join(METHODS)}")
+    if r.get("outcome") not in OUTCOMES:
+        raise bad("outcome", f"one of {', '.join(OUTCOMES)}")
+    out["intruders"] = number("intruders", 0, MAX_INTRUDERS,
+                              f"a whole number from 0 to {MAX_INTRUDERS}", whole=True)  # fmt: skip
+    out["episode"] = number("episode", 0, MAX_SEED, "a whole number >= 0", whole=True)
+    out["seed"] = number("seed", 0, MAX_SEED, f"a whole number from 0 to {MAX_SEED}", whole=True)
+    out["steps"] = number("steps", 0, MAX_STEPS, f"a whole number from 0 to {MAX_STEPS}",
+                          whole=True)  # fmt: skip
+    out["min_separation_m"] = number(
+        "min_separation_m", 0, math.inf, "a distance >= 0 in metres ('inf': no intruder)"
+    )
+    out["flight_time_s"] = number("flight_time_s", 0, 1e9, "a time >= 0 in seconds")
+    out["nmac"] = number("nmac", 0, 1, "0 or 1", whole=True)
+    out["decision_ms_p50"] = number(
+        "decision_ms_p50", 0, 1e9, "a time >= 0 in milliseconds, or empty", empty=math.nan
+    )
+    for column in GOAL_COLUMNS:  # files written before the goal was recorded lack it
+        out[column] = number(column, -1e7, 1e7, "a coordinate in metres, or empty", empty="")
+    return out
 
 
 def _read_rows(path: Path, columns: Sequence[str]) -> list[dict]:

@@ -8,17 +8,21 @@ traceback; internal errors exit 1 (set UAVXAI_DEBUG=1 to see the traceback).
 from __future__ import annotations
 
 import argparse
+import contextlib
+import errno
 import fcntl
-import fnmatch
+import io
 import json
 import os
 import shutil
+import stat
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
 from uavxai.errors import UserError
+from uavxai.outputs import NO_SPACE, OutputError, output_error, write_output
 
 EXIT_OK, EXIT_INTERNAL, EXIT_BAD_INPUT = 0, 1, 2
 
@@ -265,14 +269,11 @@ def _version() -> str:
 
 
 MARKER = ".uavxai-run"  # in every output folder uavxai creates; also its lock file
-# What uavxai writes into an output folder: a folder made before the marker existed, holding
-# nothing but these, is taken as ours (so `make demo` keeps working on an older runs/demo).
-OUR_OUTPUTS = (
-    "summary.json", "trajectory.csv", "decisions.jsonl", "*.rrd", "users.csv", "service.csv",
-    "results.csv", "episodes.csv", "*.png", "model.pt", "model.json", "learning_curve.csv",
-    "train_report.json",
-)
+MARKER_MAX_BYTES = 64_000  # a marker is one short JSON line; a bigger one is not ours
 _HELD_LOCKS: dict[Path, Any] = {}  # folder -> its open, locked marker: held until we exit
+# folder -> (did this process create the folder, did it create the marker): what to remove
+# again when the command refuses before writing anything (see _clean_refused)
+_CREATED: dict[Path, tuple[bool, bool]] = {}
 
 
 def _dangerous(path: Path) -> str | None:
@@ -288,12 +289,68 @@ def _dangerous(path: Path) -> str | None:
     return None
 
 
+def _marker_kind(path: Path) -> str | None:
+    """What is at ``path`` if it is not a plain file (None: nothing, or a plain file)."""
+    try:
+        st = path.lstat()
+    except FileNotFoundError:
+        return None
+    if stat.S_ISLNK(st.st_mode):
+        return "a symbolic link"
+    if not stat.S_ISREG(st.st_mode):
+        return "not a plain file"
+    return None
+
+
+def _open_marker(path: Path):
+    """Open (or create) the marker for reading and writing, never through a link and never a
+    FIFO or device (O_NOFOLLOW, O_NONBLOCK, then a check that it is a plain file)."""
+    flags = os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC
+    fd = os.open(path, flags, 0o644)
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise OSError(errno.EINVAL, "not a plain file", str(path))
+        return os.fdopen(fd, "r+", encoding="utf-8")
+    except BaseException:
+        os.close(fd)
+        raise
+
+
+def read_marker(folder: Path) -> dict | None:
+    """The JSON a folder's marker holds; None if there is none, or it is a link, not a plain
+    file, too big or not a JSON object (a marker is never followed or read unbounded)."""
+    path = folder / MARKER
+    if _marker_kind(path) is not None:
+        return None
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC)
+    except OSError:
+        return None
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            return None
+        raw = os.read(fd, MARKER_MAX_BYTES + 1)
+    except OSError:
+        return None
+    finally:
+        os.close(fd)
+    if len(raw) > MARKER_MAX_BYTES:
+        return None
+    try:
+        data = json.loads(raw.decode("utf-8"))
+    except (UnicodeDecodeError, ValueError):
+        return None
+    return data if isinstance(data, dict) else None
+
+
 def prepare_out_dir(out: Path, force: bool, argv: Sequence[str] | None = None) -> Path:
     """Create (or reuse an empty) output folder, mark it as uavxai's and lock it.
 
     Never overwrites silently: a non-empty folder needs ``--force``, and ``--force`` empties only
-    a folder that uavxai made (it holds the ``.uavxai-run`` marker), never the current folder,
-    home or '/'. The marker file is locked (fcntl) for as long as this process lives, so a
+    a folder that uavxai made (it holds the ``.uavxai-run`` marker, a plain file), never the
+    current folder, home or '/'. Nothing in the folder is followed: a marker that is a symbolic
+    link (or a FIFO, a device, a folder) is refused, and ``--force`` removes links, never what
+    they point to. The marker file is locked (fcntl) for as long as this process lives, so a
     second run into the same folder fails at once instead of mixing its files into ours. It
     records the command (``argv``, default this process's) that writes the folder.
     """
@@ -306,6 +363,13 @@ def prepare_out_dir(out: Path, force: bool, argv: Sequence[str] | None = None) -
     try:
         if out.exists() and not out.is_dir():
             raise UserError(f"--out {out}: exists and is not a folder.")
+        if kind := _marker_kind(out / MARKER):
+            raise UserError(
+                f"--out {out}: its {MARKER} is {kind}; uavxai never follows links or writes "
+                f"through special files in an output folder. Remove {out / MARKER} or choose "
+                "another --out."
+            )
+        existed = out.is_dir()
         had_marker = (out / MARKER).is_file()
         out.mkdir(parents=True, exist_ok=True)
         key = out.resolve()
@@ -313,7 +377,7 @@ def prepare_out_dir(out: Path, force: bool, argv: Sequence[str] | None = None) -
         old = _HELD_LOCKS.pop(key, None)
         if old is not None:
             old.close()
-        lock = open(out / MARKER, "a+", encoding="utf-8")  # noqa: SIM115 - held open on purpose
+        lock = _open_marker(out / MARKER)
     except OSError as exc:
         raise UserError(
             f"--out {out}: cannot create or write this folder ({exc.strerror or exc}); choose a "
@@ -335,14 +399,11 @@ def prepare_out_dir(out: Path, force: bool, argv: Sequence[str] | None = None) -
                     f"--out {out}: the folder exists and is not empty; choose another folder or "
                     "pass --force to overwrite it."
                 )
-            legacy = all(
-                p.is_file() and any(fnmatch.fnmatch(p.name, g) for g in OUR_OUTPUTS)
-                for p in others
-            )
-            if not (had_marker or legacy):
+            if not had_marker:
                 raise UserError(
                     f"--out {out}: refusing --force, this folder was not written by uavxai (it "
-                    f"has no {MARKER} marker); empty it yourself or choose another --out."
+                    f"has no {MARKER} marker); --force empties only folders uavxai made. Empty "
+                    "it yourself or choose another --out."
                 )
             for p in others:  # the marker stays: it is our lock
                 if p.is_dir() and not p.is_symlink():
@@ -363,6 +424,7 @@ def prepare_out_dir(out: Path, force: bool, argv: Sequence[str] | None = None) -
             raise UserError(f"--out {out}: cannot prepare this folder ({exc}).") from None
         raise
     _HELD_LOCKS[key] = lock
+    _CREATED[key] = (not existed, not had_marker)
     return out
 
 
@@ -438,8 +500,7 @@ def cmd_service(args: argparse.Namespace) -> int:
     from uavxai.service.stage import run_service_stage
 
     summary = run_service_stage(sc, planner=args.planner)
-    path = out / "summary.json"
-    path.write_text(json.dumps(summary, indent=2, default=float) + "\n")
+    path = write_output(out / "summary.json", json.dumps(summary, indent=2, default=float) + "\n")
     print_report(f"service point ({sc.name})", summary, path)
     return EXIT_OK
 
@@ -463,8 +524,8 @@ def cmd_train(args: argparse.Namespace) -> int:
     else:
         from uavxai.learning.train import train_command as trainer
     report = trainer(sc, algo=args.algo, episodes=args.episodes, out=out)
-    path = out / "train_report.json"
-    path.write_text(json.dumps(report, indent=2, default=float) + "\n")
+    text = json.dumps(report, indent=2, default=float) + "\n"
+    path = write_output(out / "train_report.json", text)
     print_report(f"training {args.stage} {args.algo} ({sc.name})", report, path)
     return EXIT_OK
 
@@ -503,18 +564,45 @@ def cmd_merge(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _recorded_command(src: Path) -> argparse.Namespace | None:
+    """The command a source folder's marker records (None: the folder has no marker).
+
+    A marker that is a link or not a plain file, unreadable, or records no command that
+    `uavxai` would run (``--help``, ``--version``, an unknown flag) is refused: merge must
+    not act on it (print help and exit) nor take it on trust."""
+    path = src / MARKER
+    if not os.path.lexists(path):
+        return None
+    if kind := _marker_kind(path):
+        raise UserError(f"{path}: is {kind}; a campaign folder's marker must be a plain file.")
+    data = read_marker(src)
+    argv = None if data is None else data.get("argv")
+    if not (isinstance(argv, list) and argv and all(isinstance(a, str) for a in argv)):
+        raise UserError(
+            f"{path}: not a uavxai marker (a short JSON object whose 'argv' lists the command "
+            "that wrote the folder); remove it if the folder holds copied results."
+        )
+    sink = io.StringIO()
+    try:
+        with contextlib.redirect_stdout(sink), contextlib.redirect_stderr(sink):
+            return build_parser().parse_args(argv)
+    except (SystemExit, UserError):
+        shown = " ".join(argv)
+        raise UserError(
+            f"{path}: records the command `uavxai {shown[:200]}`, which is not a command that "
+            "writes a campaign (merge takes folders written by `uavxai evaluate` or `uavxai "
+            "merge`); remove the marker if the folder holds copied results."
+        ) from None
+
+
 def _same_campaign(sources: list[Path]) -> None:
     """Refuse to pool campaigns flown on other scenarios or dynamics, as each folder's marker
     records the `uavxai evaluate` command that wrote it (a folder without one is taken on
     trust: copied results, or a campaign run from Python)."""
     seen: dict[tuple[str, str], Path] = {}
     for src in sources:
-        try:
-            argv = json.loads((src / MARKER).read_text())["argv"]
-            flown = build_parser().parse_args(argv)
-        except (OSError, ValueError, KeyError, TypeError, UserError):
-            continue
-        if flown.command == "merge":
+        flown = _recorded_command(src)
+        if flown is None or flown.command == "merge":
             continue  # its sources were checked when it was made
         if flown.command != "evaluate":
             raise UserError(f"{src}: written by `uavxai {flown.command}`, not by `uavxai "
@@ -587,6 +675,49 @@ def _sigterm_as_interrupt() -> None:
         signal.signal(signal.SIGTERM, interrupt)
 
 
+def _mark_incomplete(folder: Path | None, reason: str) -> None:
+    """Record in an output folder's marker that the command did not finish writing it: the
+    marker's JSON gains ``"incomplete": REASON`` (best effort: the disk may be full)."""
+    for key, lock in _HELD_LOCKS.items():
+        if folder is not None and key != Path(folder).resolve():
+            continue
+        with contextlib.suppress(OSError, ValueError):
+            lock.seek(0)
+            data = json.loads(lock.read() or "{}")
+            data["incomplete"] = reason[:500]
+            lock.seek(0)
+            lock.truncate()
+            lock.write(json.dumps(data) + "\n")
+            lock.flush()
+
+
+def _clean_refused() -> None:
+    """A command that refuses its input removes what it created: an output folder still
+    holding nothing but the marker loses the marker (if this process wrote it) and the
+    folder (if this process made it)."""
+    for key in list(_HELD_LOCKS):
+        made_folder, made_marker = _CREATED.get(key, (False, False))
+        try:
+            if not made_marker or any(p.name != MARKER for p in key.iterdir()):
+                continue
+            (key / MARKER).unlink(missing_ok=True)
+            _HELD_LOCKS.pop(key).close()
+            _CREATED.pop(key, None)
+            if made_folder:
+                key.rmdir()
+        except OSError:
+            continue
+
+
+def _internal_error(exc: BaseException) -> int:
+    print(
+        f"uavxai: internal error: {type(exc).__name__}: {exc}\n"
+        "This is a bug in uavxai; rerun with UAVXAI_DEBUG=1 for the traceback and report it.",
+        file=sys.stderr,
+    )
+    return EXIT_INTERNAL
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     os.environ.setdefault("JSBSIM_DEBUG", "0")
     os.environ.setdefault("MAVLINK20", "1")
@@ -600,6 +731,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             return EXIT_BAD_INPUT
         return COMMANDS[args.command](args)
     except UserError as exc:
+        if isinstance(exc, OutputError):
+            _mark_incomplete(exc.folder, str(exc))
+        else:
+            _clean_refused()
         print(f"uavxai: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
@@ -612,15 +747,22 @@ def main(argv: Sequence[str] | None = None) -> int:
         os.dup2(devnull, sys.stdout.fileno())
         os.close(devnull)
         return 141  # 128 + SIGPIPE, what a shell reports for a tool stopped by a closed pipe
+    except OSError as exc:
+        if os.environ.get("UAVXAI_DEBUG") or exc.errno not in NO_SPACE:
+            if os.environ.get("UAVXAI_DEBUG"):
+                raise
+            return _internal_error(exc)
+        # a full disk met by a writer that does not go through write_output (a stream)
+        folders = list(_HELD_LOCKS)
+        where = folders[-1] if folders else Path(exc.filename or ".").parent
+        error = output_error(where / Path(exc.filename or "output").name, exc)
+        _mark_incomplete(where if folders else None, str(error))
+        print(f"uavxai: error: {error}", file=sys.stderr)
+        return EXIT_BAD_INPUT
     except Exception as exc:  # noqa: BLE001 - the last line of defence: no raw traceback
         if os.environ.get("UAVXAI_DEBUG"):
             raise
-        print(
-            f"uavxai: internal error: {type(exc).__name__}: {exc}\n"
-            "This is a bug in uavxai; rerun with UAVXAI_DEBUG=1 for the traceback and report it.",
-            file=sys.stderr,
-        )
-        return EXIT_INTERNAL
+        return _internal_error(exc)
 
 
 if __name__ == "__main__":

@@ -14,8 +14,11 @@ from __future__ import annotations
 
 import difflib
 import math
+import os
 import re
 import reprlib
+import stat
+import typing
 import xml.etree.ElementTree as ET
 from functools import cache
 from pathlib import Path
@@ -27,6 +30,7 @@ from pydantic import (
     ConfigDict,
     Field,
     ValidationError,
+    ValidationInfo,
     field_validator,
     model_validator,
 )
@@ -70,8 +74,49 @@ def _ordered(value: tuple[float, float], what: str) -> tuple[float, float]:
     return value
 
 
+def _admits(annotation: Any, kind: type) -> bool:
+    """Whether a field's type accepts a value of ``kind`` (str or bool) as it is."""
+    if annotation is kind or annotation is Any:
+        return True
+    if kind is str and annotation is Path:
+        return True
+    origin = typing.get_origin(annotation)
+    if origin is Literal:
+        return any(isinstance(v, kind) for v in typing.get_args(annotation))
+    if origin is Annotated:
+        return _admits(typing.get_args(annotation)[0], kind)
+    return any(_admits(a, kind) for a in typing.get_args(annotation))
+
+
+def _strict_scalars(value: Any, annotation: Any) -> None:
+    """Refuse what pydantic's lax mode would coerce: text for a number or a boolean ('9' -> 9,
+    'yes' -> true) and booleans or numbers for one another (true -> 1, 1 -> true)."""
+    if isinstance(value, dict):
+        return  # a nested section: its own model checks its fields
+    if isinstance(value, list | tuple):
+        for item in value:
+            _strict_scalars(item, annotation)
+        return
+    if isinstance(value, str) and not _admits(annotation, str):
+        raise ValueError(
+            "text where a number or true/false belongs; write it without quotes (text is never "
+            "converted)"
+        )
+    if isinstance(value, bool) and not _admits(annotation, bool):
+        raise ValueError("a boolean where a number belongs")
+    if isinstance(value, int | float) and not isinstance(value, bool) and annotation is bool:
+        raise ValueError("a number where true or false belongs")
+
+
 class _Model(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, validate_default=True)
+
+    @field_validator("*", mode="before")
+    @classmethod
+    def _no_coercion(cls, value: Any, info: ValidationInfo) -> Any:
+        field = cls.model_fields[info.field_name]
+        _strict_scalars(value, field.annotation)
+        return value
 
 
 # --------------------------------------------------------------------------------------- world
@@ -660,6 +705,35 @@ class Scenario(_Model):
                 f"intruders.speed_mps = {list(r)}: aircraft '{intr}' flies between {lo:g} and "
                 f"{hi:g} m/s; the drawn speeds must lie inside"
             )
+        own_lo, _ = aircraft_speed_range(own)
+        wind = self.environment.wind.speed_mps
+        if wind >= own_lo:
+            raise ValueError(
+                f"environment.wind.speed_mps = {wind:g} m/s is not below the slowest airspeed of "
+                f"aircraft '{own}' ({own_lo:g} m/s): flying slowly it would be blown backwards; "
+                f"allowed: below {own_lo:g} m/s"
+            )
+        w = self.world
+        r_orbit = self.mission.orbit_radius_m
+        room = min(w.x[1] - w.x[0], w.y[1] - w.y[0]) / 2
+        if r_orbit is not None and r_orbit > room:
+            raise ValueError(
+                f"mission.orbit_radius_m = {r_orbit:g} m: the orbit does not fit in the world "
+                f"(x {list(w.x)}, y {list(w.y)}); allowed: at most {room:g} m, half the world's "
+                "narrower side"
+            )
+        sv = self.intruders
+        any_intruders = bool(sv.list) if sv.list is not None else sv.count > 0
+        if (
+            any_intruders
+            and self.surveillance.noncooperative >= 1.0
+            and self.surveillance.sensor is None
+        ):
+            raise ValueError(
+                "surveillance.noncooperative = 1 (no intruder broadcasts ADS-B) with "
+                "surveillance.sensor null (no onboard sensor): the planner would see no intruder "
+                "at all; give a sensor, or make noncooperative less than 1"
+            )
 
     def with_seed(self, seed: int) -> Scenario:
         return self.model_copy(update={"seed": int(seed)})
@@ -792,9 +866,16 @@ def parse_scenario(data: Any, source: str = "<scenario>") -> Scenario:
         if len(errors) > 10:
             lines.append(f"... and {len(errors) - 10} more")
         n = len(errors)
+        cross = [e for e in errors if e.get("type") == "value_error" and not e.get("loc")]
+        later = (
+            "" if cross or n == 0 else
+            "\nThe checks across fields (world bounds, airspeeds, timing, wind, orbit, sensors) "
+            "run once these are fixed and may find more."
+        )  # fmt: skip
         raise ScenarioError(
             f"{source}: invalid scenario ({n} problem{'s' if n > 1 else ''}):\n  "
             + "\n  ".join(lines)
+            + later
             + f"\nSee the scenario reference {REFERENCE} (units: m, s; *_deg in degrees)."
         ) from None
     except RecursionError:  # data built in Python, not by load_scenario's bounded loader
@@ -861,6 +942,16 @@ class _BoundedLoader(yaml.SafeLoader):
 
 
 _BoundedLoader.add_constructor("tag:yaml.org,2002:int", _BoundedLoader.construct_yaml_int)
+
+
+# YAML 1.2 reads 1e3 and 2.5E-4 as numbers; PyYAML (YAML 1.1) wants a dot and a signed
+# exponent (1.0e+3) and otherwise gives text, which the strict schema refuses. Read them as
+# numbers here, as a user means them; quoted ('1e3') they stay text.
+_BoundedLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9_]+)[eE][-+]?[0-9]+$"),
+    list("-+0123456789."),
+)
 
 
 class _CycleError(Exception):
@@ -957,15 +1048,43 @@ def _absolute_paths(data: Any, folder: Path) -> Any:
     return data
 
 
+# UTF-8 takes at most 4 bytes a character: a file of more bytes has too many characters.
+MAX_READ_BYTES = 4 * MAX_FILE_BYTES
+
+
+def _too_large(p: Path, size: str) -> ScenarioError:
+    return ScenarioError(
+        f"{p}: {size} is too large for a scenario file (at most {MAX_FILE_BYTES} characters); "
+        f"see {REFERENCE}."
+    )
+
+
+def read_scenario_text(p: Path) -> str:
+    """A scenario file's text, never reading more than :data:`MAX_READ_BYTES` + 1 bytes: a
+    file is refused by its size (stat) before a byte is read, and the read itself is bounded
+    (a file that grows meanwhile)."""
+    try:
+        with p.open("rb") as f:
+            st = os.fstat(f.fileno())
+            if stat.S_ISREG(st.st_mode) and st.st_size > MAX_READ_BYTES:
+                raise _too_large(p, f"{st.st_size} bytes")
+            raw = f.read(MAX_READ_BYTES + 1)
+    except OSError as exc:
+        raise ScenarioError(f"{p}: cannot read the scenario file ({exc}).") from None
+    if len(raw) > MAX_READ_BYTES:
+        raise _too_large(p, f"more than {MAX_READ_BYTES} bytes")
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ScenarioError(f"{p}: cannot read the scenario file ({exc}).") from None
+
+
 def load_scenario(path: str | Path) -> Scenario:
     """Read and validate a scenario YAML file; raises :class:`ScenarioError` on any problem.
 
     ``path`` may also be the name of a shipped scenario (``demo``, ``head_on``, ...)."""
     p = resolve_scenario(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ScenarioError(f"{p}: cannot read the scenario file ({exc}).") from None
+    text = read_scenario_text(p)
     data = safe_yaml(text, str(p))
     return parse_scenario(_absolute_paths(data, p.resolve().parent), str(p))
 

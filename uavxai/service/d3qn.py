@@ -298,40 +298,39 @@ def save_checkpoint(
 
 
 def load_checkpoint(path: str | Path) -> tuple[BranchingQNetwork, dict[str, Any]]:
-    """Load a model written by :func:`save_checkpoint`; any problem is a CheckpointError."""
+    """Load a model written by :func:`save_checkpoint`; any problem is a CheckpointError.
+
+    The declared sizes are bounded and compared with the stored tensors, and the weights must
+    be finite, before a network is allocated (:mod:`uavxai.service.guard`)."""
+    from uavxai.service import guard
+
     p = Path(path)
+    where = "service.checkpoint"
+    remedy = "Give a model.pt written by `uavxai train SCENARIO --stage service --algo d3qn`."
     if not p.is_file():
-        raise CheckpointError(
-            f"service.checkpoint {p}: no such file. Give a model.pt written by "
-            "`uavxai train SCENARIO --stage service --algo d3qn`, or null for the shipped model."
-        )
-    try:
-        data = torch.load(p, map_location="cpu", weights_only=True)
-    except Exception as exc:  # noqa: BLE001 - torch raises many types for a bad file
-        raise CheckpointError(
-            f"service.checkpoint {p}: not a readable model file ({type(exc).__name__}). Give a "
-            "model.pt written by `uavxai train SCENARIO --stage service --algo d3qn`."
-        ) from None
+        raise CheckpointError(f"{where} {p}: no such file. {remedy[:-1]}, or null for the "
+                              "shipped model.")  # fmt: skip
+    data = guard.read_checkpoint(p, where, remedy)
     if not isinstance(data, dict) or data.get("format") != CHECKPOINT_FORMAT:
         raise CheckpointError(
             f"service.checkpoint {p}: not a uavxai service-point model (expected format "
             f"{CHECKPOINT_FORMAT}). Train one with `uavxai train SCENARIO --stage service "
             "--algo d3qn`."
         )
+    obs_dim = guard.declared_int(data, "obs_dim", 1, guard.MAX_OBS_DIM, p, where, remedy)
+    k = guard.declared_int(data, "k", 1, guard.MAX_USERS, p, where, remedy)
+    levels = guard.declared_int(data, "power_levels", 1, guard.MAX_POWER_LEVELS, p, where, remedy)
+    hidden = guard.declared_int(data, "hidden", 1, guard.MAX_HIDDEN_WIDTH, p, where, remedy)
+    layers = guard.declared_int(data, "layers", 1, guard.MAX_LAYERS, p, where, remedy)
+    dueling = guard.declared_bool(data, "dueling", p, where, remedy)
     try:
-        net = BranchingQNetwork(
-            data["obs_dim"],
-            data["k"],
-            data["power_levels"],
-            data["hidden"],
-            data["layers"],
-            data["dueling"],
-        )
-        net.load_state_dict(data["state_dict"])
+        net = guard.build_checked(
+            lambda: BranchingQNetwork(obs_dim, k, levels, hidden, layers, dueling),
+            data.get("state_dict"), p, where, remedy,
+        )  # fmt: skip
+        info = {key: data[key] for key in ("algo", "k", "power_levels", "dueling", "meta")}
     except (KeyError, RuntimeError, TypeError) as exc:
         raise CheckpointError(f"service.checkpoint {p}: damaged model file ({exc}).") from None
-    net.eval()
-    info = {key: data[key] for key in ("algo", "k", "power_levels", "dueling", "meta")}
     return net, info
 
 

@@ -640,22 +640,28 @@ def save(path: Path, net: SetQNetwork, algo: str, meta: dict[str, Any]) -> None:
 
 
 def load(path: str | Path) -> tuple[SetQNetwork, dict[str, Any]]:
+    """A model written by :func:`save`; any problem is a CheckpointError. The declared sizes
+    are bounded and compared with the stored tensors, and the weights must be finite, before
+    a network is allocated (:mod:`uavxai.service.guard`)."""
+    from uavxai.service import guard
+
     p = Path(path)
-    try:
-        data = torch.load(p, map_location="cpu", weights_only=True)
-    except FileNotFoundError:
-        raise CheckpointError(f"service model {p}: no such file.") from None
-    except Exception as exc:  # noqa: BLE001 - torch raises many types for a bad file
-        raise CheckpointError(f"service model {p}: unreadable ({type(exc).__name__}).") from None
+    where = "service model"
+    remedy = "Use a model written by `uavxai train SCENARIO --stage service`, or the shipped one."
+    data = guard.read_checkpoint(p, where, remedy)
     if not isinstance(data, dict) or data.get("format") != CHECKPOINT_FORMAT:
         raise CheckpointError(f"service model {p}: not a {CHECKPOINT_FORMAT} model.")
+    levels = guard.declared_int(data, "power_levels", 1, guard.MAX_POWER_LEVELS, p, where, remedy)
+    hidden = guard.declared_int(data, "hidden", 1, guard.MAX_HIDDEN_WIDTH, p, where, remedy)
+    dueling = guard.declared_bool(data, "dueling", p, where, remedy)
     try:
-        net = SetQNetwork(data["power_levels"], data["hidden"], data["dueling"])
-        net.load_state_dict(data["state_dict"])
+        net = guard.build_checked(
+            lambda: SetQNetwork(levels, hidden, dueling), data.get("state_dict"), p, where, remedy
+        )
+        info = {key: data[key] for key in ("algo", "k_max", "power_levels", "dueling")}
     except (KeyError, RuntimeError, TypeError) as exc:
         raise CheckpointError(f"service model {p}: damaged ({exc}).") from None
-    net.eval()
-    return net, {key: data[key] for key in ("algo", "k_max", "power_levels", "dueling")}
+    return net, info
 
 
 def config_dict(cfg: UniversalConfig) -> dict[str, Any]:
