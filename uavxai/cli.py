@@ -343,6 +343,31 @@ def read_marker(folder: Path) -> dict | None:
     return data if isinstance(data, dict) else None
 
 
+def _empty_for_force(out: Path, force: bool, had_marker: bool) -> None:
+    """Empty ``out`` (all but its marker) if ``--force`` allows it; a folder with other files
+    needs ``--force``, and ``--force`` needs the marker (a folder uavxai made). Links are
+    removed, never followed."""
+    others = [p for p in out.iterdir() if p.name != MARKER]
+    if not others:
+        return
+    if not force:
+        raise UserError(
+            f"--out {out}: the folder exists and is not empty; choose another folder or "
+            "pass --force to overwrite it."
+        )
+    if not had_marker:
+        raise UserError(
+            f"--out {out}: refusing --force, this folder was not written by uavxai (it "
+            f"has no {MARKER} marker); --force empties only folders uavxai made. Empty "
+            "it yourself or choose another --out."
+        )
+    for p in others:  # the marker stays: it is our lock
+        if p.is_dir() and not p.is_symlink():
+            shutil.rmtree(p)
+        else:
+            p.unlink()
+
+
 def prepare_out_dir(out: Path, force: bool, argv: Sequence[str] | None = None) -> Path:
     """Create (or reuse an empty) output folder, mark it as uavxai's and lock it.
 
@@ -392,24 +417,7 @@ def prepare_out_dir(out: Path, force: bool, argv: Sequence[str] | None = None) -
             "for it to end or choose another --out."
         ) from None
     try:
-        others = [p for p in out.iterdir() if p.name != MARKER]
-        if others:
-            if not force:
-                raise UserError(
-                    f"--out {out}: the folder exists and is not empty; choose another folder or "
-                    "pass --force to overwrite it."
-                )
-            if not had_marker:
-                raise UserError(
-                    f"--out {out}: refusing --force, this folder was not written by uavxai (it "
-                    f"has no {MARKER} marker); --force empties only folders uavxai made. Empty "
-                    "it yourself or choose another --out."
-                )
-            for p in others:  # the marker stays: it is our lock
-                if p.is_dir() and not p.is_symlink():
-                    shutil.rmtree(p)
-                else:
-                    p.unlink()
+        _empty_for_force(out, force, had_marker)
         lock.seek(0)
         lock.truncate()
         lock.write(
