@@ -59,3 +59,59 @@ def test_invalid_encounter_sections_are_refused_with_the_key(change, message) ->
         data.setdefault(section, {}).update(values)
     with pytest.raises(ScenarioError, match=message):
         parse_scenario(data)
+
+
+# ------------------------------------------------------------- the kinematic height channel
+@pytest.mark.parametrize(("h0", "target"), [(100.0, 160.0), (300.0, 280.0), (50.0, 51.0),
+                                            (200.0, 20.0)])
+def test_height_step_is_the_clipped_first_order_law_integrated_exactly(h0, target) -> None:
+    import numpy as np
+
+    from uavxai.sim.kinematic import height_step
+
+    gain, limit, dt = 0.2, 2.5, 1e-4
+    h = h0
+    for _ in range(int(round(7.0 / dt))):  # Euler at 0.1 ms: the law itself, 7 s of it
+        h += dt * min(max(gain * (target - h), -limit), limit)
+    exact = float(height_step(np.array([h0]), np.array([target]), gain, limit, 7.0)[0])
+    assert exact == pytest.approx(h, abs=1e-3)
+    # and in pieces: 7 steps of 1 s land on the same height
+    hs = np.array([h0])
+    for _ in range(7):
+        hs = height_step(hs, np.array([target]), gain, limit, 1.0)
+    assert float(hs[0]) == pytest.approx(exact, abs=1e-9)
+
+
+def test_kinematic_intruders_climb_at_most_at_their_climb_rate_limit() -> None:
+    import math
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from uavxai.scenario import default_scenario
+    from uavxai.sim.kinematic import KinematicWorld
+
+    # a track climbing at 5 m/s for 30 s: twice what ga_c172's autopilot may climb
+    t = np.arange(0.0, 60.01, 0.5)
+    vh = np.where((t >= 10) & (t < 40), 5.0, 0.0)
+    h = 200.0 + np.concatenate(([0.0], np.cumsum(vh[:-1] * 0.5)))
+    track = SimpleNamespace(t=t, x=np.zeros_like(t) + 2000, y=1000 + 45.0 * t, h=h,
+                            vx=np.zeros_like(t), vy=np.full_like(t, 45.0), vh=vh)
+    sc = default_scenario("climb", seed=1, world={"x": [0, 6000], "y": [0, 6000], "h": [10, 900]},
+                          ownship={"start": {"x": 500, "y": 500, "h": 150, "heading_deg": 0,
+                                             "speed_mps": 20}},
+                          intruders={"aircraft": "ga_c172", "flow": "none", "list": [
+                              {"x": 2000, "y": 1000, "h": 200, "heading_deg": 0,
+                               "speed_mps": 45}]})
+    world = KinematicWorld(sc, tracks={0: track})
+    heights, rates = [], []
+    for _ in range(90):  # 150 m at 2.5 m/s: a minute's climb, then the track's height
+        world.advance(1.0)
+        s = world.state()
+        heights.append(s.pos[1, 2])
+        rates.append(s.vel[1, 2])
+    heights, rates = np.array(heights), np.array(rates)
+    assert np.max(np.abs(np.diff(heights))) <= 2.5 + 1e-9
+    assert np.max(rates) == pytest.approx(2.5)  # it did climb at the limit
+    assert heights[-1] == pytest.approx(350.0, abs=1.0)  # and reached the track's height
+    assert math.isclose(heights[5], 200.0, abs_tol=1e-6)  # level before the climb

@@ -783,6 +783,27 @@ def aircraft_speed_range(name: str) -> tuple[float, float]:
     return found["ap/speed-min-mps"], found["ap/speed-max-mps"]
 
 
+@cache
+def aircraft_height_loop(name: str) -> tuple[float, float]:
+    """(gain 1/s, climb-rate limit m/s) of the aircraft autopilot's height loop: the climb-rate
+    demand is gain x (height target - height), clipped to +-limit (the gain of its
+    ``ap/climb-rate-cmd-mps`` and the initial value of ``ap/climb-rate-limit-mps`` in its XML,
+    read without JSBSim). An aircraft without them: (0.2, 2.5), the values of ours."""
+    gain, limit = 0.2, 2.5
+    for xml in sorted((aircraft_dir() / name).rglob("*.xml")):
+        try:
+            root = ET.parse(xml).getroot()
+        except (ET.ParseError, OSError):
+            continue
+        for prop in root.iter("property"):
+            if (prop.text or "").strip() == "ap/climb-rate-limit-mps" and "value" in prop.attrib:
+                limit = float(prop.attrib["value"])
+        for el in root.iter("pure_gain"):
+            if el.get("name") == "ap/climb-rate-cmd-mps" and el.find("gain") is not None:
+                gain = float((el.find("gain").text or "").strip() or gain)
+    return gain, limit
+
+
 # ----------------------------------------------------------------------------------- loading
 def check_mavlink_url(url: str) -> str:
     """Check the form of a pymavlink connection string (the bridge's rule, one place)."""
