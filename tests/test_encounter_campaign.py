@@ -180,3 +180,64 @@ def test_a_flown_encounter_without_avoidance_meets_its_sampled_geometry_at_tca()
         assert rec.path_excess == pytest.approx(0.0, abs=1e-9)
         assert not rec.alert and not rec.manoeuvre and rec.reversals == 0
     assert checked >= 5
+
+
+# --------------------------------------------------------------------------- campaigns
+def test_a_small_kinematic_encounter_campaign_writes_the_daa_columns(tmp_path) -> None:
+    import csv
+    import math
+
+    from uavxai.campaign import DAA_COLUMNS, ENCOUNTER_COLUMNS, evaluate_command
+    from uavxai.sim.encounter import draw_encounter
+
+    sc = short(duration=40, window=(15, 25))
+    out = tmp_path / "campaign"
+    evaluate_command(sc, ["none", "mcts_fast"], [1], 6, "kinematic", 1, None, out)
+    with (out / "episodes.csv").open() as f:
+        episodes = list(csv.DictReader(f))
+    with (out / "results.csv").open() as f:
+        results = {r["method"]: r for r in csv.DictReader(f)}
+    assert len(episodes) == 12 and set(ENCOUNTER_COLUMNS) <= set(episodes[0])
+    for r in episodes:
+        seed = int(r["seed"])
+        assert seed == sc.seed + int(r["episode"]) and r["intruders"] == "1"
+        # the weight is the encounter's, drawn again alone from its seed
+        assert float(r["weight"]) == pytest.approx(draw_encounter(sc, seed).weight, rel=1e-5)
+        assert math.isfinite(float(r["hmd_m"])) and math.isfinite(float(r["vmd_m"]))
+        assert float(r["vmd_m"]) >= 0 and int(r["reversals"]) >= 0
+        assert r["lowc"] in "01" and r["alert"] in "01" and r["manoeuvre"] in "01"
+        if r["outcome"] != "collision":
+            assert float(r["path_excess"]) >= -1e-9
+        if r["method"] == "none":
+            assert (r["alert"], r["manoeuvre"], r["reversals"]) == ("0", "0", "0")
+            assert float(r["path_excess"]) == pytest.approx(0.0, abs=1e-6)
+        # an NMAC is inside the well-clear cylinder too
+        assert not (r["nmac"] == "1" and r["lowc"] == "0")
+    assert set(results) == {"none", "mcts_fast"} and set(DAA_COLUMNS) <= set(results["none"])
+    for method, r in results.items():
+        for k in ("nmac_prob", "lowc_prob", "alert_rate", "mean_reversals", "mean_path_excess"):
+            assert math.isfinite(float(r[k])), (method, k)
+        assert 0.0 <= float(r["nmac_prob_lo"]) <= float(r["nmac_prob"]) <= float(r["nmac_prob_hi"])
+        assert r["ci_check"] in ("ok", "wide")
+    none = results["none"]
+    if float(none["lowc_prob"]) > 0:  # the baseline against itself: ratio 1
+        assert float(none["lowc_ratio"]) == pytest.approx(1.0)
+    assert float(none["alert_rate"]) == 0.0
+    # the weighted probabilities are the weighted means of the episode columns
+    for method, r in results.items():
+        rows = [e for e in episodes if e["method"] == method]
+        w = [float(e["weight"]) for e in rows]
+        lowc = sum(wi for wi, e in zip(w, rows, strict=True) if e["lowc"] == "1") / sum(w)
+        assert float(r["lowc_prob"]) == pytest.approx(lowc, rel=1e-5)
+
+
+def test_intruder_counts_are_refused_for_an_encounter_scenario(tmp_path) -> None:
+    from uavxai.campaign import run_campaign
+    from uavxai.cli import main
+    from uavxai.errors import UserError
+
+    with pytest.raises(UserError, match="leave --intruders out"):
+        run_campaign(short(), ["none"], [5], 1)
+    code = main(["evaluate", str(SCENARIO), "--methods", "none", "--intruders", "5",
+                 "--episodes", "1", "--out", str(tmp_path / "x")])
+    assert code != 0 and not (tmp_path / "x").exists()

@@ -89,6 +89,20 @@ EPISODE_COLUMNS = (
     "goal_h",
 )
 GOAL_COLUMNS = EPISODE_COLUMNS[-3:]
+# Encounter campaigns (a scenario with `encounters`, SPEC "Encounter campaigns") add these:
+# per episode (uavxai.sim.encounter), and per method the weighted DAA estimates of
+# uavxai.daa_metrics.daa_summary against `none` on the same encounters.
+ENCOUNTER_COLUMNS = (
+    "weight", "hmd_m", "vmd_m", "lowc", "alert", "manoeuvre", "reversals", "path_excess",
+)
+DAA_RATES = (
+    "nmac_prob", "nmac_risk_ratio", "induced_risk_ratio", "lowc_prob", "lowc_ratio",
+    "alert_rate", "unnecessary_manoeuvre_rate",
+)
+DAA_COLUMNS = (
+    *(f"{k}{end}" for k in DAA_RATES for end in ("", "_lo", "_hi")),
+    "ci_check", "mean_reversals", "mean_path_excess",
+)
 # The columns whose values depend on the machine, not on the seed.
 TIMING_COLUMNS = ("decision_ms_p50",)
 
@@ -132,8 +146,25 @@ def run_campaign_episode(
     sc = scenario.with_seed(seed)
     # The campaign's goal: the same for every episode (its scenario's, not the episode seed's).
     goal = episode_goal(scenario) if goal is None else tuple(goal)
-    intruders = draw_intruders(sc, np.random.default_rng(seed), n_intruders)
-    r = fly(sc, _planner(scenario, method), goal, dynamics=dynamics, intruders=intruders)
+    extra: dict = {}
+    if scenario.encounters is not None:  # episode i is encounter i, with its one intruder
+        from uavxai.sim.encounter import fly_encounter
+
+        r, rec, _ = fly_encounter(scenario, _planner(scenario, method), seed, dynamics)
+        n_intruders = 1
+        extra = {
+            "weight": float(rec.weight),
+            "hmd_m": round(rec.hmd_m, 3),
+            "vmd_m": round(rec.vmd_m, 3),
+            "lowc": int(rec.lowc),
+            "alert": int(rec.alert),
+            "manoeuvre": int(rec.manoeuvre),
+            "reversals": int(rec.reversals),
+            "path_excess": float(rec.path_excess),
+        }
+    else:
+        intruders = draw_intruders(sc, np.random.default_rng(seed), n_intruders)
+        r = fly(sc, _planner(scenario, method), goal, dynamics=dynamics, intruders=intruders)
     ms = r.decision_ms
     return {
         "method": method,
@@ -148,6 +179,7 @@ def run_campaign_episode(
         "nmac": int(r.nmac),
         "decision_ms_p50": round(float(np.median(ms)), 4) if ms else math.nan,
         **{k: round(float(v), 3) for k, v in zip(GOAL_COLUMNS, goal, strict=True)},
+        **extra,
         "decision_ms": ms,
     }
 
@@ -368,6 +400,11 @@ def _check(scenario, methods, intruders, episodes, dynamics, workers) -> None:
         raise UserError(f"--methods {','.join(methods)}: allowed {', '.join(METHODS)}.")
     if not intruders or any(int(n) < 0 for n in intruders):
         raise UserError("--intruders: give one or more counts >= 0, e.g. 5,10,20,40.")
+    if scenario.encounters is not None and list(intruders) != [1]:
+        raise UserError(
+            f"scenario '{scenario.name}' flies encounters: each episode has its sampled "
+            "encounter's one intruder, so intruder counts cannot vary it (leave --intruders out)."
+        )
     if scenario.intruders.list is not None:
         raise UserError(
             f"scenario '{scenario.name}': intruders.list fixes the traffic, so --intruders "
@@ -393,8 +430,73 @@ def summarise(rows: Iterable[dict]) -> list[dict]:
     groups: dict[tuple[str, int], list[dict]] = {}
     for r in rows:
         groups.setdefault((r["method"], int(r["intruders"])), []).append(r)
-    return [_summary_row(method, n, rs, groups.get(("none", n))) for (method, n), rs in
-            groups.items()]  # fmt: skip
+    out = [_summary_row(method, n, rs, groups.get(("none", n))) for (method, n), rs in
+           groups.items()]  # fmt: skip
+    if rows and all(_is_encounter_row(r) for r in rows):
+        for row in out:
+            n = row["intruders"]
+            row.update(_daa_row(row["method"], groups[(row["method"], n)], groups.get(("none", n))))
+    return out
+
+
+def _is_encounter_row(r: dict) -> bool:
+    """A row of an encounter campaign (it has a weight)."""
+    return str(r.get("weight", "")) != ""
+
+
+def _number(v) -> float:
+    """A cell as a number; empty (not defined, as write_csv writes nan) is nan."""
+    return math.nan if v is None or v == "" else float(v)
+
+
+def columns_of(rows: Sequence[dict]) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """The (episodes.csv, results.csv) columns of a campaign's rows: with the encounter
+    columns when every row is an encounter's."""
+    if rows and all(_is_encounter_row(r) for r in rows):
+        return EPISODE_COLUMNS + ENCOUNTER_COLUMNS, RESULT_COLUMNS + DAA_COLUMNS
+    return EPISODE_COLUMNS, RESULT_COLUMNS
+
+
+def _daa_row(method: str, rs: list[dict], baseline: list[dict] | None) -> dict:
+    """The weighted DAA columns of one method against ``none`` on the encounters (seeds) both
+    flew (uavxai.daa_metrics.daa_summary); nan (and ci_check empty) without ``none``."""
+    from uavxai.daa_metrics import daa_summary
+
+    row: dict = {k: math.nan for k in DAA_COLUMNS}
+    row["ci_check"] = ""
+    if baseline is None:
+        return row
+
+    def by_seed(group: list[dict]) -> dict[int, dict]:
+        return {int(r["seed"]): r for r in group}
+
+    mine, base = by_seed(rs), by_seed(baseline)
+    seeds = sorted(set(mine) & set(base))
+    if not seeds:
+        return row
+
+    def columns(group: dict[int, dict]) -> dict[str, np.ndarray]:
+        def col(key: str) -> np.ndarray:
+            return np.array([_number(group[s][key]) for s in seeds])
+
+        cols = {k: col(k) > 0.5 for k in ("nmac", "lowc", "alert", "manoeuvre")}
+        cols.update(reversals=col("reversals"), path_excess=col("path_excess"))
+        return cols
+
+    weights = np.array([float(base[s]["weight"]) for s in seeds])
+    theirs = np.array([float(mine[s]["weight"]) for s in seeds])
+    if not np.allclose(weights, theirs, rtol=1e-6, atol=0.0):
+        raise UserError(
+            f"{method}: its encounters' weights differ from none's on the same seeds; these "
+            "episodes were not flown on the same encounters (another scenario?)."
+        )
+    per = {"none": columns(base)}
+    if method != "none":
+        per[method] = columns(mine)
+    est = daa_summary(per, weights)[method]
+    row.update({k: est[k] for k in DAA_COLUMNS if k in est})
+    row["mean_reversals"], row["mean_path_excess"] = est["reversals"], est["path_excess"]
+    return row
 
 
 def _events(rs: Sequence[dict], key: str) -> dict[int, bool]:
@@ -537,10 +639,16 @@ def merge_campaigns(sources: Sequence[str | Path], out: str | Path, title: str =
                 key = (r["method"], int(r["intruders"]), int(r["seed"]))
                 for column in ("steps", "min_separation_m", "nmac"):  # summarise reads these
                     float(r[column] or 0)
+                if _is_encounter_row(r):  # and these of an encounter campaign
+                    if not 0 < float(r["weight"]) < math.inf:
+                        raise ValueError
+                    for column in ENCOUNTER_COLUMNS[1:]:
+                        _number(r.get(column))
             except (TypeError, ValueError):
                 raise UserError(
                     f"{src / 'episodes.csv'} line {i}: intruders, seed, steps, "
-                    "min_separation_m and nmac must be numbers."
+                    "min_separation_m and nmac must be numbers (and in an encounter campaign "
+                    f"{', '.join(ENCOUNTER_COLUMNS)}, the weight > 0)."
                 ) from None
             if key in flown_by:
                 raise UserError(
@@ -553,6 +661,12 @@ def merge_campaigns(sources: Sequence[str | Path], out: str | Path, title: str =
             if any(goal):
                 goals.setdefault(goal, src)
         episodes.extend(rows)
+    kinds = {_is_encounter_row(r) for r in episodes}
+    if len(kinds) > 1:
+        raise UserError(
+            "these campaigns mix encounter campaigns (episodes.csv with weight, hmd_m, ...) and "
+            "random-traffic ones; merge campaigns of the same scenario."
+        )
         for r in _read_rows(src / "results.csv", RESULT_COLUMNS):
             # garbage timing: nothing to keep, the row's own median of medians stands
             with contextlib.suppress(ValueError):
@@ -571,8 +685,9 @@ def merge_campaigns(sources: Sequence[str | Path], out: str | Path, title: str =
         if len(sources_of[(r["method"], r["intruders"])]) == 1:
             r["decision_ms_p50"] = p50.get((r["method"], r["intruders"]), r["decision_ms_p50"])
     out.mkdir(parents=True, exist_ok=True)
-    write_csv(out / "results.csv", RESULT_COLUMNS, results)
-    write_csv(out / "episodes.csv", EPISODE_COLUMNS, episodes)
+    episode_columns, result_columns = columns_of(episodes)
+    write_csv(out / "results.csv", result_columns, results)
+    write_csv(out / "episodes.csv", episode_columns, episodes)
     plot_results(results, out, title)
     return results
 
@@ -654,11 +769,14 @@ def evaluate_command(
             raise
     results = summarise(rows)
     out.mkdir(parents=True, exist_ok=True)
-    write_csv(out / "episodes.csv", EPISODE_COLUMNS, rows)
-    write_csv(out / "results.csv", RESULT_COLUMNS, results)
+    episode_columns, result_columns = columns_of(rows)
+    write_csv(out / "episodes.csv", episode_columns, rows)
+    write_csv(out / "results.csv", result_columns, results)
     plots = plot_results(results, out, f"{scenario.name}, {dynamics}, {episodes} episodes")
     wall = time.perf_counter() - wall0
     console.print(results_table(results))
+    if scenario.encounters is not None:
+        console.print(daa_table(results))
     console.print(f"wrote {out / 'results.csv'}, {out / 'episodes.csv'} and {len(plots)} plots")
     return {"episodes": len(rows), "wall_s": wall, "results": results}
 
@@ -671,8 +789,9 @@ def _keep_finished(rows: list[dict], out: Path, console) -> None:
         (r["method"], r["intruders"], r["episode"]) for r in rows))}  # fmt: skip
     rows = sorted(rows, key=lambda r: order[(r["method"], r["intruders"], r["episode"])])
     out.mkdir(parents=True, exist_ok=True)
-    write_csv(out / "episodes.csv", EPISODE_COLUMNS, rows)
-    write_csv(out / "results.csv", RESULT_COLUMNS, summarise(rows))
+    episode_columns, result_columns = columns_of(rows)
+    write_csv(out / "episodes.csv", episode_columns, rows)
+    write_csv(out / "results.csv", result_columns, summarise(rows))
     console.print(
         f"interrupted: kept the {len(rows)} finished episodes in {out / 'episodes.csv'} and "
         f"{out / 'results.csv'}"
@@ -700,4 +819,24 @@ def results_table(results: Sequence[dict]):
             f"{r['mean_steps']:.1f}",
             f"{r['decision_ms_p50']:.2f}",
         )
+    return t
+
+
+def daa_table(results: Sequence[dict]):
+    """The weighted detect-and-avoid columns of an encounter campaign, one row per method."""
+    from rich.table import Table
+
+    def ci(r: dict, key: str) -> str:
+        v, lo, hi = (_number(r.get(k)) for k in (key, f"{key}_lo", f"{key}_hi"))
+        return "-" if math.isnan(v) else f"{v:.3g} [{lo:.3g}, {hi:.3g}]"
+
+    t = Table("method", "encounters", "P(NMAC)", "NMAC risk ratio", "induced", "P(LoWC)",
+              "LoWC ratio", "alert rate", "unnecessary manoeuvre", "reversals", "path excess",
+              "CI check", title="detect and avoid (weighted, 95 % bootstrap)")  # fmt: skip
+    for r in results:
+        t.add_row(r["method"], str(r["episodes"]), ci(r, "nmac_prob"), ci(r, "nmac_risk_ratio"),
+                  ci(r, "induced_risk_ratio"), ci(r, "lowc_prob"), ci(r, "lowc_ratio"),
+                  ci(r, "alert_rate"), ci(r, "unnecessary_manoeuvre_rate"),
+                  f"{_number(r.get('mean_reversals')):.2f}",
+                  f"{_number(r.get('mean_path_excess')):.4f}", str(r.get("ci_check", "")))
     return t
