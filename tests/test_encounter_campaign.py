@@ -241,3 +241,29 @@ def test_intruder_counts_are_refused_for_an_encounter_scenario(tmp_path) -> None
     code = main(["evaluate", str(SCENARIO), "--methods", "none", "--intruders", "5",
                  "--episodes", "1", "--out", str(tmp_path / "x")])
     assert code != 0 and not (tmp_path / "x").exists()
+
+
+def test_a_jsbsim_encounter_with_a_cessna_flies_to_its_end_and_records_its_columns() -> None:
+    """Encounter 2 (an NMAC-class one: HMD 85 m, VMD 24 m at TCA 13 s) in JSBSim, the
+    intruder a ga_c172: flown out (30 s) with `none` it passes near its sampled geometry (the
+    Cessna follows its track within ~10 m); flown with mcts_vertical, the row has every
+    column."""
+    import math
+
+    from uavxai.campaign import ENCOUNTER_COLUMNS, run_campaign_episode
+    from uavxai.sim.encounter import draw_encounter
+
+    sc = short(duration=30, window=(10, 20))
+    enc = draw_encounter(sc, 2)
+    r, rec, _, own, intr = _fly(sc, "none", 2, "jsbsim")
+    assert r.outcome.value == "timeout" and r.steps == 30  # flown to its end, no failure
+    assert rec.weight == enc.weight and rec.lowc  # 85 m by 24 m: inside well clear
+    assert rec.hmd_m == pytest.approx(enc.hmd, abs=30.0)
+    assert rec.vmd_m == pytest.approx(abs(enc.vmd), abs=10.0)
+    assert len(own) == len(intr) == 30 * sc.dynamics.trajectory_hz + 1
+    row = run_campaign_episode(sc, "mcts_vertical", 1, 2, "jsbsim")
+    assert row["outcome"] in ("timeout", "collision")
+    assert row["weight"] == pytest.approx(enc.weight)
+    for k in ENCOUNTER_COLUMNS:
+        assert math.isfinite(float(row[k])), k
+    assert row["manoeuvre"] == 1 and row["alert"] == 1  # an NMAC ahead: it does something
