@@ -188,6 +188,7 @@ def test_a_small_kinematic_encounter_campaign_writes_the_daa_columns(tmp_path) -
     import math
 
     from uavxai.campaign import DAA_COLUMNS, ENCOUNTER_COLUMNS, evaluate_command
+    from uavxai.errors import UserError
     from uavxai.sim.encounter import draw_encounter
 
     sc = short(duration=40, window=(15, 25))
@@ -229,6 +230,28 @@ def test_a_small_kinematic_encounter_campaign_writes_the_daa_columns(tmp_path) -
         w = [float(e["weight"]) for e in rows]
         lowc = sum(wi for wi, e in zip(w, rows, strict=True) if e["lowc"] == "1") / sum(w)
         assert float(r["lowc_prob"]) == pytest.approx(lowc, rel=1e-5)
+    # merge: the same campaign split in two by seed pools back into the same results
+    from uavxai.campaign import merge_campaigns
+
+    halves = (("a", lambda e: int(e["episode"]) < 3), ("b", lambda e: int(e["episode"]) >= 3))
+    for part, keep in halves:
+        folder = tmp_path / part
+        folder.mkdir()
+        with (folder / "episodes.csv").open("w", newline="") as f:
+            w = csv.DictWriter(f, list(episodes[0]))
+            w.writeheader()
+            w.writerows(e for e in episodes if keep(e))
+        (folder / "results.csv").write_text((out / "results.csv").read_text())
+    merged = {r["method"]: r for r in merge_campaigns([tmp_path / "a", tmp_path / "b"],
+                                                       tmp_path / "m")}
+    for method, r in results.items():
+        for k in ("nmac_prob", "lowc_prob", "lowc_prob_hi", "alert_rate", "mean_path_excess"):
+            assert float(merged[method][k]) == pytest.approx(float(r[k]), rel=1e-4), k
+    with (tmp_path / "a" / "episodes.csv").open() as f:
+        broken = f.read().replace(f",{episodes[0]['weight']},", ",-1,", 1)
+    (tmp_path / "a" / "episodes.csv").write_text(broken)
+    with pytest.raises(UserError, match="weight"):
+        merge_campaigns([tmp_path / "a", tmp_path / "b"], tmp_path / "m2")
 
 
 def test_intruder_counts_are_refused_for_an_encounter_scenario(tmp_path) -> None:

@@ -20,8 +20,9 @@ The record's definitions (docs/daa-metrics.md, "In campaigns"):
   inside ``d_min_m`` plus the intruder's margin within the planner's look-ahead). A planner
   that reports no options (``none``) never alerts;
 * ``manoeuvre``: at some decision, the command sent differs from what ``none`` would have sent
-  in that state: another bank command (by more than 1e-6 rad), another acceleration, or a
-  height target more than 1 m off the leg's height. ``none`` never manoeuvres;
+  in that state: another bank command (by more than 1e-6 rad), another acceleration as flown
+  (a speed-up at the top speed, a slow-down at the bottom one, is none), or a height target
+  more than 1 m off the leg's height. ``none`` never manoeuvres;
 * ``reversals``: :func:`uavxai.daa_metrics.reversals` of the bank commands sent;
 * ``path_excess``: flown 3-D path length over the progress made along the straight route
   (start toward goal) by the episode's end, minus 1 (0 for a straight, level flight). Not over
@@ -192,8 +193,18 @@ class EncounterObserver(Observer):
             self.alert = child is not None and child.meets is not None
         if not self.manoeuvre:
             high = d.alt_target_m is not None and abs(d.alt_target_m - goal[2]) > HEIGHT_TOL_M
+            accel = self._effective(event.own, d.accel_mps2)
             self.manoeuvre = (abs(d.bank_cmd_rad - base.bank_cmd_rad) > BANK_TOL_RAD
-                              or abs(d.accel_mps2 - base.accel_mps2) > 1e-9 or high)
+                              or abs(accel - self._effective(event.own, base.accel_mps2)) > 1e-9
+                              or high)
+
+    def _effective(self, own, accel: float) -> float:
+        """An acceleration command as flown: none beyond the speed limits (a speed-up at the
+        top speed holds the speed, as the autopilot's speed limits make it)."""
+        lo, hi = own.speed_band or self.none.config.speed_mps
+        if (accel > 0 and own.speed >= hi - 1e-6) or (accel < 0 and own.speed <= lo + 1e-6):
+            return 0.0
+        return float(accel)
 
 
 def path_excess_along(own: np.ndarray, start: np.ndarray, heading: float) -> float:
