@@ -661,16 +661,15 @@ def merge_campaigns(sources: Sequence[str | Path], out: str | Path, title: str =
             if any(goal):
                 goals.setdefault(goal, src)
         episodes.extend(rows)
-    kinds = {_is_encounter_row(r) for r in episodes}
-    if len(kinds) > 1:
-        raise UserError(
-            "these campaigns mix encounter campaigns (episodes.csv with weight, hmd_m, ...) and "
-            "random-traffic ones; merge campaigns of the same scenario."
-        )
         for r in _read_rows(src / "results.csv", RESULT_COLUMNS):
             # garbage timing: nothing to keep, the row's own median of medians stands
             with contextlib.suppress(ValueError):
                 p50[(r["method"], int(r["intruders"]))] = float(r["decision_ms_p50"] or "nan")
+    if len({_is_encounter_row(r) for r in episodes}) > 1:
+        raise UserError(
+            "these campaigns mix encounter campaigns (episodes.csv with weight, hmd_m, ...) and "
+            "random-traffic ones; merge campaigns of the same scenario."
+        )
     if len(goals) > 1:
         what = "; ".join(f"{src}: ({', '.join(g)})" for g, src in goals.items())
         raise UserError(
