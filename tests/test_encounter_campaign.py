@@ -290,3 +290,33 @@ def test_a_jsbsim_encounter_with_a_cessna_flies_to_its_end_and_records_its_colum
     for k in ENCOUNTER_COLUMNS:
         assert math.isfinite(float(row[k])), k
     assert row["manoeuvre"] == 1 and row["alert"] == 1  # an NMAC ahead: it does something
+
+
+# ------------------------------------------------------------ the intruder aircraft's limits
+def test_limit_track_bounds_speed_vertical_rate_and_turn_rate_and_keeps_flyable_tracks() -> None:
+    import math
+
+    import numpy as np
+
+    from uavxai.encounters import default_model, sample_track
+    from uavxai.encounters.tracks import limit_track
+
+    model, rng = default_model(), np.random.default_rng(4)
+    bank, g = math.radians(24.0), 9.80665
+    changed = 0
+    for _ in range(20):
+        tr = sample_track(model, rng, 120, {"G": 0, "A": 3, "L": 0})
+        lim = limit_track(tr, max_speed=60.0, max_vertical_rate=2.5, max_bank=bank)
+        speed = lim.speed
+        assert speed.max() <= 60.0 + 1e-9 and np.abs(lim.vh).max() <= 2.5 + 1e-12
+        rate = np.abs(np.diff(np.unwrap(np.arctan2(lim.vx, lim.vy))))  # per 1-s step
+        assert np.all(rate <= g * math.tan(bank) / speed[:-1] + 1e-9)
+        # positions are the integral of the velocities (sample2track's Euler step)
+        assert np.allclose(np.diff(lim.x), lim.vx[:-1]) and np.allclose(np.diff(lim.h), lim.vh[:-1])
+        if lim is tr:  # nothing beyond the limits: the very same track
+            assert tr.speed.max() <= 60 and np.abs(tr.vh).max() <= 2.5
+        else:
+            changed += 1
+    assert changed > 0
+    unlimited = sample_track(model, np.random.default_rng(5), 120, {"G": 0, "A": 3, "L": 0})
+    assert limit_track(unlimited) is unlimited
