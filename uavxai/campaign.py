@@ -18,6 +18,11 @@ kinematic encounter model or in JSBSim, with the planner's commands going straig
 autopilot (no MAVLink, no recording); the goal is the scenario's (``ownship.goal``, else the
 service point of the campaign's scenario), the same for every episode and as ``uavxai run``.
 
+A scenario with an ``encounters`` section (SPEC "Encounter campaigns") flies episode ``i`` as
+encounter ``i`` (:func:`uavxai.sim.encounter.fly_encounter`, seed ``scenario.seed + i``, one
+intruder: intruder counts are refused); its rows gain ``ENCOUNTER_COLUMNS`` and its results the
+weighted ``DAA_COLUMNS`` against ``none`` on the same seeds (docs/daa-metrics.md).
+
 Episodes run in this process (``workers=1``), in local worker processes (``workers>1``; the
 ``forkserver`` context, one torch thread each) or as Ray tasks (``ray_address``: ``local``
 starts a private Ray instance on this machine, ``auto`` joins the cluster this machine belongs
