@@ -189,10 +189,12 @@ def test_track_pilot_follows_a_turn_then_a_climb_in_jsbsim(aircraft, speed, tol_
     assert abs(vertical[-1]) < 2.0
 
 
-def test_track_pilot_in_the_kinematic_world_follows_the_horizontal_track_only() -> None:
+def test_track_pilot_in_the_kinematic_world_follows_the_turn_and_the_climb() -> None:
     horizontal, vertical = follow(KinematicWorld, NAME, 50.0)
     assert horizontal.max() < 50.0  # 2.3 m measured
-    assert vertical[-1] == pytest.approx(-40.0)  # its intruders hold their height
+    # the 2 m/s climb within the 2.5 m/s limit: the height loop's feed-forward keeps it close
+    assert np.abs(vertical).max() < 5.0
+    assert abs(vertical[-1]) < 1.0
 
 
 def test_track_pilot_law() -> None:

@@ -18,6 +18,11 @@ kinematic encounter model or in JSBSim, with the planner's commands going straig
 autopilot (no MAVLink, no recording); the goal is the scenario's (``ownship.goal``, else the
 service point of the campaign's scenario), the same for every episode and as ``uavxai run``.
 
+A scenario with an ``encounters`` section (SPEC "Encounter campaigns") flies episode ``i`` as
+encounter ``i`` (:func:`uavxai.sim.encounter.fly_encounter`, seed ``scenario.seed + i``, one
+intruder: intruder counts are refused); its rows gain ``ENCOUNTER_COLUMNS`` and its results the
+weighted ``DAA_COLUMNS`` against ``none`` on the same seeds (docs/daa-metrics.md).
+
 Episodes run in this process (``workers=1``), in local worker processes (``workers>1``; the
 ``forkserver`` context, one torch thread each) or as Ray tasks (``ray_address``: ``local``
 starts a private Ray instance on this machine, ``auto`` joins the cluster this machine belongs
@@ -92,6 +97,20 @@ EPISODE_COLUMNS = (
     "goal_h",
 )
 GOAL_COLUMNS = EPISODE_COLUMNS[-3:]
+# Encounter campaigns (a scenario with `encounters`, SPEC "Encounter campaigns") add these:
+# per episode (uavxai.sim.encounter), and per method the weighted DAA estimates of
+# uavxai.daa_metrics.daa_summary against `none` on the same encounters.
+ENCOUNTER_COLUMNS = (
+    "weight", "hmd_m", "vmd_m", "lowc", "alert", "manoeuvre", "reversals", "path_excess",
+)
+DAA_RATES = (
+    "nmac_prob", "nmac_risk_ratio", "induced_risk_ratio", "lowc_prob", "lowc_ratio",
+    "alert_rate", "unnecessary_manoeuvre_rate",
+)
+DAA_COLUMNS = (
+    *(f"{k}{end}" for k in DAA_RATES for end in ("", "_lo", "_hi")),
+    "ci_check", "mean_reversals", "mean_path_excess",
+)
 # The columns whose values depend on the machine, not on the seed.
 TIMING_COLUMNS = ("decision_ms_p50",)
 
@@ -135,8 +154,25 @@ def run_campaign_episode(
     sc = scenario.with_seed(seed)
     # The campaign's goal: the same for every episode (its scenario's, not the episode seed's).
     goal = episode_goal(scenario) if goal is None else tuple(goal)
-    intruders = draw_intruders(sc, np.random.default_rng(seed), n_intruders)
-    r = fly(sc, _planner(scenario, method), goal, dynamics=dynamics, intruders=intruders)
+    extra: dict = {}
+    if scenario.encounters is not None:  # episode i is encounter i, with its one intruder
+        from uavxai.sim.encounter import fly_encounter
+
+        r, rec, _ = fly_encounter(scenario, _planner(scenario, method), seed, dynamics)
+        n_intruders = 1
+        extra = {
+            "weight": float(rec.weight),
+            "hmd_m": round(rec.hmd_m, 3),
+            "vmd_m": round(rec.vmd_m, 3),
+            "lowc": int(rec.lowc),
+            "alert": int(rec.alert),
+            "manoeuvre": int(rec.manoeuvre),
+            "reversals": int(rec.reversals),
+            "path_excess": float(rec.path_excess),
+        }
+    else:
+        intruders = draw_intruders(sc, np.random.default_rng(seed), n_intruders)
+        r = fly(sc, _planner(scenario, method), goal, dynamics=dynamics, intruders=intruders)
     ms = r.decision_ms
     return {
         "method": method,
@@ -151,6 +187,7 @@ def run_campaign_episode(
         "nmac": int(r.nmac),
         "decision_ms_p50": round(float(np.median(ms)), 4) if ms else math.nan,
         **{k: round(float(v), 3) for k, v in zip(GOAL_COLUMNS, goal, strict=True)},
+        **extra,
         "decision_ms": ms,
     }
 
@@ -371,6 +408,11 @@ def _check(scenario, methods, intruders, episodes, dynamics, workers) -> None:
         raise UserError(f"--methods {','.join(methods)}: allowed {', '.join(METHODS)}.")
     if not intruders or any(int(n) < 0 for n in intruders):
         raise UserError("--intruders: give one or more counts >= 0, e.g. 5,10,20,40.")
+    if scenario.encounters is not None and list(intruders) != [1]:
+        raise UserError(
+            f"scenario '{scenario.name}' flies encounters: each episode has its sampled "
+            "encounter's one intruder, so intruder counts cannot vary it (leave --intruders out)."
+        )
     if scenario.intruders.list is not None:
         raise UserError(
             f"scenario '{scenario.name}': intruders.list fixes the traffic, so --intruders "
@@ -396,8 +438,73 @@ def summarise(rows: Iterable[dict]) -> list[dict]:
     groups: dict[tuple[str, int], list[dict]] = {}
     for r in rows:
         groups.setdefault((r["method"], int(r["intruders"])), []).append(r)
-    return [_summary_row(method, n, rs, groups.get(("none", n))) for (method, n), rs in
-            groups.items()]  # fmt: skip
+    out = [_summary_row(method, n, rs, groups.get(("none", n))) for (method, n), rs in
+           groups.items()]  # fmt: skip
+    if rows and all(_is_encounter_row(r) for r in rows):
+        for row in out:
+            n = row["intruders"]
+            row.update(_daa_row(row["method"], groups[(row["method"], n)], groups.get(("none", n))))
+    return out
+
+
+def _is_encounter_row(r: dict) -> bool:
+    """A row of an encounter campaign (it has a weight)."""
+    return str(r.get("weight", "")) != ""
+
+
+def _number(v) -> float:
+    """A cell as a number; empty (not defined, as write_csv writes nan) is nan."""
+    return math.nan if v is None or v == "" else float(v)
+
+
+def columns_of(rows: Sequence[dict]) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """The (episodes.csv, results.csv) columns of a campaign's rows: with the encounter
+    columns when every row is an encounter's."""
+    if rows and all(_is_encounter_row(r) for r in rows):
+        return EPISODE_COLUMNS + ENCOUNTER_COLUMNS, RESULT_COLUMNS + DAA_COLUMNS
+    return EPISODE_COLUMNS, RESULT_COLUMNS
+
+
+def _daa_row(method: str, rs: list[dict], baseline: list[dict] | None) -> dict:
+    """The weighted DAA columns of one method against ``none`` on the encounters (seeds) both
+    flew (uavxai.daa_metrics.daa_summary); nan (and ci_check empty) without ``none``."""
+    from uavxai.daa_metrics import daa_summary
+
+    row: dict = {k: math.nan for k in DAA_COLUMNS}
+    row["ci_check"] = ""
+    if baseline is None:
+        return row
+
+    def by_seed(group: list[dict]) -> dict[int, dict]:
+        return {int(r["seed"]): r for r in group}
+
+    mine, base = by_seed(rs), by_seed(baseline)
+    seeds = sorted(set(mine) & set(base))
+    if not seeds:
+        return row
+
+    def columns(group: dict[int, dict]) -> dict[str, np.ndarray]:
+        def col(key: str) -> np.ndarray:
+            return np.array([_number(group[s][key]) for s in seeds])
+
+        cols = {k: col(k) > 0.5 for k in ("nmac", "lowc", "alert", "manoeuvre")}
+        cols.update(reversals=col("reversals"), path_excess=col("path_excess"))
+        return cols
+
+    weights = np.array([float(base[s]["weight"]) for s in seeds])
+    theirs = np.array([float(mine[s]["weight"]) for s in seeds])
+    if not np.allclose(weights, theirs, rtol=1e-6, atol=0.0):
+        raise UserError(
+            f"{method}: its encounters' weights differ from none's on the same seeds; these "
+            "episodes were not flown on the same encounters (another scenario?)."
+        )
+    per = {"none": columns(base)}
+    if method != "none":
+        per[method] = columns(mine)
+    est = daa_summary(per, weights)[method]
+    row.update({k: est[k] for k in DAA_COLUMNS if k in est})
+    row["mean_reversals"], row["mean_path_excess"] = est["reversals"], est["path_excess"]
+    return row
 
 
 def _events(rs: Sequence[dict], key: str) -> dict[int, bool]:
@@ -541,6 +648,18 @@ def merge_campaigns(sources: Sequence[str | Path], out: str | Path, title: str =
         # files written before the goal was recorded lack its columns, and are taken on trust
         rows = _read_rows(src / "episodes.csv", EPISODE_COLUMNS[: -len(GOAL_COLUMNS)])
         rows = [_checked_row(r, src / "episodes.csv", i) for i, r in enumerate(rows, start=2)]
+        for i, r in enumerate(rows, start=2):
+            try:
+                if _is_encounter_row(r):  # an encounter campaign's columns
+                    if not 0 < float(r["weight"]) < math.inf:
+                        raise ValueError
+                    for column in ENCOUNTER_COLUMNS[1:]:
+                        _number(r.get(column))
+            except (TypeError, ValueError):
+                raise UserError(
+                    f"{src / 'episodes.csv'} line {i}: in an encounter campaign "
+                    f"{', '.join(ENCOUNTER_COLUMNS)} must be numbers, the weight > 0."
+                ) from None
         for r in rows:
             key = (r["method"], r["intruders"], r["seed"])
             if key in flown_by:
@@ -560,6 +679,11 @@ def merge_campaigns(sources: Sequence[str | Path], out: str | Path, title: str =
                 ms = float(r["decision_ms_p50"] or "nan")
                 if math.isfinite(ms) and ms >= 0:
                     p50[(r["method"], int(r["intruders"]))] = ms
+    if len({_is_encounter_row(r) for r in episodes}) > 1:
+        raise UserError(
+            "these campaigns mix encounter campaigns (episodes.csv with weight, hmd_m, ...) and "
+            "random-traffic ones; merge campaigns of the same scenario."
+        )
     if len(goals) > 1:
         what = "; ".join(f"{src}: ({', '.join(map(str, g))})" for g, src in goals.items())
         raise UserError(
@@ -574,8 +698,9 @@ def merge_campaigns(sources: Sequence[str | Path], out: str | Path, title: str =
         if len(sources_of[(r["method"], r["intruders"])]) == 1:
             r["decision_ms_p50"] = p50.get((r["method"], r["intruders"]), r["decision_ms_p50"])
     out.mkdir(parents=True, exist_ok=True)
-    write_csv(out / "results.csv", RESULT_COLUMNS, results)
-    write_csv(out / "episodes.csv", EPISODE_COLUMNS, episodes)
+    episode_columns, result_columns = columns_of(episodes)
+    write_csv(out / "results.csv", result_columns, results)
+    write_csv(out / "episodes.csv", episode_columns, episodes)
     plot_results(results, out, title)
     return results
 
@@ -710,11 +835,14 @@ def evaluate_command(
             raise
     results = summarise(rows)
     out.mkdir(parents=True, exist_ok=True)
-    write_csv(out / "episodes.csv", EPISODE_COLUMNS, rows)
-    write_csv(out / "results.csv", RESULT_COLUMNS, results)
+    episode_columns, result_columns = columns_of(rows)
+    write_csv(out / "episodes.csv", episode_columns, rows)
+    write_csv(out / "results.csv", result_columns, results)
     plots = plot_results(results, out, f"{scenario.name}, {dynamics}, {episodes} episodes")
     wall = time.perf_counter() - wall0
     console.print(results_table(results))
+    if scenario.encounters is not None:
+        console.print(daa_table(results))
     console.print(f"wrote {out / 'results.csv'}, {out / 'episodes.csv'} and {len(plots)} plots")
     return {"episodes": len(rows), "wall_s": wall, "results": results}
 
@@ -727,8 +855,9 @@ def _keep_finished(rows: list[dict], out: Path, console) -> None:
         (r["method"], r["intruders"], r["episode"]) for r in rows))}  # fmt: skip
     rows = sorted(rows, key=lambda r: order[(r["method"], r["intruders"], r["episode"])])
     out.mkdir(parents=True, exist_ok=True)
-    write_csv(out / "episodes.csv", EPISODE_COLUMNS, rows)
-    write_csv(out / "results.csv", RESULT_COLUMNS, summarise(rows))
+    episode_columns, result_columns = columns_of(rows)
+    write_csv(out / "episodes.csv", episode_columns, rows)
+    write_csv(out / "results.csv", result_columns, summarise(rows))
     console.print(
         f"interrupted: kept the {len(rows)} finished episodes in {out / 'episodes.csv'} and "
         f"{out / 'results.csv'}"
@@ -756,4 +885,24 @@ def results_table(results: Sequence[dict]):
             f"{r['mean_steps']:.1f}",
             f"{r['decision_ms_p50']:.2f}",
         )
+    return t
+
+
+def daa_table(results: Sequence[dict]):
+    """The weighted detect-and-avoid columns of an encounter campaign, one row per method."""
+    from rich.table import Table
+
+    def ci(r: dict, key: str) -> str:
+        v, lo, hi = (_number(r.get(k)) for k in (key, f"{key}_lo", f"{key}_hi"))
+        return "-" if math.isnan(v) else f"{v:.3g} [{lo:.3g}, {hi:.3g}]"
+
+    t = Table("method", "encounters", "P(NMAC)", "NMAC risk ratio", "induced", "P(LoWC)",
+              "LoWC ratio", "alert rate", "unnecessary manoeuvre", "reversals", "path excess",
+              "CI check", title="detect and avoid (weighted, 95 % bootstrap)")  # fmt: skip
+    for r in results:
+        t.add_row(r["method"], str(r["episodes"]), ci(r, "nmac_prob"), ci(r, "nmac_risk_ratio"),
+                  ci(r, "induced_risk_ratio"), ci(r, "lowc_prob"), ci(r, "lowc_ratio"),
+                  ci(r, "alert_rate"), ci(r, "unnecessary_manoeuvre_rate"),
+                  f"{_number(r.get('mean_reversals')):.2f}",
+                  f"{_number(r.get('mean_path_excess')):.4f}", str(r.get("ci_check", "")))
     return t

@@ -208,9 +208,10 @@ def _add_evaluate(sub: argparse._SubParsersAction) -> None:
     )
     e.add_argument(
         "--intruders",
-        required=True,
         type=_csv_list(int, "--intruders"),
-        help="comma-separated intruder counts, e.g. 5,10,20,40",
+        help="comma-separated intruder counts, e.g. 5,10,20,40 (required, except for a "
+        "scenario with `encounters`, which refuses it: each episode flies its encounter's one "
+        "intruder)",
     )
     e.add_argument("--episodes", type=_positive_int, default=100)
     e.add_argument("--dynamics", choices=_dynamics(), default="kinematic")
@@ -540,13 +541,21 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
     sc = _load(args)
+    if sc.encounters is not None and args.intruders is not None:
+        raise UserError(
+            f"--intruders: scenario '{sc.name}' flies encounters (its `encounters` section): "
+            "each episode has its sampled encounter's one intruder; leave --intruders out."
+        )
+    if sc.encounters is None and args.intruders is None:
+        raise UserError("--intruders: give one or more intruder counts, e.g. 5,10,20,40.")
+    intruders = [1] if sc.encounters is not None else args.intruders
     out = prepare_out_dir(args.out or Path("runs") / f"{sc.name}-evaluate", args.force, args.argv)
     from uavxai.campaign import evaluate_command
 
     evaluate_command(
         sc,
         methods=args.methods,
-        intruders=args.intruders,
+        intruders=intruders,
         episodes=args.episodes,
         dynamics=args.dynamics,
         workers=args.workers,

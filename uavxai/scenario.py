@@ -380,6 +380,13 @@ class NMAC(_Model):
     vertical_m: Annotated[float, Field(gt=0, le=10_000)] = 30.48
 
 
+class WellClear(_Model):
+    """The well-clear cylinder of small UAS that evaluations count (2000 ft x 250 ft)."""
+
+    horizontal_m: Annotated[float, Field(gt=0, le=10_000)] = 609.6
+    vertical_m: Annotated[float, Field(gt=0, le=10_000)] = 76.2
+
+
 class Avoidance(_Model):
     planner: Literal[AVOIDANCE_PLANNERS] = "mcts"  # type: ignore[valid-type]
     checkpoint: Annotated[str, Field(max_length=4096)] | None = None  # dqn / safe_dqn
@@ -397,6 +404,7 @@ class Avoidance(_Model):
     mcts: MCTSConfig = MCTSConfig()
     actions: Literal[tuple(ACTION_SETS)] = "paper"  # type: ignore[valid-type]
     nmac: NMAC = NMAC()
+    well_clear: WellClear = WellClear()
 
     @field_validator("speed_mps")
     @classmethod
@@ -571,6 +579,54 @@ class Mission(_Model):
 
 
 # ------------------------------------------------------------------------------------- scenario
+# The SPEC's names for encounter intruder aircraft -> this repository's aircraft folders.
+ENCOUNTER_AIRCRAFT = {"c172x": "ga_c172", "c172p": "ga_c172"}
+
+
+class Encounters(_Model):
+    """Pairwise encounters drawn from a statistical encounter model (SPEC "Encounter
+    campaigns"): episode i of `uavxai evaluate` flies encounter i."""
+
+    model: Literal["mitll_uncor"] = "mitll_uncor"
+    parameters: Annotated[str, Field(min_length=1, max_length=4096)] | None = None
+    intruder_aircraft: AircraftName = "ga_c172"
+    importance: Literal["none", "nmac"] = "nmac"
+    duration_s: Annotated[int, Field(ge=10, le=3600)] = 120
+    tca_window_s: tuple[Annotated[int, Field(ge=0, le=3600)],
+                        Annotated[int, Field(ge=0, le=3600)]] = (45, 75)
+    hmd_max_m: Annotated[float, Field(ge=152.4, le=100_000)] = 1852.0
+    vmd_max_m: Annotated[float, Field(ge=30.48, le=10_000)] = 152.4
+    hmd_nominal: Literal["uniform", "disc"] = "uniform"
+    intruder_floor_m: Annotated[float, Field(ge=0, le=MAX_HEIGHT_M)] = 30.0
+
+    @field_validator("intruder_aircraft")
+    @classmethod
+    def _slug(cls, v: str) -> str:
+        return check_slug(v, "encounters.intruder_aircraft")
+
+    @field_validator("parameters")
+    @classmethod
+    def _file(cls, v: str | None) -> str | None:
+        if v is not None and not Path(v).expanduser().is_file():
+            raise ValueError(f"encounters.parameters: no such file {v!r}")
+        return v
+
+    @model_validator(mode="after")
+    def _window(self) -> Encounters:
+        lo, hi = self.tca_window_s
+        if not lo <= hi < self.duration_s:
+            raise ValueError(
+                f"encounters.tca_window_s {list(self.tca_window_s)} must be [min, max] with "
+                f"min <= max < duration_s ({self.duration_s})"
+            )
+        return self
+
+    @property
+    def aircraft(self) -> str:
+        """The aircraft folder that flies the intruders (the SPEC's c172x is ga_c172)."""
+        return ENCOUNTER_AIRCRAFT.get(self.intruder_aircraft, self.intruder_aircraft)
+
+
 class Scenario(_Model):
     name: Annotated[str, Field(min_length=1, max_length=200)]
     seed: Annotated[int, Field(ge=0, le=2**31 - 1)] = 0
@@ -587,6 +643,7 @@ class Scenario(_Model):
     surveillance: Surveillance = Surveillance()
     mission: Mission = Mission()
     operator: Operator = Operator()
+    encounters: Encounters | None = None
 
     @field_validator("name")
     @classmethod
@@ -673,7 +730,35 @@ class Scenario(_Model):
                     f"aircraft '{name}' is not a folder under aircraft/; known: {known}"
                 )
         self._flyable()
+        self._encounters()
         return self
+
+    def _encounters(self) -> None:
+        """An encounter scenario flies one sampled intruder per episode, to a fixed goal."""
+        e = self.encounters
+        if e is None:
+            return
+        if self.intruders.list is not None or self.intruders.flow != "none":
+            raise ValueError(
+                "encounters: each episode's intruder is the sampled encounter's; set "
+                "intruders.flow: none and no intruders.list"
+            )
+        if self.ownship.goal is None:
+            raise ValueError(
+                "encounters: set ownship.goal (the ownship's straight path from its start to "
+                "the goal is the path the encounter is placed against)"
+            )
+        if not (aircraft_dir() / e.aircraft / f"{e.aircraft}.xml").is_file():
+            known = sorted(
+                p.name for p in aircraft_dir().iterdir() if (p / f"{p.name}.xml").is_file()
+            )
+            raise ValueError(
+                f"encounters.intruder_aircraft '{e.intruder_aircraft}' is not a folder under "
+                f"aircraft/ (known: {known}; c172x and c172p mean ga_c172)"
+            )
+        start, goal = self.ownship.start, self.ownship.goal
+        if math.dist((start.x, start.y), goal[:2]) < 1.0:
+            raise ValueError("encounters: ownship.goal must lie away from ownship.start")
 
     def _flyable(self) -> None:
         """Speeds the aircraft can fly, from the same numbers JSBSim reads (the autopilot's
@@ -770,6 +855,27 @@ def aircraft_speed_range(name: str) -> tuple[float, float]:
     if len(found) < 2:  # an aircraft without the speed limits: no limit known beyond the schema
         return 0.0, math.inf
     return found["ap/speed-min-mps"], found["ap/speed-max-mps"]
+
+
+@cache
+def aircraft_height_loop(name: str) -> tuple[float, float]:
+    """(gain 1/s, climb-rate limit m/s) of the aircraft autopilot's height loop: the climb-rate
+    demand is gain x (height target - height), clipped to +-limit (the gain of its
+    ``ap/climb-rate-cmd-mps`` and the initial value of ``ap/climb-rate-limit-mps`` in its XML,
+    read without JSBSim). An aircraft without them: (0.2, 2.5), the values of ours."""
+    gain, limit = 0.2, 2.5
+    for xml in sorted((aircraft_dir() / name).rglob("*.xml")):
+        try:
+            root = ET.parse(xml).getroot()
+        except (ET.ParseError, OSError):
+            continue
+        for prop in root.iter("property"):
+            if (prop.text or "").strip() == "ap/climb-rate-limit-mps" and "value" in prop.attrib:
+                limit = float(prop.attrib["value"])
+        for el in root.iter("pure_gain"):
+            if el.get("name") == "ap/climb-rate-cmd-mps" and el.find("gain") is not None:
+                gain = float((el.find("gain").text or "").strip() or gain)
+    return gain, limit
 
 
 # ----------------------------------------------------------------------------------- loading

@@ -16,7 +16,7 @@ import numpy as np
 
 from uavxai.dynamics.track_pilot import TrackLike, TrackPilot
 from uavxai.geometry import bearing, wrap_angle
-from uavxai.scenario import IntruderSpec, Scenario, aircraft_speed_range
+from uavxai.scenario import IntruderSpec, Scenario, aircraft_height_loop, aircraft_speed_range
 
 BEHAVIOURS = ("straight", "random_turns", "goal_seeking")
 PILOT_PERIOD_S = 1.0  # how often intruder pilots decide, in every world
@@ -112,11 +112,13 @@ def track_pilot(scenario: Scenario, track: TrackLike, t0: float = 0.0) -> TrackP
     """A :class:`TrackPilot` for ``track`` within the scenario's bank limit and the speed
     range of its intruder aircraft."""
     lo, hi = aircraft_speed_range(scenario.intruders.aircraft)
+    gain, _ = aircraft_height_loop(scenario.intruders.aircraft)
     return TrackPilot(
         track,
         bank_limit_rad=math.radians(scenario.avoidance.bank_limit_deg),
         speed_range=(lo, hi),
         t0=t0,
+        height_gain_per_s=gain,
         period_s=PILOT_PERIOD_S,
     )
 

@@ -24,8 +24,8 @@ next period), ``V`` the aircraft's ground speed and ``chi`` its ground course:
   i.e. a vertical-rate feed-forward with a proportional correction, through the altitude
   interface every autopilot of ours has. The autopilot's climb-rate limit still applies.
 
-The kinematic world's intruders fly the bank and speed but hold their altitude (its
-intruder model has no vertical channel): there a track is followed in the horizontal only.
+The kinematic world flies the height target the same way (its intruders climb at their
+autopilot's gain, clipped to its climb-rate limit: uavxai.sim.kinematic.height_step).
 """
 
 from __future__ import annotations

@@ -38,13 +38,14 @@ count more often; it is kept apart here so the importance weight stays nominal /
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
 
 from uavxai.encounters.model import EncounterModel
-from uavxai.encounters.tracks import MIN_FIXED_WING_SPEED, Trajectory, sample_track
+from uavxai.encounters.tracks import MIN_FIXED_WING_SPEED, Trajectory, limit_track, sample_track
 from uavxai.errors import UserError
 
 NMAC_HMD = 152.4  # m, 500 ft
@@ -86,6 +87,10 @@ class EncounterConfig:
     start: dict[str, int] = field(default_factory=lambda: dict(DEFAULT_START))
     min_speed: float = MIN_FIXED_WING_SPEED  # m/s
     steps_per_second: int = 1
+    # The intruder aircraft's dynamic limits (tracks.limit_track), applied before placing.
+    max_speed: float = math.inf  # m/s
+    max_vertical_rate: float = math.inf  # m/s
+    max_bank: float = math.inf  # rad: turn rates within g tan(max_bank) / V
 
     def check(self) -> None:
         lo, hi = self.tca_window
@@ -202,15 +207,21 @@ def place_intruder(track: Trajectory, k: int, own: OwnshipAtTCA, hmd: float, vmd
                       h=ph + vmd + track.h - track.h[k], vx=vx, vy=vy, vh=track.vh)
 
 
-def sample_encounter(model: EncounterModel, own: OwnshipAtTCA, seed: int,
+def sample_encounter(model: EncounterModel,
+                     own: OwnshipAtTCA | Callable[[float], OwnshipAtTCA], seed: int,
                      importance: Importance = "none",
                      config: EncounterConfig | None = None) -> Encounter:
-    """One encounter, fully determined by ``seed`` (see the module docstring)."""
+    """One encounter, fully determined by ``seed`` (see the module docstring). ``own``: the
+    ownship at TCA, or a function of the drawn TCA (s) giving it (an ownship on a path
+    flown from t = 0, so that the intruder meets it at that time)."""
     c = config or EncounterConfig()
     c.check()
     rng = np.random.default_rng(seed)
     track = sample_track(model, rng, c.duration, c.start, c.steps_per_second, c.min_speed)
+    track = limit_track(track, c.max_speed, c.max_vertical_rate, c.max_bank)
     tca = int(rng.integers(c.tca_window[0], c.tca_window[1] + 1))
+    if callable(own):
+        own = own(float(tca))
     k = tca * c.steps_per_second
     v_own = math.hypot(own.velocity[0], own.velocity[1])
     dh = float(track.vh[k]) - own.velocity[2]

@@ -10,6 +10,7 @@ h up (m); heading clockwise from north.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -104,3 +105,32 @@ def sample_track(model: EncounterModel, rng: np.random.Generator, seconds: int,
             return track
     raise UserError(f"{model.name}: no flyable track in {max_tries} draws "
                     f"(start={start}, min_speed={min_speed} m/s)")
+
+
+def limit_track(track: Trajectory, max_speed: float = float("inf"),
+                max_vertical_rate: float = float("inf"),
+                max_bank: float = float("inf")) -> Trajectory:
+    """``track`` within an aircraft's dynamic limits (as MIT LL's getDynamicLimits bounds a
+    type's): horizontal speed at most ``max_speed``, vertical rate within
+    +-``max_vertical_rate`` (m/s), turn rate within the coordinated turn of bank ``max_bank``
+    (rad) at the speed flown, g tan(max_bank) / V; heading and positions integrated again as
+    :func:`sample2track` does (the rates at the start of each step). Unchanged when nothing
+    exceeds the limits."""
+    g = 9.80665
+    dt = np.diff(track.t)
+    speed = np.minimum(track.speed, max_speed)
+    psi = np.unwrap(np.arctan2(track.vx, track.vy))
+    rate = np.diff(psi) / dt
+    top = g * math.tan(min(max_bank, 1.5)) / np.maximum(speed[:-1], 1e-6)
+    over = (np.abs(track.vh) > max_vertical_rate).any() or (track.speed > max_speed).any()
+    if not (over or (np.abs(rate) > top).any()):
+        return track
+    psi = psi[0] + np.concatenate(([0.0], np.cumsum(np.clip(rate, -top, top) * dt)))
+    vx, vy = speed * np.sin(psi), speed * np.cos(psi)
+    vh = np.clip(track.vh, -max_vertical_rate, max_vertical_rate)
+
+    def integral(start: float, v: np.ndarray) -> np.ndarray:
+        return start + np.concatenate(([0.0], np.cumsum(v[:-1] * dt)))
+
+    return Trajectory(t=track.t, x=integral(track.x[0], vx), y=integral(track.y[0], vy),
+                      h=integral(track.h[0], vh), vx=vx, vy=vy, vh=vh)

@@ -7,7 +7,7 @@ what differs between them is only which dynamics, which command path and which o
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import lru_cache
 
@@ -15,6 +15,7 @@ import numpy as np
 
 from uavxai.avoidance.types import Planner
 from uavxai.dynamics.orbit import scenario_orbit_radius
+from uavxai.dynamics.track_pilot import TrackLike
 from uavxai.scenario import IntruderSpec, Scenario
 from uavxai.sim.clock import Clock
 from uavxai.sim.command import CommandPath, DirectPath, Dynamics
@@ -27,18 +28,19 @@ from uavxai.sim.picture import Picture
 from uavxai.surveillance.tracker import truth_beliefs
 
 
-def _jsbsim(scenario: Scenario, intruders, seed: int) -> Dynamics:
+def _jsbsim(scenario: Scenario, intruders, seed: int, tracks=None) -> Dynamics:
     from uavxai.dynamics.world import JSBSimWorld  # jsbsim only when it flies
 
-    return JSBSimWorld(scenario, intruders=intruders, seed=seed)
+    return JSBSimWorld(scenario, intruders=intruders, seed=seed, tracks=tracks)
 
 
-def _kinematic(scenario: Scenario, intruders, seed: int) -> Dynamics:
-    return KinematicWorld(scenario, intruders=intruders, seed=seed)
+def _kinematic(scenario: Scenario, intruders, seed: int, tracks=None) -> Dynamics:
+    return KinematicWorld(scenario, intruders=intruders, seed=seed, tracks=tracks)
 
 
-# The dynamics by name: `uavxai evaluate --dynamics NAME`.
-DYNAMICS: dict[str, Callable[[Scenario, list[IntruderSpec] | None, int], Dynamics]] = {
+# The dynamics by name: `uavxai evaluate --dynamics NAME`; called (scenario, intruders, seed,
+# tracks), tracks an intruder index -> trajectory mapping or None.
+DYNAMICS: dict[str, Callable[..., Dynamics]] = {
     "jsbsim": _jsbsim,
     "kinematic": _kinematic,
 }
@@ -71,6 +73,7 @@ def fly(
     *,
     dynamics: str = "jsbsim",
     intruders: list[IntruderSpec] | None = None,
+    tracks: Mapping[int, TrackLike] | None = None,
     path: Callable[[Dynamics], CommandPath] = DirectPath,
     observers: Sequence[Observer] = (),
     mission: MissionConfig | None = None,
@@ -78,11 +81,11 @@ def fly(
     """Fly one seeded episode of ``scenario`` (its seed) and return its result; the world is
     closed and every observer closed whatever happens. With a ``mission`` the episode flies
     it (transit, on station, return; ``goal`` is then the service point) instead of ending at
-    the goal."""
+    the goal. ``tracks``: intruders (by index) that follow a trajectory (the track pilot)."""
     seed = scenario.seed
     world = command = None
     try:
-        world = DYNAMICS[dynamics](scenario, intruders, seed)
+        world = DYNAMICS[dynamics](scenario, intruders, seed, tracks)
         av = scenario.avoidance
         planner.reset(seed)
         command = path(world)

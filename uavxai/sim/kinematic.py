@@ -4,10 +4,13 @@ behind the same interface, so that one episode engine runs both.
 The ownship follows its autopilot commands the way the planners predict it (bank command
 reached at the roll-rate limit, coordinated turn, along-track acceleration within the speed
 limits, climb towards the height target at a bounded rate: :class:`EncounterModel`);
-intruders are flown by the same pilots as in the JSBSim world (:func:`make_pilots`), at
-constant speed and altitude. A steady wind (``environment.wind``) carries everyone over the
-ground; turbulence is JSBSim-only (the model has no gust response). It never fails:
-:meth:`failure` is always None.
+intruders are flown by the same pilots as in the JSBSim world (:func:`make_pilots`), at the
+speed their pilot sets, and at their height unless the pilot gives a height target (the
+`track` pilot): then their climb rate is their autopilot's, gain x (target - height) clipped
+to +-its climb-rate limit (:func:`uavxai.scenario.aircraft_height_loop`; 0.2 /s and 2.5 m/s
+for ga_c172), integrated exactly over each step (:func:`height_step`). A steady wind
+(``environment.wind``) carries everyone over the ground; turbulence is JSBSim-only (the model
+has no gust response). It never fails: :meth:`failure` is always None.
 
 Commands are taken as the JSBSim world takes them (``command_ownship``); a speed target is
 flown as the largest allowed acceleration towards it.
@@ -30,7 +33,7 @@ from uavxai.dynamics.loiter import ScheduledWorld
 from uavxai.dynamics.state import OWNSHIP_ID, TrafficState, intruder_id
 from uavxai.dynamics.track_pilot import TrackLike
 from uavxai.dynamics.traffic import draw_intruders
-from uavxai.scenario import IntruderSpec, Scenario
+from uavxai.scenario import IntruderSpec, Scenario, aircraft_height_loop
 from uavxai.vocabulary import HOLD
 
 _FAR = 1e12  # a goal nobody reaches: the model's goal only sets the height target here
@@ -66,6 +69,10 @@ class KinematicWorld(ScheduledWorld):
             dtype=float,
         ).reshape(len(self.intruders), STATE_DIM)
         self._vh = 0.0
+        # The intruders' height targets (nan: hold the height) and climb rates.
+        self._intruder_alt = np.full(len(self.intruders), np.nan)
+        self._intruder_vh = np.zeros(len(self.intruders))
+        self._height_loop = aircraft_height_loop(scenario.intruders.aircraft)
         # Ground velocity = air velocity + wind (the model's paths drift with it already);
         # turbulence is JSBSim-only.
         self._wind = np.asarray(EnvironmentConfig.from_scenario(scenario).wind_enu, dtype=float)
@@ -119,13 +126,22 @@ class KinematicWorld(ScheduledWorld):
             _, self._traffic = model.fly_commanded(
                 self._traffic, self._traffic[:, PHI_CMD], duration
             )
+            climbing = np.isfinite(self._intruder_alt)
+            if climbing.any():
+                gain, limit = self._height_loop
+                h0 = self._traffic[climbing, 2]
+                h1 = height_step(h0, self._intruder_alt[climbing], gain, limit, duration)
+                self._traffic[climbing, 2] = h1
+                self._intruder_vh[climbing] = (h1 - h0) / duration
 
     def _command_intruder(
         self, row: int, bank: float, speed: float, alt: float | None = None
     ) -> None:
-        # ``alt`` is not flown: the model's intruders hold their height (no vertical channel)
         self._traffic[row - 1, PHI_CMD] = bank
         self._traffic[row - 1, V] = speed  # the pilot's speed target, held
+        self._intruder_alt[row - 1] = np.nan if alt is None else float(alt)
+        if alt is None:
+            self._intruder_vh[row - 1] = 0.0
 
     def _replace(self, entries: list[Entry]) -> None:
         """As the JSBSim world: a newcomer at the edge for every intruder that left."""
@@ -134,6 +150,8 @@ class KinematicWorld(ScheduledWorld):
             spec = e.to_spec(self.scenario.intruders.behaviour)
             self._traffic[e.replaces] = (e.x, e.y, e.h, e.speed_mps, e.heading_rad, 0, 0, 0)
             self._pilots[e.replaces] = newcomer_pilot(self.scenario, spec, self.seed, e.number)
+            self._intruder_alt[e.replaces] = np.nan
+            self._intruder_vh[e.replaces] = 0.0
             ids[e.replaces + 1] = e.id
         self.ids = tuple(ids)
         self._cached = None
@@ -146,6 +164,7 @@ class KinematicWorld(ScheduledWorld):
             vel = np.stack([v * np.sin(psi), v * np.cos(psi), np.zeros_like(v)], axis=1)
             vel += self._wind  # over the ground
             vel[0, 2] = self._vh
+            vel[1:, 2] = self._intruder_vh
             att = np.stack([rows[:, PHI], np.zeros_like(v), np.mod(psi, 2 * math.pi)], axis=1)
             self._cached = TrafficState(
                 t=self.t, ids=self.ids, pos=rows[:, :3].copy(), vel=vel, att=att, airspeed=v.copy()
@@ -213,3 +232,15 @@ class KinematicWorld(ScheduledWorld):
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def height_step(h0, target, gain: float, limit: float, duration: float) -> np.ndarray:
+    """Heights after ``duration`` s of dh/dt = clip(gain (target - h), -limit, limit), exactly:
+    at the limit while the gap exceeds limit / gain, then first-order (time constant 1 / gain)
+    towards the target. Arrays ``h0``, ``target`` of the same shape; ``gain`` > 0."""
+    h0, target = np.asarray(h0, dtype=float), np.asarray(target, dtype=float)
+    gap = target - h0
+    knee = limit / gain  # below this gap the climb rate is proportional
+    t_lim = np.clip((np.abs(gap) - knee) / limit, 0.0, duration)  # time spent at the limit
+    gap_after = gap - np.sign(gap) * limit * t_lim
+    return target - gap_after * np.exp(-gain * (duration - t_lim))

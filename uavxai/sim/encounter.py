@@ -1,0 +1,258 @@
+"""Flying statistical encounters (SPEC "Encounter campaigns"; docs/scenario.md "encounters").
+
+Episode i of an encounter scenario is encounter i: :func:`draw_encounter` samples it with seed
+(campaign seed + i) from the scenario's encounter model against the ownship's planned straight
+path (from ``ownship.start`` toward ``ownship.goal`` at the start speed and height), so that
+the closest approach falls at the sampled TCA; :func:`fly_encounter` flies it, the one
+intruder following the encounter's track (the `track` pilot) on
+``encounters.intruder_aircraft``, for ``encounters.duration_s``, and returns the episode
+result with the per-encounter detect-and-avoid record (:class:`EncounterRecord`).
+
+The record's definitions (docs/daa-metrics.md, "In campaigns"):
+
+* ``hmd_m``, ``vmd_m``: :func:`uavxai.daa_metrics.hmd_vmd` of the flown ownship and intruder
+  positions, sampled at ``dynamics.trajectory_hz``;
+* ``lowc``: :func:`uavxai.daa_metrics.loss_of_well_clear` of the same, with
+  ``avoidance.well_clear``; ``nmac``: the judge's (``avoidance.nmac``), as every campaign;
+* ``alert``: at some decision, the planner predicted a conflict on the line it would have
+  flown toward the goal: the root option of the action the ``none`` planner takes in that
+  state (same ownship, same picture, same goal) has a ``meets`` (its predicted line comes
+  inside ``d_min_m`` plus the intruder's margin within the planner's look-ahead). A planner
+  that reports no options (``none``) never alerts;
+* ``manoeuvre``: at some decision, the command sent differs from what ``none`` would have sent
+  in that state: another bank command (by more than 1e-6 rad), another acceleration as flown
+  (a speed-up at the top speed, a slow-down at the bottom one, is none), or a height target
+  more than 1 m off the leg's height. ``none`` never manoeuvres;
+* ``reversals``: :func:`uavxai.daa_metrics.reversals` of the bank commands sent;
+* ``path_excess``: flown 3-D path length over the progress made along the straight route
+  (start toward goal) by the episode's end, minus 1 (0 for a straight, level flight). Not over
+  the ``none`` flight's length: every encounter lasts ``duration_s``, so two flights at the
+  same speed have the same length whatever they did; the progress lost is the cost.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from functools import lru_cache
+
+import numpy as np
+
+from uavxai.avoidance.direct import DirectPlanner
+from uavxai.avoidance.types import Planner, PlannerConfig
+from uavxai.daa_metrics import hmd_vmd, loss_of_well_clear, path_length, reversals
+from uavxai.encounters import (
+    Encounter,
+    EncounterConfig,
+    EncounterModel,
+    Trajectory,
+    default_model,
+    load_model,
+    sample_encounter,
+    straight_ownship,
+)
+from uavxai.encounters.tracks import MIN_FIXED_WING_SPEED
+from uavxai.errors import UserError
+from uavxai.geometry import bearing
+from uavxai.scenario import IntruderSpec, Scenario, aircraft_height_loop, aircraft_speed_range
+from uavxai.sim.episode import Episode, EpisodeResult, Observer
+
+BANK_TOL_RAD = 1e-6
+HEIGHT_TOL_M = 1.0
+# A track's turns need at most this share of the intruder's bank limit, leaving the track
+# pilot the rest to correct its errors.
+TRACK_BANK_SHARE = 0.8
+
+
+@lru_cache(maxsize=4)
+def encounter_model(parameters: str | None) -> EncounterModel:
+    """The encounter model of a scenario (``encounters.parameters``; None: the shipped one),
+    read once per process."""
+    return default_model() if parameters is None else load_model(parameters)
+
+
+def encounter_config(scenario: Scenario) -> EncounterConfig:
+    """The pairing settings of ``scenario``'s ``encounters`` section, with the intruder
+    aircraft's dynamic limits: tracks slower than its minimum speed redrawn, faster ones flown
+    at its maximum, vertical rates within its climb-rate limit, turns within
+    TRACK_BANK_SHARE of the bank limit."""
+    e = scenario.encounters
+    if e is None:
+        raise UserError(f"scenario '{scenario.name}' has no encounters section")
+    lo, hi = aircraft_speed_range(e.aircraft)
+    _, climb = aircraft_height_loop(e.aircraft)
+    return EncounterConfig(
+        duration=e.duration_s,
+        tca_window=tuple(e.tca_window_s),
+        hmd_max=e.hmd_max_m,
+        vmd_max=e.vmd_max_m,
+        hmd_nominal=e.hmd_nominal,
+        min_speed=max(MIN_FIXED_WING_SPEED, lo),
+        max_speed=hi,
+        max_vertical_rate=climb,
+        max_bank=TRACK_BANK_SHARE * math.radians(scenario.avoidance.bank_limit_deg),
+    )
+
+
+def route(scenario: Scenario) -> tuple[np.ndarray, float]:
+    """The ownship's planned straight route: its start (x, y, h) and heading (rad) to the goal."""
+    s, goal = scenario.ownship.start, scenario.ownship.goal
+    if goal is None:
+        raise UserError(f"scenario '{scenario.name}': an encounter scenario needs ownship.goal")
+    return np.array([s.x, s.y, s.h]), bearing(goal[0] - s.x, goal[1] - s.y)
+
+
+def draw_encounter(scenario: Scenario, seed: int) -> Encounter:
+    """Encounter ``seed`` of ``scenario``: the intruder track placed against the ownship's
+    straight route, flown from t = 0, at TCA; held ``intruder_floor_m`` above the ground."""
+    e = scenario.encounters
+    start, heading = route(scenario)
+    speed = scenario.ownship.start.speed_mps
+
+    def own_at(tca: float):
+        return straight_ownship(speed, heading, float(start[2]), tca, start=(start[0], start[1]))
+
+    enc = sample_encounter(encounter_model(e.parameters), own_at, int(seed), e.importance,
+                           encounter_config(scenario))
+    tr = enc.intruder
+    low = tr.h < e.intruder_floor_m
+    if low.any():
+        tr = Trajectory(t=tr.t, x=tr.x, y=tr.y, h=np.maximum(tr.h, e.intruder_floor_m),
+                        vx=tr.vx, vy=tr.vy, vh=np.where(low, 0.0, tr.vh))
+        enc = replace(enc, intruder=tr)
+    return enc
+
+
+def intruder_spec(enc: Encounter) -> IntruderSpec:
+    """The intruder's start: its track's first sample."""
+    tr = enc.intruder
+    return IntruderSpec(x=float(tr.x[0]), y=float(tr.y[0]), h=float(tr.h[0]),
+                        heading_deg=math.degrees(float(tr.heading[0])),
+                        speed_mps=float(tr.speed[0]))
+
+
+def flight_scenario(scenario: Scenario) -> Scenario:
+    """``scenario`` as an encounter flies it: the intruder aircraft the encounter's, as many
+    decisions as ``duration_s`` lasts."""
+    e = scenario.encounters
+    steps = math.ceil(e.duration_s / scenario.avoidance.decision_period_s - 1e-9)
+    return scenario.model_copy(update={
+        "intruders": scenario.intruders.model_copy(update={"aircraft": e.aircraft}),
+        "avoidance": scenario.avoidance.model_copy(update={"max_steps": steps}),
+    })
+
+
+@dataclass
+class EncounterRecord:
+    """One flown encounter's detect-and-avoid columns (episodes.csv)."""
+
+    weight: float
+    hmd_m: float
+    vmd_m: float
+    lowc: bool
+    alert: bool
+    manoeuvre: bool
+    reversals: int
+    path_excess: float
+    sampled_hmd_m: float  # the encounter's, at TCA
+    sampled_vmd_m: float
+    tca_s: float
+
+
+class EncounterObserver(Observer):
+    """Records what the DAA columns need: the ownship and intruder positions at every sample,
+    and per decision the command sent and what ``none`` would have sent in that state."""
+
+    def __init__(self, config: PlannerConfig) -> None:
+        self.none = DirectPlanner(config)
+        self.own: list[np.ndarray] = []
+        self.intruder: list[np.ndarray] = []
+        self.bank: list[float] = []
+        self.alert = False
+        self.manoeuvre = False
+
+    def _keep(self, state) -> None:
+        self.own.append(state.pos[0].copy())
+        self.intruder.append(state.pos[1].copy() if state.n > 1 else np.full(3, np.nan))
+
+    def on_start(self, ep: Episode) -> None:
+        self._keep(ep.state)
+
+    def on_sample(self, ep: Episode, state) -> None:
+        self._keep(state)
+
+    def on_decision(self, ep: Episode, event) -> None:
+        d = event.decision
+        self.bank.append(float(d.bank_cmd_rad))
+        if d.planner == self.none.name:
+            return  # the baseline neither alerts nor manoeuvres
+        goal = ep.aim()
+        base = self.none.plan(event.own, event.intruders, goal)
+        if not self.alert:
+            child = next((c for c in d.children if c.action == base.action), None)
+            self.alert = child is not None and child.meets is not None
+        if not self.manoeuvre:
+            high = d.alt_target_m is not None and abs(d.alt_target_m - goal[2]) > HEIGHT_TOL_M
+            accel = self._effective(event.own, d.accel_mps2)
+            self.manoeuvre = (abs(d.bank_cmd_rad - base.bank_cmd_rad) > BANK_TOL_RAD
+                              or abs(accel - self._effective(event.own, base.accel_mps2)) > 1e-9
+                              or high)
+
+    def _effective(self, own, accel: float) -> float:
+        """An acceleration command as flown: none beyond the speed limits (a speed-up at the
+        top speed holds the speed, as the autopilot's speed limits make it)."""
+        lo, hi = own.speed_band or self.none.config.speed_mps
+        if (accel > 0 and own.speed >= hi - 1e-6) or (accel < 0 and own.speed <= lo + 1e-6):
+            return 0.0
+        return float(accel)
+
+
+def path_excess_along(own: np.ndarray, start: np.ndarray, heading: float) -> float:
+    """Flown 3-D path length over the progress along the route (start, heading) minus 1; nan
+    when the ownship made no progress."""
+    ahead = np.array([math.sin(heading), math.cos(heading)])
+    progress = float((own[-1, :2] - start[:2]) @ ahead)
+    return path_length(own) / progress - 1.0 if progress > 1e-6 else math.nan
+
+
+def fly_encounter(
+    scenario: Scenario,
+    planner: Planner,
+    seed: int,
+    dynamics: str = "kinematic",
+    observers=(),
+) -> tuple[EpisodeResult, EncounterRecord, Encounter]:
+    """Fly encounter ``seed`` of ``scenario`` (with ``seed`` as the episode's seed)."""
+    from uavxai.sim.build import fly
+
+    sc = flight_scenario(scenario.with_seed(seed))
+    enc = draw_encounter(scenario, seed)
+    config = PlannerConfig.from_scenario(sc)
+    rec = EncounterObserver(config)
+    goal = tuple(float(v) for v in sc.ownship.goal)
+    r = fly(sc, planner, goal, dynamics=dynamics, intruders=[intruder_spec(enc)],
+            tracks={0: enc.intruder}, observers=[rec, *observers])
+    own, intr = np.array(rec.own), np.array(rec.intruder)
+    hmd, vmd = hmd_vmd(own, intr)
+    wc = sc.avoidance.well_clear
+    start, heading = route(sc)
+    record = EncounterRecord(
+        weight=float(enc.weight),
+        hmd_m=hmd,
+        vmd_m=vmd,
+        lowc=loss_of_well_clear(own, intr, wc.horizontal_m, wc.vertical_m),
+        alert=rec.alert,
+        manoeuvre=rec.manoeuvre,
+        reversals=reversals(rec.bank),
+        path_excess=path_excess_along(own, start, heading),
+        sampled_hmd_m=float(enc.hmd),
+        sampled_vmd_m=float(enc.vmd),
+        tca_s=float(enc.tca),
+    )
+    return r, record, enc
+
+
+__all__ = [
+    "EncounterObserver", "EncounterRecord", "draw_encounter", "encounter_config",
+    "encounter_model", "fly_encounter", "flight_scenario", "intruder_spec", "route",
+]
