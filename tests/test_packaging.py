@@ -57,3 +57,17 @@ def test_data_travels_with_the_wheel(wheel: zipfile.ZipFile) -> None:
 def test_entry_point_declared(wheel: zipfile.ZipFile) -> None:
     (ep,) = [n for n in wheel.namelist() if n.endswith("entry_points.txt")]
     assert "uavxai = uavxai.cli:main" in wheel.read(ep).decode()
+
+
+def test_every_module_travels_with_the_wheel(wheel: zipfile.ZipFile) -> None:
+    """Every module of the source tree is in the wheel (the package list is written by hand:
+    uavxai.learning was missing, so `uavxai train --stage avoidance` failed after
+    `pip install .`), and the encounter model's parameter file with its licence."""
+    names = set(wheel.namelist())
+    modules = sorted(str(p.relative_to(REPO)) for p in (REPO / "uavxai").rglob("*.py"))
+    missing = [m for m in modules if m not in names]
+    assert not missing, missing
+    bridges = sorted(p.name for p in (REPO / "bridges").glob("*.py"))
+    assert all(f"uavxai/bridges/{b}" in names for b in bridges)
+    for data in ("uncor_1200only_fwse_v1p2.txt", "LICENSE", "README.md"):
+        assert f"uavxai/encounters/data/{data}" in names
