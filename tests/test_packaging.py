@@ -19,8 +19,8 @@ def wheel(tmp_path_factory: pytest.TempPathFactory) -> zipfile.ZipFile:
     # Built from a copy without build/: setuptools reuses a stale build/lib, which would hide
     # a module missing from the package list.
     src = tmp_path_factory.mktemp("src") / "uavxai"
-    shutil.copytree(REPO, src, ignore=shutil.ignore_patterns(
-        ".git", ".venv", "build", "dist", "runs", "*.egg-info", "__pycache__", ".*_cache"))  # fmt: skip
+    skip = (".git", ".venv", "build", "dist", "runs", "*.egg-info", "__pycache__", ".*_cache")
+    shutil.copytree(REPO, src, ignore=shutil.ignore_patterns(*skip))
     subprocess.run(
         [
             sys.executable,
