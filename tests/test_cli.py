@@ -15,6 +15,9 @@ from uavxai import cli
 from uavxai.cli import MARKER, main, prepare_out_dir
 from uavxai.errors import UserError
 
+pytestmark = pytest.mark.usefixtures("release_cli_locks")
+
+
 REPO = Path(__file__).resolve().parents[1]
 UAVXAI = [sys.executable, "-m", "uavxai"]
 
@@ -34,13 +37,6 @@ log: {rerun: false}
 """
 
 
-@pytest.fixture(autouse=True)
-def _release_locks():
-    """prepare_out_dir keeps its lock for the life of the process; tests end it themselves."""
-    yield
-    for lock in cli._HELD_LOCKS.values():
-        lock.close()
-    cli._HELD_LOCKS.clear()
 
 
 @pytest.fixture(scope="module")
@@ -197,6 +193,7 @@ def test_report_table_keeps_to_its_row_limit(tmp_path: Path, capsys) -> None:
 def test_train_prints_a_short_table_and_writes_the_json(
     tiny: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
+
     out = tmp_path / "train"
     argv = ["train", str(tiny), "--stage", "service", "--algo", "dqn", "--episodes", "2"]
     assert main([*argv, "--out", str(out)]) == 0

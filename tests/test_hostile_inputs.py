@@ -15,11 +15,12 @@ from typing import Any
 import pytest
 import yaml
 
-from uavxai import cli
 from uavxai.cli import main
 from uavxai.errors import ScenarioError
 from uavxai.paths import scenarios_dir
 from uavxai.scenario import MAX_NODES, Scenario, load_scenario, parse_scenario
+
+pytestmark = pytest.mark.usefixtures("release_cli_locks")
 
 
 def laughs(depth: int) -> str:
@@ -132,12 +133,6 @@ CORPUS: list[tuple[str, str | bytes, tuple[str, ...]]] = [
 ]
 
 
-@pytest.fixture(autouse=True)
-def _release_locks():
-    yield
-    for lock in cli._HELD_LOCKS.values():
-        lock.close()
-    cli._HELD_LOCKS.clear()
 
 
 @pytest.mark.parametrize(("text", "words"), [c[1:] for c in CORPUS], ids=[c[0] for c in CORPUS])

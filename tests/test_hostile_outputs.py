@@ -17,13 +17,7 @@ from uavxai import cli
 from uavxai.cli import MARKER, main
 from uavxai.outputs import write_output
 
-
-@pytest.fixture(autouse=True)
-def _release_locks():
-    yield
-    for lock in cli._HELD_LOCKS.values():
-        lock.close()
-    cli._HELD_LOCKS.clear()
+pytestmark = pytest.mark.usefixtures("release_cli_locks")
 
 
 @pytest.fixture(scope="module")
