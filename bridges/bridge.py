@@ -123,6 +123,7 @@ class CommandSink(Protocol):
         accel_cmd_mps2: float | None = None,
         speed_target_mps: float | None = None,
         alt_target_m: float | None = None,
+        speed_max_mps: float | None = None,
     ) -> None: ...
 
     def command_orbit(
@@ -657,8 +658,8 @@ class MavlinkBridge:
             self.counters["clamped_commands"] += 1
             for note in read.notes:
                 self.announce(f"clamped: {note}", mavlink.MAV_SEVERITY_WARNING)
-        if cmd.kind == "speed":
-            return self._obey(speed_target_mps=cmd.speed_mps)
+        if cmd.kind == "speed":  # the operator's airspeed, flown as the autopilot's ceiling
+            return self._obey(speed_target_mps=cmd.speed_mps, speed_max_mps=cmd.speed_mps)
         if cmd.kind == "altitude":
             return self._obey(alt_target_m=cmd.h)
         self._obey(alt_target_m=cmd.h, speed_target_mps=cmd.speed_mps)

@@ -71,6 +71,8 @@ def test_operator_height_and_speed_during_a_head_on_encounter_keep_avoidance_on(
     t_end, h_end, v_end, *_ = watch.rows[-1]
     assert abs(h_end - 130.0) < 3.0, h_end
     assert abs(v_end - 22.0) < 1.5, v_end
+    # and never faster than asked once slowed to it (the avoidance may fly below it)
+    assert max(row[2] for row in watch.rows if row[0] >= 15) < 22.6
     # the explanations open with the operator's aim
     later = [row[4] for row in watch.rows if row[0] >= 9]
     assert later and all(w.startswith("the operator asked for 130 m") for w in later), later[0]
@@ -156,3 +158,35 @@ def test_the_recording_shows_the_operators_modes_as_phases(tmp_path) -> None:
                 if name.endswith("TextLog:text"):
                     texts += [v for row in batch.column(name).to_pylist() for v in (row or [])]
     assert texts == ["phase: GUIDED (operator)", "phase: RTL (operator)"], texts
+
+
+@pytest.mark.parametrize("world_kind", ["kinematic", "jsbsim"])
+def test_an_operators_airspeed_is_a_ceiling_the_planner_may_slow_below(world_kind: str) -> None:
+    """DO_CHANGE_SPEED lowers the autopilot's top speed: a speed-up asked for above it is
+    flown at it, a slow-down below it is flown; raising it lets the speed-up through again."""
+    from manoeuvres import flight_test_scenario
+
+    from uavxai.dynamics.world import JSBSimWorld
+    from uavxai.sim.kinematic import KinematicWorld
+
+    world = (JSBSimWorld if world_kind == "jsbsim" else KinematicWorld)(
+        flight_test_scenario(25.0))
+    try:
+        world.advance(2.0)
+        world.command_ownship(speed_target_mps=18.0, speed_max_mps=18.0)
+        world.command_ownship(accel_cmd_mps2=1.0)  # the planner asks to speed up: held at 18
+        top = 0.0
+        for _ in range(30):
+            world.advance(1.0)
+            top = max(top, float(world.state().airspeed[0])) if world.t > 14 else top
+        assert 17.0 < float(world.state().airspeed[0]) < 18.6
+        assert top < 18.6, top
+        world.command_ownship(accel_cmd_mps2=-1.0)  # slowing below the ceiling is flown
+        world.advance(4.0)
+        assert float(world.state().airspeed[0]) < 16.5
+        world.command_ownship(speed_max_mps=30.0, accel_cmd_mps2=1.0)  # the ceiling raised
+        world.advance(12.0)
+        assert float(world.state().airspeed[0]) > 22.0
+        assert world.failure() is None
+    finally:
+        world.close()

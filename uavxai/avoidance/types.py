@@ -42,8 +42,8 @@ class Ownship:
     # known, the planner's steady wind only.
     ground_velocity: tuple[float, float] | None = None
     # The airspeeds the planner may fly (min, max); None: PlannerConfig.speed_mps. An
-    # operator's DO_CHANGE_SPEED pins it to that speed (uavxai.sim.operator): avoidance then
-    # manoeuvres by bank and height, as DAA guidance does, and the speed stays the operator's.
+    # operator's DO_CHANGE_SPEED makes that speed the top (uavxai.sim.operator): the autopilot
+    # flies no faster, and avoidance may still slow down to let traffic pass.
     speed_band: tuple[float, float] | None = None
 
 

@@ -104,6 +104,7 @@ class Aircraft:
         pm = self.fdm.get_property_manager()
         self._get = [pm.get_node(p).get_double_value for p in STATE_PROPERTIES]
         self._set = {k: pm.get_node(p).set_double_value for k, p in COMMANDS.items()}
+        self._set["speed_max_mps"] = pm.get_node(SPEED_MAX).set_double_value
         self.trimmed = False
         self._wind_ne = (0.0, 0.0)
 
@@ -225,13 +226,16 @@ class Aircraft:
         accel_cmd_mps2: float | None = None,
         speed_target_mps: float | None = None,
         alt_target_m: float | None = None,
+        speed_max_mps: float | None = None,
     ) -> None:
-        """Write autopilot inputs; None leaves one unchanged."""
+        """Write autopilot inputs; None leaves one unchanged. ``speed_max_mps`` is the
+        autopilot's airspeed ceiling (its speed target never passes it)."""
         for key, value in (
             ("bank_cmd_rad", bank_cmd_rad),
             ("accel_cmd_mps2", accel_cmd_mps2),
             ("speed_target_mps", speed_target_mps),
             ("alt_target_m", alt_target_m),
+            ("speed_max_mps", speed_max_mps),
         ):
             if value is not None:
                 self._set[key](float(value))

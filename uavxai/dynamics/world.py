@@ -118,6 +118,7 @@ class JSBSimWorld(ScheduledWorld):
         if not env.calm:
             own.set_environment(env.wind_ne, env.turbulence, jsbsim_seed(self.seed, 0))
         own.set_limits(bank_limit_rad=math.radians(avoid.bank_limit_deg), speed_range=limits)
+        self._own_speed_range = limits  # command_ownship's speed_max_mps stays within it
         own.start(start.x, start.y, start.h, heading_from_deg(start.heading_deg), start.speed_mps)
         for i, spec in enumerate(self.intruders, start=1):
             self.aircraft.append(self._intruder(i, spec, env))
@@ -291,17 +292,24 @@ class JSBSimWorld(ScheduledWorld):
         accel_cmd_mps2: float | None = None,
         speed_target_mps: float | None = None,
         alt_target_m: float | None = None,
+        speed_max_mps: float | None = None,
     ) -> None:
         """Write the ownship's autopilot inputs; None leaves one unchanged. The bank command
         is limited to the scenario's bank limit and the speed target to its speed range
-        by the autopilot itself; ``alt_target_m`` is a height above ground (local h)."""
+        by the autopilot itself; ``alt_target_m`` is a height above ground (local h);
+        ``speed_max_mps`` lowers (or restores) the top of the speed range, within it: an
+        operator's airspeed, which avoidance may fly below but never above."""
         given = {
             "bank_cmd_rad": bank_cmd_rad,
             "accel_cmd_mps2": accel_cmd_mps2,
             "speed_target_mps": speed_target_mps,
             "alt_target_m": alt_target_m,
+            "speed_max_mps": speed_max_mps,
         }
         self._finite_commands(**given)
+        if speed_max_mps is not None:
+            lo, hi = self._own_speed_range
+            given["speed_max_mps"] = min(max(float(speed_max_mps), lo), hi)
         if bank_cmd_rad is not None:
             self._orbit = None  # a bank command takes the aircraft off its loiter orbit
         self.aircraft[0].command(**given)

@@ -41,6 +41,7 @@ class Dynamics(Protocol):
         accel_cmd_mps2: float | None = None,
         speed_target_mps: float | None = None,
         alt_target_m: float | None = None,
+        speed_max_mps: float | None = None,
     ) -> None: ...
     def ownship_command(self) -> dict[str, float]: ...
     def failure(self) -> str | None: ...
@@ -71,9 +72,8 @@ class CommandPath(Protocol):
         """The height the autopilot holds (MAV_CMD_DO_CHANGE_ALTITUDE)."""
 
     def set_cruise_speed(self, speed_mps: float, t: float) -> None:
-        """The airspeed the autopilot holds whenever the planner asks for no other (an
-        operator's DO_CHANGE_SPEED): sent now, and again with every decision that holds
-        speed."""
+        """An operator's airspeed (DO_CHANGE_SPEED): the autopilot flies it and never faster;
+        the planner may still slow down below it."""
 
     def cruise_speed(self, default: float) -> float:
         """The operator's airspeed if one was asked for, else ``default``."""
@@ -123,9 +123,10 @@ def wire_values(bank_cmd_rad: float, accel_mps2: float) -> tuple[float, float]:
 
 
 class _Cruise:
-    """The operator's airspeed. Once asked for, the planner plans at it (the episode pins
-    ``Ownship.speed_band``) and avoids by bank and height; both paths send it with every
-    decision in place of an acceleration, so the autopilot holds it."""
+    """The operator's airspeed, a ceiling: once asked for, the autopilot flies it and never
+    faster (DO_CHANGE_SPEED sets its speed target and lowers its top speed to it). The planner
+    keeps its accelerations (the episode gives it ``Ownship.speed_band`` up to that speed),
+    so it may slow down to let traffic pass and speeds up to the operator's airspeed again."""
 
     _cruise: float | None = None
 
@@ -135,15 +136,6 @@ class _Cruise:
     def set_cruise_speed(self, speed_mps: float, t: float) -> None:
         self._cruise = float(np.float32(speed_mps))
         self._speed(self._cruise, t)
-
-    def _accel(self, decision: Decision) -> float:
-        """The along-track acceleration sent: the planner's, or none under an operator's
-        airspeed (the planner then plans at that speed: ``Ownship.speed_band``)."""
-        return decision.accel_mps2 if self._cruise is None else 0.0
-
-    def _hold_cruise(self, decision: Decision, t: float) -> None:
-        if self._cruise is not None:
-            self._speed(self._cruise, t)
 
     def _speed(self, speed_mps: float, t: float) -> None:
         raise NotImplementedError
@@ -178,15 +170,15 @@ class DirectPath(_Cruise):
         self.commands += 1
 
     def send(self, decision: Decision, t: float) -> None:
-        bank, accel = wire_values(decision.bank_cmd_rad, self._accel(decision))
+        bank, accel = wire_values(decision.bank_cmd_rad, decision.accel_mps2)
         self._world.command_ownship(bank_cmd_rad=bank, accel_cmd_mps2=accel)
         self.commands += 2
         if decision.alt_target_m is not None:  # the vertical set's height command
             self.altitude(decision.alt_target_m, t)
-        self._hold_cruise(decision, t)
 
     def _speed(self, speed_mps: float, t: float) -> None:
-        self._world.command_ownship(speed_target_mps=speed_mps)
+        # what the bridge does with DO_CHANGE_SPEED (MavlinkBridge._fly_planner_command)
+        self._world.command_ownship(speed_target_mps=speed_mps, speed_max_mps=speed_mps)
         self.commands += 1
 
     def operator_input(self, frames: bytes) -> None:
@@ -250,10 +242,9 @@ class MavlinkPath(_Cruise):
         self._encoder = encoder
 
     def send(self, decision: Decision, t: float) -> None:
-        self.bridge.feed(self._encoder.encode(decision.bank_cmd_rad, self._accel(decision), t))
+        self.bridge.feed(self._encoder.encode(decision.bank_cmd_rad, decision.accel_mps2, t))
         if decision.alt_target_m is not None:  # the vertical set's height command
             self.altitude(decision.alt_target_m, t)
-        self._hold_cruise(decision, t)
 
     def _speed(self, speed_mps: float, t: float) -> None:
         self.bridge.feed(self._encoder.change_speed(speed_mps))

@@ -242,8 +242,9 @@ class Episode:
         vertical = self.planner.config.vertical_of(cmd.get("alt_target_m"))
         own = ownship_view(self.state, cmd["bank_cmd_rad"], vertical)
         cruise = self.path.cruise_speed(None)
-        if cruise is not None:  # the operator's airspeed: avoidance by bank and height
-            own = dataclasses.replace(own, speed_band=(cruise, cruise))
+        if cruise is not None:  # the operator's airspeed, a ceiling the planner may slow below
+            lo = min(self.planner.config.speed_mps[0], cruise)
+            own = dataclasses.replace(own, speed_band=(lo, cruise))
         return own
 
     def _leg_step(self) -> int:

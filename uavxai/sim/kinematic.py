@@ -78,6 +78,7 @@ class KinematicWorld(ScheduledWorld):
         self._wind = np.asarray(EnvironmentConfig.from_scenario(scenario).wind_enu, dtype=float)
         self._accel = 0.0
         self._speed_target: float | None = None
+        self._speed_max = float(self.config.speed_mps[1])  # the autopilot's ceiling
         self._alt_target = float(start.h)
         self._pilots = make_pilots(scenario, self.intruders, self.seed, tracks)
         self._init_schedule(scenario, self.seed, len(self.intruders))
@@ -106,12 +107,16 @@ class KinematicWorld(ScheduledWorld):
             model = self._models[key] = EncounterModel(
                 dataclasses.replace(self.config, accel_mps2=key)
             )
+        model.hold_speed_band((self.config.speed_mps[0], self._speed_max))
         return model
 
     def _fly(self, duration: float) -> None:
         accel = self._accel
-        if self._speed_target is not None:
-            gap = self._speed_target - self._own[V]
+        target = self._speed_target
+        if target is None and self._own[V] > self._speed_max:
+            target = self._speed_max  # a lowered ceiling: the autopilot's target drops to it
+        if target is not None:
+            gap = target - self._own[V]
             accel = math.copysign(min(abs(gap) / duration, self.config.accel_mps2), gap)
         model = self._model(accel)
         # The bank command is written straight into the state; "hold bank" then flies it.
@@ -178,15 +183,21 @@ class KinematicWorld(ScheduledWorld):
         accel_cmd_mps2: float | None = None,
         speed_target_mps: float | None = None,
         alt_target_m: float | None = None,
+        speed_max_mps: float | None = None,
     ) -> None:
         """As the JSBSim world: the bank command is clamped to the bank limit, the speed
-        target to the speed range; an acceleration command cancels a speed target."""
+        target to the speed range (whose top ``speed_max_mps`` lowers); an acceleration
+        command cancels a speed target."""
         self._finite_commands(
             bank_cmd_rad=bank_cmd_rad,
             accel_cmd_mps2=accel_cmd_mps2,
             speed_target_mps=speed_target_mps,
             alt_target_m=alt_target_m,
+            speed_max_mps=speed_max_mps,
         )
+        if speed_max_mps is not None:
+            lo, hi = self.config.speed_mps
+            self._speed_max = min(max(float(speed_max_mps), lo), hi)
         if bank_cmd_rad is not None:
             self._orbit = None  # a bank command takes the aircraft off its loiter orbit
             self._bank_from_guidance(bank_cmd_rad)
@@ -194,8 +205,8 @@ class KinematicWorld(ScheduledWorld):
             self._accel = float(accel_cmd_mps2)
             self._speed_target = None
         if speed_target_mps is not None:
-            lo, hi = self.config.speed_mps
-            self._speed_target = min(max(float(speed_target_mps), lo), hi)
+            lo = self.config.speed_mps[0]
+            self._speed_target = min(max(float(speed_target_mps), lo), self._speed_max)
             self._accel = 0.0
         if alt_target_m is not None:
             self._alt_target = float(alt_target_m)
