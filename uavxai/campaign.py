@@ -40,7 +40,7 @@ import multiprocessing
 import os
 import sys
 import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from pathlib import Path
 
@@ -248,19 +248,25 @@ def run_campaign(
     ray_address: str | None = None,
     on_done: Callable[[dict], None] | None = None,
     goal: Sequence[float] | None = None,
+    finished: Mapping[tuple[str, int, int], dict] | None = None,
 ) -> list[dict]:
     """Fly a campaign; returns the episode rows in (method, intruders, episode) order.
 
     ``on_done`` is called with each row as it finishes (for a progress bar). ``goal``: where
     every episode flies (None: :func:`uavxai.sim.build.episode_goal` of ``scenario``).
+    ``finished``: rows of tasks flown before (a resumed campaign's journal,
+    :mod:`uavxai.journal`), taken as they are instead of flown again.
     """
     from uavxai.sim.build import episode_goal
 
     _check(scenario, methods, intruders, episodes, dynamics, workers)
     tasks = campaign_tasks(methods, intruders, episodes)
     common = (dynamics, tuple(episode_goal(scenario) if goal is None else goal))
+    finished = finished or {}
     # Heavy tasks first (many intruders, tree search) so that workers finish together.
-    order = sorted(range(len(tasks)), key=lambda k: -tasks[k][1])
+    order = sorted(
+        (k for k in range(len(tasks)) if tasks[k] not in finished), key=lambda k: -tasks[k][1]
+    )
     if ray_address is not None:
         rows = _run_ray(scenario, tasks, order, common, ray_address, workers, on_done)
     elif workers == 1:
@@ -271,7 +277,7 @@ def run_campaign(
                 on_done(rows[k])
     else:
         rows = _run_pool(scenario, tasks, order, common, workers, on_done)
-    return [rows[k] for k in range(len(tasks))]
+    return [rows[k] if k in rows else finished[t] for k, t in enumerate(tasks)]
 
 
 def _run_pool(scenario, tasks, order, common, workers, on_done) -> dict[int, dict]:
@@ -786,12 +792,16 @@ def evaluate_command(
     workers: int,
     ray_address: str | None,
     out: Path,
+    resume: bool = False,
 ) -> dict:
-    """The `uavxai evaluate` command: run the campaign with a progress bar, write
-    ``results.csv``, ``episodes.csv`` and the plots into ``out``; return a short report."""
+    """The `uavxai evaluate` command: run the campaign with a progress bar, journal each
+    finished episode (:mod:`uavxai.journal`), write ``results.csv``, ``episodes.csv`` and the
+    plots into ``out``; return a short report. ``resume``: take the episodes journaled in
+    ``out`` by an interrupted run of the same campaign and fly only the others."""
     import torch
     from rich.console import Console
 
+    from uavxai.journal import Journal, campaign_header, read_journal
     from uavxai.progress import progress_bar
     from uavxai.sim.build import episode_goal
 
@@ -807,12 +817,19 @@ def evaluate_command(
     goal = episode_goal(scenario)
     where = "ownship.goal" if scenario.ownship.goal is not None else "the service point"
     console.print(f"goal ({where}): ({goal[0]:.0f}, {goal[1]:.0f}, {goal[2]:.0f}) m")
+    header = campaign_header(scenario, methods, intruders, episodes, dynamics, goal, _versions())
+    before = read_journal(out, header) if resume else {}
+    if resume:
+        console.print(f"resuming: {len(before)} of {total} episodes already flown in {out}")
+    journal = Journal(out, header)
     with progress_bar(console) as progress:
         bar = progress.add_task(f"{scenario.name} ({dynamics})", total=total)
+        progress.update(bar, advance=len(before))
 
-        finished: list[dict] = []
+        finished: list[dict] = list(before.values())
 
         def done(row: dict) -> None:
+            journal.append(row)
             finished.append(row)
             progress.update(
                 bar, advance=1, description=f"{row['method']} x{row['intruders']}: {row['outcome']}"
@@ -829,10 +846,13 @@ def evaluate_command(
                 ray_address=ray_address,
                 on_done=done,
                 goal=goal,
+                finished=before,
             )
         except KeyboardInterrupt:
             _keep_finished(finished, out, console)
             raise
+        finally:
+            journal.close()
     results = summarise(rows)
     out.mkdir(parents=True, exist_ok=True)
     episode_columns, result_columns = columns_of(rows)
@@ -860,7 +880,7 @@ def _keep_finished(rows: list[dict], out: Path, console) -> None:
     write_csv(out / "results.csv", result_columns, summarise(rows))
     console.print(
         f"interrupted: kept the {len(rows)} finished episodes in {out / 'episodes.csv'} and "
-        f"{out / 'results.csv'}"
+        f"{out / 'results.csv'}; the same command with --resume flies the others"
     )
 
 
