@@ -587,6 +587,7 @@ _STYLE = {
     "mcts": ("tab:blue", "o"),
     "mcts_fast": ("tab:orange", "s"),
     "mcts_vertical": ("tab:cyan", "*"),
+    "mcts_daa": ("tab:olive", "X"),
     "exhaustive": ("tab:green", "^"),
     "dqn": ("tab:purple", "v"),
     "safe_dqn": ("tab:brown", "P"),

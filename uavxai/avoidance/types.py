@@ -155,6 +155,13 @@ class PlannerConfig:
     # floor), where it levels off, reached at climb_rate_mps.
     actions: str = "paper"
     vertical_margin_m: float = 20.0
+    # The alerting stage of `mcts_daa` (uavxai.avoidance.alerting): the tree decides only while
+    # an intruder is predicted inside the well-clear cylinder (horizontal, vertical m; the
+    # small-UAS 2000 ft / 250 ft) within alert_horizon_s (DO-365's 55 s), and for alert_hold_s
+    # after the last such prediction; otherwise the ownship flies its route.
+    alert_horizon_s: float = 55.0
+    alert_well_clear_m: tuple[float, float] = (609.6, 76.2)
+    alert_hold_s: float = 5.0
 
     def __post_init__(self) -> None:
         self._check_actions()
@@ -163,7 +170,8 @@ class PlannerConfig:
                 f"PlannerConfig.intruder_model must be one of {', '.join(INTRUDER_MODELS)}, "
                 f"got {self.intruder_model!r}."
             )
-        checked = ("reach_horizon_s", "uncertainty_k", "late_collision_value", "own_error_10s_m")
+        checked = ("reach_horizon_s", "uncertainty_k", "late_collision_value", "own_error_10s_m",
+                   "alert_horizon_s", "alert_hold_s")  # fmt: skip
         for name in checked:
             if not getattr(self, name) >= 0:
                 raise UserError(f"PlannerConfig.{name} must be >= 0, got {getattr(self, name)}.")
