@@ -86,7 +86,6 @@ def fly(
     world = command = None
     try:
         world = DYNAMICS[dynamics](scenario, intruders, seed, tracks)
-        av = scenario.avoidance
         planner.reset(seed)
         command = path(world)
         # a companion planner decodes and tracks the traffic on its own core, too
