@@ -370,6 +370,9 @@ class SearchTree:
     # parent
     first_child: np.ndarray | None = None
     branching: int = N_ACTIONS  # children per expanded node: the action set's size
+    # the time the episode had left when the search valued its lines: a line still open
+    # then ends ``timeout`` (inf: no time-out in sight)
+    time_left_s: float = math.inf
 
     @property
     def q(self) -> np.ndarray:
@@ -429,6 +432,7 @@ class SearchTree:
             pos=self.pos[old],
             t_closest=None if self.t_closest is None else self.t_closest[old],
             state=None if self.state is None else self.state[old],
+            time_left_s=self.time_left_s,
         )
 
 
@@ -528,6 +532,8 @@ class Decision:
             "branch_horizon_s": self.branch_horizon_s,
             "cornered": self.cornered,
             "d_min_m": self.d_min_m,
+            # the episode's time left that the search valued its lines against (None: no tree)
+            "time_left_s": None if self.tree is None else _finite(self.tree.time_left_s),
             "ms": self.ms,
         }
 
@@ -567,8 +573,11 @@ class Planner(Protocol):
 
     ``plan`` sees the world as it is now and returns one of its action set's actions (the
     paper's 9, or with ``config.actions == "vertical"`` 11) as a Decision.
-    ``step`` is how many decisions the episode has already taken, so that a planner can see a
-    time-out (``max_steps``) coming; library users who do not count may leave it at 0.
+    ``step`` places the episode's time-out: the planner sees it ``config.max_steps - step``
+    decisions ahead. A transit-only episode passes the decisions it has taken; an episode
+    whose own limit is longer (a mission: transit, station and return) passes the step that
+    makes this its own remaining decisions (negative then). Library users who do not count
+    may leave it at 0.
     ``reset`` re-seeds whatever randomness the planner uses: same seed, same decisions.
     """
 
