@@ -1154,10 +1154,6 @@ def _assert_audit(audit: Audit) -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason=(
-    "open (issue 30): at the bank limit the JSBSim ownship's bank command comes back at float32 "
-    "precision, 4e-9 rad beyond the limit, and uavxai.avoidance.lines.flies then calls a "
-    "clamped 'right' a bank step ('banked right' said of a command that changes nothing)"))
 def test_every_claim_of_a_jsbsim_mission_is_true(tmp_path):
     """Issue 30: the audit sees the orbit's sentences and every phase of a mission flown in
     JSBSim, and counts what the flight contradicts."""

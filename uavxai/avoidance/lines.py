@@ -185,7 +185,9 @@ def flies(action: int, own: Ownship, config: PlannerConfig) -> int | None:
     bank, accel, climb = a.bank, a.accel, a.climb
     if climb and vertical_command(own.vertical, action) == own.vertical:
         climb = 0
-    if bank and abs(float(bank_command(own.bank, action, config)) - own.bank) < 1e-9:
+    # 1e-6 rad: a bank command read back through JSBSim (float32) sits up to ~1e-7 rad
+    # beyond the limit the clamp returns; a step that small changes nothing.
+    if bank and abs(float(bank_command(own.bank, action, config)) - own.bank) < 1e-6:
         bank = 0
     if accel:
         commanded = config.accel_mps2 * config.action_hold_s

@@ -186,6 +186,8 @@ class Mission(Observer):
             return None
         if self.phase == Phase.AVOIDING:
             self._enter(Phase.ON_STATION, t, "orbit clear, rejoining", ep)
+        said = step.decision.words[0]
+        step.decision.words = (f"{ep.plan_label()}: {said}", "")  # the phase it is flown in
         return step.decision
 
     def set_height(self, ep: Episode, h: float) -> None:
@@ -339,7 +341,7 @@ def orbit_step(
         confidence=1.0,
         planner="orbit",
         d_min_m=d_min,
-        words=(f"{ep.plan_label()}: {said}", ""),
+        words=(said, ""),  # Mission.decide opens it with the phase, once that is settled
     )
     return OrbitStep(decision, None)
 
