@@ -6,6 +6,7 @@ are the sub-packages `uavxai.aircraft` and `uavxai.scenarios` (see pyproject.tom
 
 from __future__ import annotations
 
+import os
 from importlib.resources import files
 from pathlib import Path
 
@@ -62,3 +63,22 @@ def resolve_scenario(path: str | Path) -> Path:
         f"{text[:200]}: no such scenario file (expected a .yaml file, or the name of a shipped "
         f"scenario: {', '.join(shipped)})."
     )
+
+
+def invocation(argv0: str | None = None) -> str:
+    """How the user can start uavxai again from where they are: ``uavxai`` when that name on
+    PATH is this program, else the path of the running script (``.venv/bin/uavxai`` after
+    `make demo`, whose venv is not activated), or ``python -m uavxai`` for a module run."""
+    import shlex
+    import shutil
+    import sys
+
+    argv0 = sys.argv[0] if argv0 is None else argv0
+    script = Path(argv0)
+    if script.name in ("__main__.py", "-m", "-c", "") or not script.is_file():
+        return f"{shlex.quote(sys.executable)} -m uavxai"
+    on_path = shutil.which("uavxai")
+    if on_path is not None and Path(on_path).resolve() == script.resolve():
+        return "uavxai"
+    shown = argv0 if os.sep in argv0 else str(script.resolve())
+    return shlex.quote(shown)
