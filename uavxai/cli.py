@@ -23,6 +23,7 @@ from typing import Any, NoReturn
 
 from uavxai.errors import UserError
 from uavxai.outputs import NO_SPACE, OutputError, output_error, write_output
+from uavxai.vocabulary import SERVICE_PLANNERS
 
 EXIT_OK, EXIT_INTERNAL, EXIT_BAD_INPUT = 0, 1, 2
 
@@ -117,15 +118,17 @@ def _mavlink_url(text: str) -> str:
 
 
 def _dynamics() -> tuple[str, ...]:
-    from uavxai.sim.build import DYNAMICS  # the registry of worlds
+    # the names alone (uavxai.vocabulary): building the parser must not import the dynamics,
+    # JSBSim and MAVLink, which every command (`explain`, `scenarios`) would wait for
+    from uavxai.vocabulary import DYNAMICS_MODELS
 
-    return tuple(DYNAMICS)
+    return DYNAMICS_MODELS
 
 
 def _avoidance_methods() -> tuple[str, ...]:
-    from uavxai.avoidance.planners import PLANNERS  # the registry, not a copy of its names
+    from uavxai.vocabulary import AVOIDANCE_PLANNERS  # the registry's names, checked there
 
-    return tuple(PLANNERS)
+    return AVOIDANCE_PLANNERS
 
 
 _SCENARIO_HELP = "a scenario file, or the name of a shipped one (`uavxai scenarios` lists them)"
@@ -161,6 +164,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_service(sub)
     _add_explain(sub)
     _add_validate(sub)
+    sub.add_parser("scenarios", help="list the shipped scenarios: name, what it flies, file")
     return p
 
 
@@ -302,7 +306,7 @@ def _add_service(sub: argparse._SubParsersAction) -> None:
     _add_scenario(s)
     s.add_argument(
         "--planner",
-        choices=("d3qn", "dqn", "random", "grid"),
+        choices=SERVICE_PLANNERS,
         help="the service-point planner (default: the scenario's service.planner); grid is "
         "the exhaustive reference optimum, slow",
     )
@@ -632,6 +636,12 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     intruders = [1] if sc.encounters is not None else args.intruders
     out = prepare_out_dir(args.out or Path("runs") / f"{sc.name}-evaluate", args.force, args.argv)
     from uavxai.campaign import evaluate_command
+    from uavxai.scenario import load_scenario
+    from uavxai.sim.build import episode_goal
+
+    # the goal of the file's own seed: --seed draws other encounters, not another goal, so a
+    # campaign extended with another --seed merges with the first (`uavxai merge`)
+    goal = episode_goal(load_scenario(args.scenario)) if args.seed is not None else None
 
     evaluate_command(
         sc,
@@ -642,6 +652,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         workers=args.workers,
         ray_address=args.ray,
         out=out,
+        goal=goal,
     )
     return EXIT_OK
 
@@ -749,6 +760,19 @@ def cmd_explain(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def cmd_scenarios(args: argparse.Namespace) -> int:
+    from uavxai.paths import invocation, scenario_catalogue
+
+    rows = scenario_catalogue()
+    width = max(len(name) for name, _, _ in rows)
+    for name, about, path in rows:
+        print(f"{name:<{width}}  {about}")
+        print(f"{'':<{width}}  {path}")
+    example = "demo" if any(name == "demo" for name, _, _ in rows) else rows[0][0]
+    print(f"run one by name: {invocation()} run {example}  (or the path of a copy you edited)")
+    return EXIT_OK
+
+
 COMMANDS = {
     "run": cmd_run,
     "train": cmd_train,
@@ -757,6 +781,7 @@ COMMANDS = {
     "service": cmd_service,
     "explain": cmd_explain,
     "validate": cmd_validate,
+    "scenarios": cmd_scenarios,
 }
 
 

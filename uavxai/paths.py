@@ -82,3 +82,22 @@ def invocation(argv0: str | None = None) -> str:
         return "uavxai"
     shown = argv0 if os.sep in argv0 else str(script.resolve())
     return shlex.quote(shown)
+
+
+def scenario_catalogue() -> list[tuple[str, str, Path]]:
+    """Every shipped scenario: (name, one line on what it flies, its file). The line is the
+    first sentence of the file's leading comment (the scenario schema has no description
+    key), cut to 100 characters."""
+    rows = []
+    for name in shipped_scenarios():
+        path = scenarios_dir() / f"{name}.yaml"
+        comment = []
+        with path.open(encoding="utf-8") as f:
+            for line in f:
+                if not line.startswith("#"):
+                    break
+                comment.append(line.lstrip("#").strip())
+        text = " ".join(comment)
+        first = text.split(". ")[0].rstrip(".") + "." if text else "(no description)"
+        rows.append((name, first if len(first) <= 100 else first[:97] + "...", path))
+    return rows
