@@ -12,27 +12,13 @@ import sys
 from pathlib import Path
 
 import pytest
+from test_cli import TINY  # one head-on intruder, a few decisions, no recording
 
 from uavxai.cli import build_parser, main
 from uavxai.paths import scenario_catalogue, shipped_scenarios
 from uavxai.vocabulary import AVOIDANCE_PLANNERS
 
 pytestmark = pytest.mark.usefixtures("release_cli_locks")
-
-# One head-on intruder, a random service search, a few decisions, no recording.
-TINY = """\
-name: tiny
-seed: 1
-ownship:
-  start: {x: 200, y: 1000, h: 120, heading_deg: 90, speed_mps: 20}
-  goal: [1800, 1000, 120]
-service: {planner: random, steps: 5}
-intruders:
-  list:
-    - {x: 800, y: 1000, h: 120, heading_deg: 270, speed_mps: 22}
-avoidance: {planner: mcts_fast, max_steps: 15}
-log: {rerun: false}
-"""
 
 
 def _subcommands() -> dict[str, argparse.ArgumentParser]:

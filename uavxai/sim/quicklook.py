@@ -112,7 +112,8 @@ class QuickLook(Observer):
         (gx, gy, _), where = goal
         for k, xy in enumerate(self.others.values()):
             xy_a = np.array(xy)
-            ax.plot(*xy_a.T, color="0.6", linewidth=0.7, label="intruders" if k == 0 else None)
+            ax.plot(*xy_a.T, color="0.6", linewidth=0.5, alpha=0.6,
+                    label="intruders" if k == 0 else None)  # fmt: skip
             ax.plot(*xy_a[-1], marker=".", color="0.4")
         ax.plot(own[:, 0], own[:, 1], color="tab:blue", linewidth=2.0, label="ownship")
         ax.plot(*own[0, :2], marker="o", color="tab:blue", label="start")
