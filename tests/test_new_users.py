@@ -110,3 +110,20 @@ def test_a_run_plots_prints_its_safety_and_a_runnable_explain_command(tmp_path: 
     assert hint in text
     again = subprocess.run(hint.split(), capture_output=True, text=True, env=env)
     assert again.returncode == 0 and again.stdout.startswith("Decision 0")
+
+
+def test_explain_and_scenarios_do_not_load_the_simulator(tmp_path: Path) -> None:
+    """`explain` and `scenarios` read files: building the command line must not import the
+    dynamics, JSBSim, MAVLink or torch (they made `explain` of one decision take seconds)."""
+    decision = {"t": 0.0, "action": {"bank_cmd_rad": 0.0, "accel_mps2": 0.0}, "children": [],
+                "explanation": "held", "ms": 1.0}  # fmt: skip
+    (tmp_path / "decisions.jsonl").write_text(json.dumps(decision) + "\n")
+    heavy = ("uavxai.sim.build", "jsbsim", "pymavlink", "torch")
+    for argv in (["explain", str(tmp_path), "--decision", "0"], ["scenarios"]):
+        code = (
+            "import sys\nfrom uavxai.cli import main\n"
+            f"rc = main({argv!r})\n"
+            f"print(rc, [m for m in {heavy!r} if m in sys.modules])"
+        )
+        proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+        assert proc.stdout.splitlines()[-1] == "0 []", (argv, proc.stdout, proc.stderr)
