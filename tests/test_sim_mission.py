@@ -108,3 +108,42 @@ def test_ground_station_sees_auto_and_the_phases_as_status_texts() -> None:
     seen = list(dict.fromkeys(modes))
     assert seen == ["AUTO"], seen
     assert [t.split(":")[0] for t in texts] == ["transit", "on station", "returning"], texts
+
+
+class _Budgets(Observer):
+    """Per decision: its step, the phase, the time its search was valued against and the time
+    the episode really had left, and its words."""
+
+    def __init__(self) -> None:
+        self.rows: list[tuple[int, str, float | None, float, str]] = []
+
+    def on_decision(self, ep, event) -> None:
+        d = event.decision
+        left = (ep.max_steps - event.step) * ep.planner.config.decision_period_s
+        valued = d.tree.time_left_s if d.tree is not None else None
+        words = f"{d.explanation} {d.counterfactual}"
+        self.rows.append((event.step, ep.mission.phase.value, valued, left, words))
+
+
+def test_on_station_the_search_is_valued_against_the_missions_time_left() -> None:
+    """Issue 30: on station the planner counted the transit leg's steps against
+    ``avoidance.max_steps`` and said "ends timeout" of lines the mission had time for. Every
+    tree is valued against the episode's own time left, and "timeout" is said only of a
+    line the episode's time-out really cuts (within the search's horizon of it)."""
+    crossing = {"list": [{"x": 1900, "y": 1000, "h": 120, "heading_deg": 270, "speed_mps": 15}]}
+    sc = default_scenario("mission-budget", intruders={**crossing, "behaviour": "straight"},
+                          avoidance={"max_steps": 30}, seed=1)  # fmt: skip
+    m = _mission(sc, service_s=90.0, return_home=False)
+    budgets = _Budgets()
+    planner = make_planner("mcts", PlannerConfig.from_scenario(sc))
+    r = fly(sc, planner, STATION, dynamics="kinematic", mission=m, observers=[budgets])
+    assert r.outcome is Outcome.COMPLETED
+    cfg = planner.config
+    horizon = cfg.depth * cfg.action_hold_s
+    searched = [row for row in budgets.rows if row[2] is not None]
+    late = [row for row in searched if row[1] == "avoiding" and row[0] >= cfg.max_steps]
+    assert late, "no avoidance on station past the leg's max_steps: nothing under test"
+    for step, phase, valued, left, words in searched:
+        assert valued == pytest.approx(left), (step, phase, valued, left)
+        if "timeout" in words:
+            assert left <= horizon + 1e-9, (step, phase, words)

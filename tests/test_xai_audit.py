@@ -16,7 +16,7 @@ import json
 import math
 import re
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -25,19 +25,21 @@ import pytest
 from uavxai.avoidance.mcts import predict_levels
 from uavxai.avoidance.model import GOAL, NONE, OUT_OF_BOUNDS, EncounterModel
 from uavxai.avoidance.planners import make_planner
-from uavxai.avoidance.types import Intruder, PlannerConfig
+from uavxai.avoidance.types import Intruder, Ownship, PlannerConfig
 from uavxai.dynamics.traffic import draw_intruders
 from uavxai.recording.recorder import _plan_label
 from uavxai.recording.tree_graph import CHOSEN_COLOR, tree_graph
 from uavxai.scenario import Scenario, load_scenario
-from uavxai.sim.build import episode_goal, fly
+from uavxai.sim.build import episode_goal, episode_steps, fly
 from uavxai.sim.episode import Observer
+from uavxai.sim.mission import CONFLICT_FACTOR, ON_ORBIT_SHARE, MissionConfig, orbit_clearance
 from uavxai.sim.observers import DecisionsJSONL, TrajectoryCSV, Trust
 from uavxai.vocabulary import ACTIONS, HOLD
 from uavxai.xai.explain import explain_command
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
 SPEED_SHARE = 0.1  # a speed change below this share of what is commanded is none (docs)
+BANK_EPS = 1e-6  # rad: the bank command comes back from the autopilot at float32 precision
 
 
 # ------------------------------------------------------------------------------ flying
@@ -46,9 +48,11 @@ class _Keep(Observer):
 
     def __init__(self) -> None:
         self.decisions: list = []
+        self.goals: list = []  # where the planner steered (a mission's moves with its phase)
 
     def on_decision(self, ep, event) -> None:
         self.decisions.append(event.decision)
+        self.goals.append(tuple(ep.aim()))
 
 
 @dataclass
@@ -60,13 +64,23 @@ class Run:
     decisions: list  # Decision objects (None: only the files, e.g. a `uavxai run`)
     summary: dict
     contexts: list = field(default_factory=list)  # per decision, as the audit read it
+    max_steps: int = 0  # the episode's own limit (0: the planner's, a transit-only episode)
+    mission: object = None  # uavxai.sim.mission.MissionConfig of a mission, else None
+    goals: list = field(default_factory=list)  # per decision (empty: ``goal`` throughout)
+
+    @property
+    def steps_limit(self) -> int:
+        return self.max_steps or self.config.max_steps
 
 
-def fly_recorded(sc: Scenario, planner_name: str, folder: Path) -> Run:
-    """Fly ``sc`` on the kinematic dynamics, writing the files `uavxai run` writes."""
+def fly_recorded(
+    sc: Scenario, planner_name: str, folder: Path, dynamics: str = "kinematic", mission=None
+) -> Run:
+    """Fly ``sc`` (kinematic unless told), writing the files `uavxai run` writes; with a
+    ``mission`` (MissionConfig) the whole mission, to its station."""
     folder.mkdir(parents=True, exist_ok=True)
     planner = make_planner(planner_name, PlannerConfig.from_scenario(sc))
-    goal = episode_goal(sc)
+    goal = episode_goal(sc) if mission is None else mission.station
     keep = _Keep()
     observers = [
         Trust(),
@@ -75,10 +89,13 @@ def fly_recorded(sc: Scenario, planner_name: str, folder: Path) -> Run:
         keep,
     ]
     intruders = draw_intruders(sc, np.random.default_rng(sc.seed), None)
-    result = fly(sc, planner, goal, dynamics="kinematic", intruders=intruders, observers=observers)
+    result = fly(sc, planner, goal, dynamics=dynamics, intruders=intruders, observers=observers,
+                 mission=mission)  # fmt: skip
     (folder / "summary.json").write_text(json.dumps(result.summary))
     records = [json.loads(line) for line in (folder / "decisions.jsonl").open()]
-    return Run(folder, planner.config, tuple(goal), records, keep.decisions, result.summary)
+    run = Run(folder, planner.config, tuple(goal), records, keep.decisions, result.summary)
+    run.max_steps, run.mission, run.goals = episode_steps(sc, mission), mission, keep.goals
+    return run
 
 
 def scenario(name: str, **changes) -> Scenario:
@@ -196,16 +213,19 @@ def flight(folder: Path) -> tuple[np.ndarray, list[dict[str, np.ndarray]]]:
     return np.array([float(t) for t in times]), samples
 
 
-def flown_min(times: np.ndarray, samples: list, t0: float, t1: float) -> float:
+def flown_min(
+    times: np.ndarray, samples: list, t0: float, t1: float, only: str | None = None
+) -> float:
     """The smallest ownship-intruder distance flown from ``t0`` until the first sample at or
-    after ``t1`` (linear between samples; an aircraft new in a sample counts from there)."""
+    after ``t1`` (linear between samples; an aircraft new in a sample counts from there);
+    ``only``: to that intruder (its number) alone."""
     out = math.inf
     first = int(np.searchsorted(times, t0 + 1e-9))
     for i in range(max(first, 1), len(times)):
         prev, now = samples[i - 1], samples[i]
         own0, own1 = prev["ownship"], now["ownship"]
         for ident, p1 in now.items():
-            if ident == "ownship":
+            if ident == "ownship" or (only is not None and not _name_ok(ident, only)):
                 continue
             p0 = prev.get(ident) if len(prev) == len(now) else None
             if p0 is None:
@@ -238,7 +258,19 @@ WHY = (
     r"|a higher Q beyond 3 decimals decided|the tie goes to the first in action order)"
 )
 KEEPS = r"is predicted to keep (?P<n>\d+) m from intruder (?P<k>[^\s;,()]+?)"
-GOAL_TAIL = r"(?P<goal> and reaches the goal)?(?=;|$)"
+ENDS = r"ends out of bounds|ends at the time-out|ends timeout"
+GOAL_TAIL = rf"(?:(?P<goal> and reaches the goal)|(?: and (?P<end>{ENDS})(?P<too2> too)?))?(?=;|$)"
+ORBIT_WHERE = (
+    r"^on station: (?:orbiting \((?P<x>-?\d+), (?P<y>-?\d+)\) at (?P<r>\d+) m radius, "
+    r"(?P<h>-?\d+) m height|joining the orbit about \((?P<x2>-?\d+), (?P<y2>-?\d+)\), "
+    r"(?:(?P<d>\d+) m from its centre, radius (?P<r2>\d+) m"
+    r"|(?P<off>\d+) m (?P<side>outside|inside) its (?P<r3>\d+) m radius))"
+)
+ORBIT_PASS = (
+    r"; intruder (?P<k>[^\s;,()]+) predicted to pass (?:the orbit ahead|(?P<old>it)) at "
+    r"(?P<n>\d+) m in (?P<t>\d+) s(?P<cond> if it holds its present turn \(2-sigma track error "
+    r"taken off; the orbit is left below (?P<lim>\d+) m\))?"
+)
 PHRASE = {a.phrase: a.index for a in ACTIONS}
 
 # (claim type, where, pattern), matched in this order; each match is blanked before the next
@@ -253,7 +285,13 @@ CLAIMS = [
      r"(?: \(in (?P<t>\d+\.\d) s, the next in (?P<t2>\d+\.\d) s\)"
      r"| \(in (?P<t3>\d+\.\d) s, as another does\) and passes it widest "
      rf"\((?P<m>\d+\.\d) m against (?P<m2>\d+\.\d) m\)| and passes it widest, tied: {WHY})?"),
+    ("orbit: where", "o", ORBIT_WHERE),
+    ("orbit: intruder passes", "o", ORBIT_PASS),
     ("why not: a collision", "c", rf"(?P<opt>it) {MEETS}, a predicted collision"),
+    ("why not: inside the margin", "c",
+     rf"(?P<opt>it) {MEETS}, inside the (?P<mg>\d+) m margin kept beyond the (?P<dm>\d+) m "
+     r"collision distance for what that intruder may do, which the search counts as a collision"),
+    ("every option ends", "s", rf"every option (?P<how>{ENDS})"),
     ("why not: both conflict", "c", rf"(?P<opt>it) {MEETS} too;"),
     ("cornered: why not", "c",
      rf"(?P<opt>it) {MEETS}, (?P<how>sooner|as soon and closer|the same; {WHY})"),
@@ -261,7 +299,7 @@ CLAIMS = [
     ("every option conflicts", "s", r"every option meets an intruder"),
     ("keeps N m from k", "sc", rf"(?P<opt>{OPT}|it) {KEEPS}{GOAL_TAIL}"),
     ("keeps clear", "sc", rf"(?P<opt>{OPT}|it) keeps clear of every known intruder{GOAL_TAIL}"),
-    ("line ends", "sc", r"(?P<opt>" + OPT + r"|its best line) ends (?P<how>out of bounds|timeout)"),
+    ("line ends", "sc", rf"(?P<opt>{OPT}|its best line) (?P<how>{ENDS})(?P<too> too)?"),
     ("Q lower", "s", rf"(?P<opt>{OPT}) scores lower \(Q (?P<a>{Q}) against (?P<b>{Q}){RISK}\)"),
     ("Q higher, fewer simulations", "sc",
      rf"(?P<opt>{OPT}) has the higher Q \((?P<a>{Q}) against (?P<b>{Q}){RISK}\) but fewer "
@@ -282,24 +320,60 @@ _COMPILED = [(name, where, re.compile(p)) for name, where, p in CLAIMS]
 
 @dataclass
 class Audit:
+    """Claims checked and, per kind, how many were false (the record or the tree contradict
+    them), misleading (true to the letter, but said as a reason that was none, or leaving
+    the chosen line's own end unsaid) and contradicted by the flight (a prediction the
+    aircraft then flew more than ``FLIGHT_TOLERANCE_M`` short of: the words say
+    "predicted", so it is no false claim, but it is counted and bounded)."""
+
     checked: Counter = field(default_factory=Counter)
     false: Counter = field(default_factory=Counter)
+    misleading: Counter = field(default_factory=Counter)
+    contradicted: Counter = field(default_factory=Counter)
     failures: list[str] = field(default_factory=list)
     info: Counter = field(default_factory=Counter)
 
     def claim(self, kind: str, ok: bool, where: str) -> None:
         self.checked[kind] += 1
         if not ok:
-            self.false[kind] += 1
-            if len(self.failures) < 40:
-                self.failures.append(f"{kind}: {where}")
+            self._count(self.false, kind, where)
+
+    def mislead(self, kind: str, where: str) -> None:
+        self._count(self.misleading, kind, where)
+
+    def flown(self, kind: str, held: bool, where: str) -> None:
+        """A prediction set against the flight: counted when the flight contradicts it."""
+        self.info[f"flight: {kind}"] += 1
+        if not held:
+            self._count(self.contradicted, kind, where)
+
+    def _count(self, counter: Counter, kind: str, where: str) -> None:
+        counter[kind] += 1
+        if len(self.failures) < 40:
+            self.failures.append(f"{kind}: {where}")
+
+    def totals(self) -> dict[str, int]:
+        return {
+            "claims": sum(self.checked.values()),
+            "false": sum(self.false.values()),
+            "misleading": sum(self.misleading.values()),
+            "flown": sum(v for k, v in self.info.items() if k.startswith("flight: ")),
+            "contradicted": sum(self.contradicted.values()),
+        }
 
     def table(self) -> str:
-        rows = [f"{'claim':<40}{'checked':>9}{'false':>7}"]
-        for kind in sorted(self.checked):
-            rows.append(f"{kind:<40}{self.checked[kind]:>9}{self.false[kind]:>7}")
-        rows.append(f"{'total':<40}{sum(self.checked.values()):>9}{sum(self.false.values()):>7}")
+        rows = [f"{'claim':<44}{'checked':>9}{'false':>7}{'mislead':>9}{'flown x':>9}"]
+        kinds = sorted(set(self.checked) | set(self.contradicted) | set(self.misleading))
+        for kind in kinds:
+            rows.append(f"{kind:<44}{self.checked[kind]:>9}{self.false[kind]:>7}"
+                        f"{self.misleading[kind]:>9}{self.contradicted[kind]:>9}")  # fmt: skip
+        t = self.totals()
+        rows.append(f"{'total':<44}{t['claims']:>9}{t['false']:>7}{t['misleading']:>9}"
+                    f"{t['contradicted']:>9}  ({t['flown']} set against flight)")  # fmt: skip
         return "\n".join(rows)
+
+
+FLIGHT_TOLERANCE_M = 10.0  # a prediction flown more than this short of is contradicted
 
 
 @dataclass
@@ -315,6 +389,12 @@ class Ctx:
     decision: object = None
     runner: dict | None = None
     text: str = ""
+    audit: Audit | None = None
+    label: str = ""
+    run: Run | None = None
+    flight: tuple = ()  # (times, samples) of the run's trajectory
+    index: int = 0  # the decision's step in its episode
+    said_chosen_end: bool = False  # the words said how the chosen line ends
 
     def q(self, c: dict) -> float:
         return float(c["q"])
@@ -334,10 +414,11 @@ def flies_of(record: dict, child: dict, cfg: PlannerConfig) -> int:
     """The manoeuvre ``child`` flies, read from its recorded command and the ownship's state."""
     own, a = record["state"]["ownship"], ACTIONS[child["action"]["index"]]
     step = child["action"]["bank_cmd_rad"] - own["bank"]
-    bank = int(np.sign(step)) if abs(step) > 1e-9 else 0
+    bank = int(np.sign(step)) if abs(step) > BANK_EPS else 0
     commanded = cfg.accel_mps2 * cfg.action_hold_s
     v = own["speed"]
-    lo, hi = min(cfg.speed_mps[0], v), max(cfg.speed_mps[1], v)
+    band = own.get("speed_band") or cfg.speed_mps  # the speeds this decision might fly
+    lo, hi = min(band[0], v), max(band[1], v)
     change = min(max(v + a.accel * commanded, lo), hi) - v
     accel = a.accel if commanded > 0 and abs(change) >= SPEED_SHARE * commanded else 0
     vertical = own.get("vertical", 0)
@@ -437,7 +518,10 @@ def check_meets(ctx: Ctx, m: re.Match, c: dict | None = None) -> bool:
 
 
 def check_why_not_collision(ctx: Ctx, m: re.Match) -> bool:
-    return check_meets(ctx, m) and not ctx.conflicts(ctx.chosen)
+    """A predicted collision: the predicted miss is inside d_min itself (issue 30: passes
+    inside the margin only were called collisions)."""
+    miss_inside = _meeting(ctx, ctx.runner)[2] < ctx.record["d_min_m"] if ctx.runner else False
+    return check_meets(ctx, m) and not ctx.conflicts(ctx.chosen) and miss_inside
 
 
 def check_both_conflict(ctx: Ctx, m: re.Match) -> bool:
@@ -510,6 +594,8 @@ def check_keeps(ctx: Ctx, m: re.Match) -> bool:
             return False  # the record must hold the number the words quote
     if (m["goal"] is not None) != reaches:
         return False
+    if m["end"] is not None and not _end_ok(ctx, c, m["end"], m["too2"]):
+        return False
     return sep is not None and _near(sep, m["n"], 0.5) and _name_ok(who, m["k"])
 
 
@@ -524,11 +610,51 @@ def check_clear(ctx: Ctx, m: re.Match) -> bool:
 
 
 def check_ends(ctx: Ctx, m: re.Match) -> bool:
-    c = _subject(ctx, m)
-    if c is None or c["outcome"] != m["how"].replace(" ", "_"):
+    return _end_ok(ctx, _subject(ctx, m), m["how"], m["too"])
+
+
+_END_CODES = {"ends out of bounds": ("out_of_bounds", OUT_OF_BOUNDS),
+              "ends at the time-out": ("timeout", 4), "ends timeout": ("timeout", 4)}  # fmt: skip
+
+
+def _end_ok(ctx: Ctx, c: dict | None, how: str, too: str | None) -> bool:
+    """An option's line end: the record's and the tree's; a time-out only where the
+    episode's own limit falls within the search's horizon; said of another option as a
+    reason against it only when the chosen line does not end so too (else misleading)."""
+    if c is None:
         return False
-    code = {"out of bounds": OUT_OF_BOUNDS, "timeout": 4}[m["how"]]
-    return ctx.lines is None or ctx.lines[c["action"]["index"]].end == code
+    outcome, code = _END_CODES[how]
+    if c["outcome"] != outcome:
+        return False
+    if ctx.lines is not None and ctx.lines[c["action"]["index"]].end != code:
+        return False
+    if c is ctx.chosen:
+        ctx.said_chosen_end = True
+    if outcome == "timeout" and ctx.run is not None:
+        left = (ctx.run.steps_limit - ctx.index) * ctx.cfg.decision_period_s
+        if left > ctx.cfg.depth * ctx.cfg.action_hold_s + 1e-9:
+            return False  # the episode had the time: no time-out can end this line
+    same = c is not ctx.chosen and ctx.chosen["outcome"] == c["outcome"]
+    if same != (too is not None):
+        if same:  # a reason that is none: the chosen line ends so as well
+            ctx.audit.mislead("line end given as a reason", f"{ctx.label}: {how}")
+            return True
+        return False
+    return True
+
+
+def check_every_end(ctx: Ctx, m: re.Match) -> bool:
+    outcome = _END_CODES[m["how"]][0]
+    return all(k["outcome"] == outcome for k in ctx.kids.values())
+
+
+def check_margin(ctx: Ctx, m: re.Match) -> bool:
+    """Inside the margin, not inside d_min: the miss is at least d_min."""
+    if not check_meets(ctx, m) or ctx.conflicts(ctx.chosen):
+        return False
+    d_min = ctx.record["d_min_m"]
+    miss, need = float(m["miss"]), float(m["need"])
+    return miss >= d_min - 0.5 and _near(need - d_min, m["mg"], 1.0) and _near(d_min, m["dm"], 0.5)
 
 
 def _risk_ok(c: dict, said: str | None) -> bool:
@@ -625,7 +751,70 @@ def check_support(ctx: Ctx, m: re.Match) -> bool:
     return f"{100 * share:.0f}" == m["p"]
 
 
+def _station_at(run: Run, t: float) -> tuple[float, float, float]:
+    """The service point in effect at ``t`` (summary: re-planned points with their times)."""
+    points = [p for p in run.summary["mission"]["service_points"] if p[0] <= t + 1e-9]
+    return tuple(points[-1][1:])
+
+
+def _phase_at(run: Run, t: float) -> str:
+    phases = [ph for when, ph in run.summary["mission"]["transitions"] if when <= t + 1e-9]
+    return phases[-1] if phases else ""
+
+
+def check_orbit_where(ctx: Ctx, m: re.Match) -> bool:
+    """Orbiting only on the circle (within a tenth of its radius), about the service point
+    in effect, at its height; joining says how far from the centre it is."""
+    run, own, t = ctx.run, ctx.record["state"]["ownship"], ctx.record["t"]
+    x, y, h = _station_at(run, t)
+    r = run.mission.radius_m
+    d = math.hypot(own["x"] - x, own["y"] - y)
+    if _phase_at(run, t) != "on_station":
+        return False
+    cx, cy = m["x"] or m["x2"], m["y"] or m["y2"]
+    if not (_near(x, cx, 0.5) and _near(y, cy, 0.5)):
+        return False
+    if m["r"] is not None:
+        return _near(r, m["r"], 0.5) and _near(h, m["h"], 0.5) and abs(d - r) <= ON_ORBIT_SHARE * r
+    if m["d"] is not None:
+        return _near(r, m["r2"], 0.5) and _near(d, m["d"], 0.5) and abs(d - r) > ON_ORBIT_SHARE * r
+    side = "outside" if d > r else "inside"
+    return _near(r, m["r3"], 0.5) and _near(abs(d - r), m["off"], 0.5) and m["side"] == side
+
+
+def check_orbit_pass(ctx: Ctx, m: re.Match) -> bool:
+    """The orbit ahead against the intruders the record says the planner saw, as the record
+    holds it; its flight counted (the words are a prediction on each intruder's present
+    turn)."""
+    run, rec = ctx.run, ctx.record
+    station = _station_at(run, rec["t"])
+    c = replace(run.mission, station=station)
+    own = Ownship(**{k: rec["state"]["ownship"][k] for k in ("x", "y", "h", "speed", "heading",
+                                                             "bank")})  # fmt: skip
+    intruders = [Intruder(**i) for i in rec["state"]["intruders"]]
+    horizon = ctx.cfg.depth * ctx.cfg.action_hold_s
+    sep, who, when = orbit_clearance(c, own, intruders, horizon)
+    ok = (
+        who is not None
+        and _name_ok(who.removeprefix("intruder "), m["k"])
+        and _near(sep, m["n"], 0.5)
+        and _near(when, m["t"], 0.5)
+        and _near(rec["branch_min_separation_m"], m["n"], 0.5)
+        and (m["lim"] is None or _near(CONFLICT_FACTOR * rec["d_min_m"], m["lim"], 0.5))
+    )
+    if m["old"] is not None:  # said as what will happen, not as the conditional it is
+        ctx.audit.mislead("orbit: a pass said as certain", ctx.label)
+    times, samples = ctx.flight
+    flown = flown_min(times, samples, rec["t"], rec["t"] + horizon, only=m["k"])
+    if math.isfinite(flown):
+        ctx.audit.flown("orbit: intruder passes", flown >= float(m["n"]) - FLIGHT_TOLERANCE_M,
+                        f"{ctx.label}: said {m['n']} m, flown {flown:.0f} m")  # fmt: skip
+    return ok
+
+
 CHECKS = {
+    "orbit: where": check_orbit_where,
+    "orbit: intruder passes": check_orbit_pass,
     "verb": check_verb,
     "why not names the runner-up": check_runner,
     "cornered: chose by the stated rule": check_cornered,
@@ -637,6 +826,8 @@ CHECKS = {
     "keeps N m from k": check_keeps,
     "keeps clear": check_clear,
     "line ends": check_ends,
+    "every option ends": check_every_end,
+    "why not: inside the margin": check_margin,
     "Q lower": check_lower,
     "Q higher, fewer simulations": check_higher,
     "Q tie says what decided": check_tie,
@@ -657,6 +848,8 @@ def audit_text(audit: Audit, ctx: Ctx, text: str, where: str, label: str) -> Non
             rest = rest[: m.start()] + "\0" * (m.end() - m.start()) + rest[m.end() :]
     audit.claim("every claim parsed", re.fullmatch(r"[\s;:,()\0]*", rest) is not None,
                 f"{label}: unparsed {rest.replace(chr(0), '')!r}")  # fmt: skip
+    if where == "o":  # an orbit decision names no options
+        return
     # a named option is never the chosen manoeuvre offered as an alternative
     chosen = ctx.chosen["action"]["index"]
     named = rf"(?:^|: |; )({OPT}) (?:meets|is as good|has the higher|scores lower|ends)"
@@ -671,18 +864,27 @@ def audit_run(audit: Audit, run: Run) -> None:
     times, samples = flight(run.folder)
     errors = []
     run.contexts = [
-        _context(run, r, run.decisions[i] if run.decisions else None)
+        _context(run, r, run.decisions[i] if run.decisions else None, i)
         for i, r in enumerate(run.records)
     ]
     for i, (record, ctx) in enumerate(zip(run.records, run.contexts, strict=True)):
-        decision = ctx.decision
         label = f"{run.folder.name}#{i}"
+        ctx.audit, ctx.label, ctx.run, ctx.index = audit, label, run, i
+        ctx.flight = (times, samples)
+        _audit_next_period(audit, ctx, times, samples, label)
+        if record["planner"] == "orbit":
+            audit_text(audit, ctx, record["explanation"], "o", label)
+            continue
+        decision = ctx.decision
         audit_text(audit, ctx, record["explanation"], "s", label)
         if record["counterfactual"]:
             audit_text(audit, ctx, record["counterfactual"], "c", label)
+        if ctx.chosen["outcome"] in ("out_of_bounds", "timeout") and not ctx.said_chosen_end:
+            audit.mislead("chosen line's end unsaid", f"{label}: {record['explanation']!r}")
         _audit_record(audit, ctx, label)
         if decision is not None and decision.tree is not None:
             _audit_drawing(audit, ctx, decision, label)
+        _audit_keeps_flown(audit, ctx, times, samples, label)
         error = _audit_trust_window(audit, ctx, times, samples, label)
         if error is not None:
             errors.append(error)
@@ -690,17 +892,46 @@ def audit_run(audit: Audit, run: Run) -> None:
     _audit_overview(audit, run)
 
 
-def _context(run: Run, record: dict, decision) -> Ctx:
+def _context(run: Run, record: dict, decision, i: int) -> Ctx:
+    if record["planner"] == "orbit":  # no options: the orbit's own claims
+        return Ctx(record, run.config, {}, {}, {}, None, decision)
     kids = {c["action"]["index"]: c for c in record["children"]}
     chosen = kids[record["action"]["index"]]
     flies = {a: flies_of(record, c, run.config) for a, c in kids.items()}
     lines = None
     if decision is not None and decision.tree is not None:
-        lines = line_truths(decision, record, run.config, run.goal)
+        lines = line_truths(decision, record, run.config, run.goals[i] if run.goals else run.goal)
     ctx = Ctx(record, run.config, kids, chosen, flies, lines, decision)
     head = re.match(rf"^why not ({OPT})", record["counterfactual"] or "")
     ctx.runner = kids.get(PHRASE[head.group(1)]) if head else None
     return ctx
+
+
+def _audit_next_period(audit: Audit, ctx: Ctx, times, samples, label: str) -> None:
+    """`uavxai explain` labels ``predicted_min_separation_m`` "predicted minimum separation
+    over the next decision period": set against that period as flown."""
+    sep = ctx.record.get("predicted_min_separation_m")
+    if sep is None:
+        return
+    t = ctx.record["t"]
+    flown = flown_min(times, samples, t, t + ctx.cfg.decision_period_s)
+    if math.isfinite(flown):
+        audit.flown("explain: next period's separation", abs(flown - sep) <= FLIGHT_TOLERANCE_M,
+                    f"{label}: {sep:.0f} m, flown {flown:.0f} m")  # fmt: skip
+
+
+def _audit_keeps_flown(audit: Audit, ctx: Ctx, times, samples, label: str) -> None:
+    """The chosen option's "is predicted to keep N m from intruder k", against the flight
+    over the chosen line's horizon (the flight followed that line, not the others')."""
+    said = re.search(rf"; (?:{OPT}) {KEEPS}", ctx.record["explanation"])
+    horizon = ctx.record.get("branch_horizon_s") or 0.0
+    if said is None or not horizon > 0:
+        return
+    t = ctx.record["t"]
+    flown = flown_min(times, samples, t, t + horizon, only=said["k"])
+    if math.isfinite(flown):
+        audit.flown("keeps N m from k", flown >= float(said["n"]) - FLIGHT_TOLERANCE_M,
+                    f"{label}: said {said['n']} m from {said['k']}, flown {flown:.0f}")  # fmt: skip
 
 
 def _audit_record(audit: Audit, ctx: Ctx, label: str) -> None:
@@ -713,8 +944,8 @@ def _audit_record(audit: Audit, ctx: Ctx, label: str) -> None:
         act = ACTIONS[a]
         step = c["action"]["bank_cmd_rad"] - own["bank"]
         lim = math.radians(ctx.cfg.bank_limit_deg)
-        at_limit = abs(step) < 1e-9 and abs(own["bank"]) >= lim - 1e-9
-        sign_ok = np.sign(step) == act.bank or at_limit
+        at_limit = abs(step) < BANK_EPS and abs(own["bank"]) >= lim - BANK_EPS
+        sign_ok = (np.sign(step) if abs(step) > BANK_EPS else 0) == act.bank or at_limit
         audit.claim("option phrase matches its command",
                     bool(sign_ok) and np.sign(c["action"]["accel_mps2"]) == act.accel,
                     f"{label}: {act.phrase}")  # fmt: skip
@@ -784,7 +1015,7 @@ def _audit_overview(audit: Audit, run: Run) -> None:
     truth = []
     for i, ctx in enumerate(run.contexts):
         hold = ctx.kids.get(HOLD)
-        if hold is None:
+        if hold is None or not ctx.chosen:
             continue
         index = ctx.chosen["action"]["index"]
         other = ctx.flies[index] != ctx.flies[HOLD]
@@ -888,6 +1119,56 @@ def test_the_audit_catches_false_claims(fast_audit):
                     audit_text(audit, ctx, bad, where, f"#{i}")
         assert hits, pattern  # the corruption found something to corrupt
         assert sum(audit.false.values()) >= hits, (pattern, audit.table())
+
+
+def mission_run(tmp: Path, seed: int = 3, service_s: float = 60.0, count: int = 20) -> Run:
+    """A whole mission in JSBSim among manoeuvring traffic seen through ADS-B: transit, the
+    orbit on station (left to avoid traffic, rejoined), home."""
+    sc = scenario("manoeuvring", seed=seed, intruders={"count": count},
+                  avoidance={"mcts": {"simulations": 100}})  # fmt: skip
+    mission = replace(MissionConfig.from_scenario(sc, (600.0, 600.0, 120.0)), service_s=service_s)
+    run = fly_recorded(sc, "mcts", tmp / f"mission-{seed}", dynamics="jsbsim", mission=mission)
+    # checked against the record, as a `uavxai run` is: the lines are re-flown in the
+    # kinematic runs (the planner's model of the JSBSim ownship is not all in the record)
+    run.decisions = []
+    return run
+
+
+def audit_of(runs: list[Run]) -> Audit:
+    audit = Audit()
+    for run in runs:
+        audit_run(audit, run)
+    return audit
+
+
+# What the flight may contradict (issue 30): a share of the predictions set against it.
+CONTRADICTED_SHARE = 0.10
+MISLEADING_SHARE = 0.005
+
+
+def _assert_audit(audit: Audit) -> None:
+    t = audit.totals()
+    assert t["false"] == 0, "\n".join(audit.failures)
+    assert t["misleading"] <= MISLEADING_SHARE * t["claims"], "\n".join(audit.failures)
+    assert t["flown"] and t["contradicted"] <= CONTRADICTED_SHARE * t["flown"], audit.table()
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=(
+    "open (issue 30): at the bank limit the JSBSim ownship's bank command comes back at float32 "
+    "precision, 4e-9 rad beyond the limit, and uavxai.avoidance.lines.flies then calls a "
+    "clamped 'right' a bank step ('banked right' said of a command that changes nothing)"))
+def test_every_claim_of_a_jsbsim_mission_is_true(tmp_path):
+    """Issue 30: the audit sees the orbit's sentences and every phase of a mission flown in
+    JSBSim, and counts what the flight contradicts."""
+    run = mission_run(tmp_path)
+    audit = audit_of([run])
+    print(f"\n{len(run.records)} decisions, {run.summary['outcome']}")
+    print(audit.table())
+    phases = {ph for _, ph in run.summary["mission"]["transitions"]}
+    assert {"transit", "on_station", "avoiding", "returning"} <= phases
+    assert audit.checked["orbit: where"] and audit.checked["orbit: intruder passes"]
+    _assert_audit(audit)
 
 
 @pytest.mark.slow

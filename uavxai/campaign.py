@@ -41,7 +41,7 @@ import multiprocessing
 import os
 import sys
 import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from pathlib import Path
 
@@ -249,19 +249,25 @@ def run_campaign(
     ray_address: str | None = None,
     on_done: Callable[[dict], None] | None = None,
     goal: Sequence[float] | None = None,
+    finished: Mapping[tuple[str, int, int], dict] | None = None,
 ) -> list[dict]:
     """Fly a campaign; returns the episode rows in (method, intruders, episode) order.
 
     ``on_done`` is called with each row as it finishes (for a progress bar). ``goal``: where
     every episode flies (None: :func:`uavxai.sim.build.episode_goal` of ``scenario``).
+    ``finished``: rows of tasks flown before (a resumed campaign's journal,
+    :mod:`uavxai.journal`), taken as they are instead of flown again.
     """
     from uavxai.sim.build import episode_goal
 
     _check(scenario, methods, intruders, episodes, dynamics, workers)
     tasks = campaign_tasks(methods, intruders, episodes)
     common = (dynamics, tuple(episode_goal(scenario) if goal is None else goal))
+    finished = finished or {}
     # Heavy tasks first (many intruders, tree search) so that workers finish together.
-    order = sorted(range(len(tasks)), key=lambda k: -tasks[k][1])
+    order = sorted(
+        (k for k in range(len(tasks)) if tasks[k] not in finished), key=lambda k: -tasks[k][1]
+    )
     if ray_address is not None:
         rows = _run_ray(scenario, tasks, order, common, ray_address, workers, on_done)
     elif workers == 1:
@@ -272,7 +278,7 @@ def run_campaign(
                 on_done(rows[k])
     else:
         rows = _run_pool(scenario, tasks, order, common, workers, on_done)
-    return [rows[k] for k in range(len(tasks))]
+    return [rows[k] if k in rows else finished[t] for k, t in enumerate(tasks)]
 
 
 def _run_pool(scenario, tasks, order, common, workers, on_done) -> dict[int, dict]:
@@ -582,6 +588,7 @@ _STYLE = {
     "mcts": ("tab:blue", "o"),
     "mcts_fast": ("tab:orange", "s"),
     "mcts_vertical": ("tab:cyan", "*"),
+    "mcts_daa": ("tab:olive", "X"),
     "exhaustive": ("tab:green", "^"),
     "dqn": ("tab:purple", "v"),
     "safe_dqn": ("tab:brown", "P"),
@@ -780,6 +787,19 @@ def _read_rows(path: Path, columns: Sequence[str]) -> list[dict]:
     return rows
 
 
+def _campaign_goal(scenario: Scenario, goal: Sequence[float] | None, console) -> tuple:
+    """Where every episode flies, said on ``console``: ``goal``, or None: the scenario's
+    (``ownship.goal``, else its service point). `uavxai evaluate --seed N` passes the goal of
+    the scenario file's own seed, so that a campaign extended with another seed flies to the
+    same goal and merges with the first."""
+    from uavxai.sim.build import episode_goal
+
+    goal = tuple(float(g) for g in (episode_goal(scenario) if goal is None else goal))
+    where = "ownship.goal" if scenario.ownship.goal is not None else "the service point"
+    console.print(f"goal ({where}): ({goal[0]:.0f}, {goal[1]:.0f}, {goal[2]:.0f}) m")
+    return goal
+
+
 def evaluate_command(
     scenario: Scenario,
     methods: list[str],
@@ -790,17 +810,17 @@ def evaluate_command(
     ray_address: str | None,
     out: Path,
     goal: Sequence[float] | None = None,
+    resume: bool = False,
 ) -> dict:
-    """The `uavxai evaluate` command: run the campaign with a progress bar, write
-    ``results.csv``, ``episodes.csv`` and the plots into ``out``; return a short report.
-    ``goal``: where every episode flies (None: :func:`uavxai.sim.build.episode_goal` of
-    ``scenario``; the command passes the goal of the scenario file's own seed, so that a
-    campaign extended with another ``--seed`` flies to the same goal and can be merged)."""
+    """The `uavxai evaluate` command: the campaign with a progress bar, each finished episode
+    journaled (:mod:`uavxai.journal`), ``results.csv``, ``episodes.csv`` and the plots in
+    ``out``; a short report back. ``goal``: see :func:`_campaign_goal`; ``resume``: fly only
+    what an interrupted run of the same campaign did not journal in ``out``."""
     import torch
     from rich.console import Console
 
+    from uavxai.journal import Journal, campaign_header, read_journal
     from uavxai.progress import progress_bar
-    from uavxai.sim.build import episode_goal
 
     torch.set_num_threads(1)
     _check(scenario, methods, intruders, episodes, dynamics, workers)
@@ -811,15 +831,20 @@ def evaluate_command(
     # Piped output gets a wide table rather than column names cut to fit 80 characters.
     console = Console(stderr=True, width=None if sys.stderr.isatty() else 200)
     wall0 = time.perf_counter()
-    goal = tuple(episode_goal(scenario) if goal is None else goal)
-    where = "ownship.goal" if scenario.ownship.goal is not None else "the service point"
-    console.print(f"goal ({where}): ({goal[0]:.0f}, {goal[1]:.0f}, {goal[2]:.0f}) m")
+    goal = _campaign_goal(scenario, goal, console)
+    header = campaign_header(scenario, methods, intruders, episodes, dynamics, goal, _versions())
+    before = read_journal(out, header) if resume else {}
+    if resume:
+        console.print(f"resuming: {len(before)} of {total} episodes already flown in {out}")
+    journal = Journal(out, header)
     with progress_bar(console) as progress:
         bar = progress.add_task(f"{scenario.name} ({dynamics})", total=total)
+        progress.update(bar, advance=len(before))
 
-        finished: list[dict] = []
+        finished: list[dict] = list(before.values())
 
         def done(row: dict) -> None:
+            journal.append(row)
             finished.append(row)
             progress.update(
                 bar, advance=1, description=f"{row['method']} x{row['intruders']}: {row['outcome']}"
@@ -836,10 +861,13 @@ def evaluate_command(
                 ray_address=ray_address,
                 on_done=done,
                 goal=goal,
+                finished=before,
             )
         except KeyboardInterrupt:
             _keep_finished(finished, out, console)
             raise
+        finally:
+            journal.close()
     results = summarise(rows)
     out.mkdir(parents=True, exist_ok=True)
     episode_columns, result_columns = columns_of(rows)
@@ -867,7 +895,7 @@ def _keep_finished(rows: list[dict], out: Path, console) -> None:
     write_csv(out / "results.csv", result_columns, summarise(rows))
     console.print(
         f"interrupted: kept the {len(rows)} finished episodes in {out / 'episodes.csv'} and "
-        f"{out / 'results.csv'}"
+        f"{out / 'results.csv'}; the same command with --resume flies the others"
     )
 
 

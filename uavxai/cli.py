@@ -281,6 +281,12 @@ def _add_evaluate(sub: argparse._SubParsersAction) -> None:
     )
     e.add_argument("--out", type=Path, help="output folder (default runs/<scenario name>-evaluate)")
     _add_force(e)
+    e.add_argument(
+        "--resume",
+        action="store_true",
+        help="go on with the interrupted campaign in --out (same command, --episodes may "
+        "grow): the episodes it journaled are kept, the others flown",
+    )
 
 
 def _add_merge(sub: argparse._SubParsersAction) -> None:
@@ -441,8 +447,13 @@ def _empty_for_force(out: Path, force: bool, had_marker: bool) -> None:
             p.unlink()
 
 
-def prepare_out_dir(out: Path, force: bool, argv: Sequence[str] | None = None) -> Path:
+def prepare_out_dir(
+    out: Path, force: bool, argv: Sequence[str] | None = None, keep: bool = False
+) -> Path:
     """Create (or reuse an empty) output folder, mark it as uavxai's and lock it.
+
+    ``keep`` (``evaluate --resume``): the folder must be one uavxai made (it has the marker)
+    and its files stay, to be taken over.
 
     Never overwrites silently: a non-empty folder needs ``--force``, and ``--force`` empties only
     a folder that uavxai made (it holds the ``.uavxai-run`` marker, a plain file), never the
@@ -469,6 +480,12 @@ def prepare_out_dir(out: Path, force: bool, argv: Sequence[str] | None = None) -
             )
         existed = out.is_dir()
         had_marker = (out / MARKER).is_file()
+        if keep and not had_marker:
+            raise UserError(
+                f"--resume: {out} is not the folder of an interrupted `uavxai evaluate` (it "
+                f"{'has no ' + MARKER + ' marker' if existed else 'does not exist'}); give the "
+                "--out of the campaign to resume."
+            )
         out.mkdir(parents=True, exist_ok=True)
         key = out.resolve()
         # a folder this process locked before (main() called twice): release, then lock anew
@@ -490,7 +507,8 @@ def prepare_out_dir(out: Path, force: bool, argv: Sequence[str] | None = None) -
             "for it to end or choose another --out."
         ) from None
     try:
-        _empty_for_force(out, force, had_marker)
+        if not keep:
+            _empty_for_force(out, force, had_marker)
         lock.seek(0)
         lock.truncate()
         lock.write(
@@ -634,7 +652,11 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     if sc.encounters is None and args.intruders is None:
         raise UserError("--intruders: give one or more intruder counts, e.g. 5,10,20,40.")
     intruders = [1] if sc.encounters is not None else args.intruders
-    out = prepare_out_dir(args.out or Path("runs") / f"{sc.name}-evaluate", args.force, args.argv)
+    if args.resume and args.force:
+        raise UserError("--resume keeps the folder's finished episodes and --force would "
+                        "empty it: give one of them.")  # fmt: skip
+    out = prepare_out_dir(args.out or Path("runs") / f"{sc.name}-evaluate", args.force,
+                          args.argv, keep=args.resume)  # fmt: skip
     from uavxai.campaign import evaluate_command
     from uavxai.scenario import load_scenario
     from uavxai.sim.build import episode_goal
@@ -653,6 +675,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         ray_address=args.ray,
         out=out,
         goal=goal,
+        resume=args.resume,
     )
     return EXIT_OK
 

@@ -105,12 +105,13 @@ def action_name(a: int) -> str:
 # (uavxai.avoidance.planners, uavxai.service.stage) provide one factory for each and check at
 # import that they cover exactly these names, so a name is written once.
 AVOIDANCE_PLANNERS = (
-    "mcts", "mcts_fast", "exhaustive", "mcts_vertical", "mvp", "dqn", "safe_dqn", "none",
+    "mcts", "mcts_fast", "exhaustive", "mcts_vertical", "mcts_daa", "mvp", "dqn", "safe_dqn",
+    "none",
 )  # fmt: skip
 # The planners that fly the vertical action set: the tree searches (mcts_vertical always
 # does) and `none`, which flies straight to the goal whatever the set. mvp resolves in the
 # horizontal plane and dqn / safe_dqn were trained on the paper's nine: they refuse it.
-VERTICAL_PLANNERS = ("mcts", "mcts_fast", "exhaustive", "mcts_vertical", "none")
+VERTICAL_PLANNERS = ("mcts", "mcts_fast", "exhaustive", "mcts_vertical", "mcts_daa", "none")
 SERVICE_PLANNERS = ("d3qn", "dqn", "random", "grid")
 # The worlds a campaign flies in (`uavxai evaluate --dynamics`; uavxai.sim.build.DYNAMICS
 # builds them): named here so that the command line need not import JSBSim's side to list them.

@@ -543,4 +543,5 @@ class TreeBuilder:
             state=states,
             first_child=np.array(self.first_child),
             branching=k,
+            time_left_s=self.time_left_s,
         )

@@ -13,6 +13,7 @@ import dataclasses
 from collections.abc import Callable
 from pathlib import Path
 
+from uavxai.avoidance.alerting import AlertingPlanner
 from uavxai.avoidance.direct import DirectPlanner
 from uavxai.avoidance.exhaustive import ExhaustivePlanner
 from uavxai.avoidance.mcts import MCTSPlanner
@@ -54,6 +55,13 @@ register("exhaustive")(lambda config, checkpoint: ExhaustivePlanner(config))
 register("mcts_vertical")(
     lambda config, checkpoint: MCTSPlanner(
         dataclasses.replace(config, actions="vertical"), name="mcts_vertical"
+    )
+)
+# mcts_vertical behind an alerting stage: it searches only while traffic threatens well clear.
+register("mcts_daa")(
+    lambda config, checkpoint: AlertingPlanner(
+        MCTSPlanner(dataclasses.replace(config, actions="vertical"), name="mcts_daa"),
+        name="mcts_daa",
     )
 )
 register("mvp")(lambda config, checkpoint: MVPPlanner(config))

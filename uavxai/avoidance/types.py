@@ -155,6 +155,13 @@ class PlannerConfig:
     # floor), where it levels off, reached at climb_rate_mps.
     actions: str = "paper"
     vertical_margin_m: float = 20.0
+    # The alerting stage of `mcts_daa` (uavxai.avoidance.alerting): the tree decides only while
+    # an intruder is predicted inside the well-clear cylinder (horizontal, vertical m; the
+    # small-UAS 2000 ft / 250 ft) within alert_horizon_s (DO-365's 55 s), and for alert_hold_s
+    # after the last such prediction; otherwise the ownship flies its route.
+    alert_horizon_s: float = 55.0
+    alert_well_clear_m: tuple[float, float] = (609.6, 76.2)
+    alert_hold_s: float = 5.0
 
     def __post_init__(self) -> None:
         self._check_actions()
@@ -163,7 +170,8 @@ class PlannerConfig:
                 f"PlannerConfig.intruder_model must be one of {', '.join(INTRUDER_MODELS)}, "
                 f"got {self.intruder_model!r}."
             )
-        checked = ("reach_horizon_s", "uncertainty_k", "late_collision_value", "own_error_10s_m")
+        checked = ("reach_horizon_s", "uncertainty_k", "late_collision_value", "own_error_10s_m",
+                   "alert_horizon_s", "alert_hold_s")  # fmt: skip
         for name in checked:
             if not getattr(self, name) >= 0:
                 raise UserError(f"PlannerConfig.{name} must be >= 0, got {getattr(self, name)}.")
@@ -362,6 +370,9 @@ class SearchTree:
     # parent
     first_child: np.ndarray | None = None
     branching: int = N_ACTIONS  # children per expanded node: the action set's size
+    # the time the episode had left when the search valued its lines: a line still open
+    # then ends ``timeout`` (inf: no time-out in sight)
+    time_left_s: float = math.inf
 
     @property
     def q(self) -> np.ndarray:
@@ -421,6 +432,7 @@ class SearchTree:
             pos=self.pos[old],
             t_closest=None if self.t_closest is None else self.t_closest[old],
             state=None if self.state is None else self.state[old],
+            time_left_s=self.time_left_s,
         )
 
 
@@ -520,6 +532,8 @@ class Decision:
             "branch_horizon_s": self.branch_horizon_s,
             "cornered": self.cornered,
             "d_min_m": self.d_min_m,
+            # the episode's time left that the search valued its lines against (None: no tree)
+            "time_left_s": None if self.tree is None else _finite(self.tree.time_left_s),
             "ms": self.ms,
         }
 
@@ -559,8 +573,11 @@ class Planner(Protocol):
 
     ``plan`` sees the world as it is now and returns one of its action set's actions (the
     paper's 9, or with ``config.actions == "vertical"`` 11) as a Decision.
-    ``step`` is how many decisions the episode has already taken, so that a planner can see a
-    time-out (``max_steps``) coming; library users who do not count may leave it at 0.
+    ``step`` places the episode's time-out: the planner sees it ``config.max_steps - step``
+    decisions ahead. A transit-only episode passes the decisions it has taken; an episode
+    whose own limit is longer (a mission: transit, station and return) passes the step that
+    makes this its own remaining decisions (negative then). Library users who do not count
+    may leave it at 0.
     ``reset`` re-seeds whatever randomness the planner uses: same seed, same decisions.
     """
 

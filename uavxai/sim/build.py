@@ -88,7 +88,6 @@ def fly(
     world = command = None
     try:
         world = DYNAMICS[dynamics](scenario, intruders, seed, tracks)
-        av = scenario.avoidance
         planner.reset(seed)
         command = path(world)
         # a companion planner decodes and tracks the traffic on its own core, too
@@ -101,9 +100,7 @@ def fly(
             (start.x, start.y, start.h), scenario_orbit_radius(scenario), start.speed_mps
         )
         script = [ScriptedOperator(scenario)] if scenario.operator.commands else []
-        max_steps = av.max_steps
-        if mission is not None:  # there and back, plus the time on station
-            max_steps = 2 * av.max_steps + math.ceil(mission.service_s / av.decision_period_s)
+        max_steps = episode_steps(scenario, mission)
         episode = start_episode(
             scenario,
             world,
@@ -124,6 +121,15 @@ def fly(
             command.close()
         if world is not None:
             world.close()
+
+
+def episode_steps(scenario: Scenario, mission: MissionConfig | None) -> int:
+    """Decisions before the episode times out: ``avoidance.max_steps``, or for a mission
+    there and back plus the time on station."""
+    av = scenario.avoidance
+    if mission is None:
+        return av.max_steps
+    return 2 * av.max_steps + math.ceil(mission.service_s / av.decision_period_s)
 
 
 def start_episode(

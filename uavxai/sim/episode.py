@@ -166,7 +166,7 @@ class Episode:
             or getattr(self.picture, "truth", True)
         ):
             return False
-        self.planner.submit_onboard(own, state.t, goal, step=self._leg_step())
+        self.planner.submit_onboard(own, state.t, goal, step=self._budget_step())
         self._pending = (self.steps, state.t, own, _ONBOARD, state, None)
         self.steps += 1
         return True
@@ -182,8 +182,8 @@ class Episode:
         :meth:`result` has the decision)."""
         submit = getattr(self.planner, "submit", None)
         if submit is None:
-            return self.planner.plan(own, intruders, goal, step=self._leg_step())
-        submit(own, intruders, goal, step=self._leg_step())
+            return self.planner.plan(own, intruders, goal, step=self._budget_step())
+        submit(own, intruders, goal, step=self._budget_step())
         self._fly_intruders_ahead()
         return None
 
@@ -194,7 +194,7 @@ class Episode:
 
     def plan(self):
         """What the planner flies for now (a mission, an operator's route: something with a
-        ``goal``, ``decide``, ``leg_start_step`` and ``outcome``), or None: ``goal``."""
+        ``goal``, ``decide`` and ``outcome``), or None: ``goal``."""
         return self.operator.active(self) if self.operator is not None else self.mission
 
     def aim(self) -> tuple[float, float, float]:
@@ -247,11 +247,14 @@ class Episode:
             own = dataclasses.replace(own, speed_band=(lo, cruise))
         return own
 
-    def _leg_step(self) -> int:
-        """Decisions taken on the way to the current goal: the planner weighs its time-out
-        (``max_steps``) against these, per leg of a mission."""
-        plan = self.plan()
-        return self.steps - (plan.leg_start_step if plan is not None else 0)
+    def _budget_step(self) -> int:
+        """The ``step`` the planner weighs its time-out against: it sees one coming
+        ``config.max_steps - step`` decisions ahead, and the time-out that can happen is this
+        episode's (``self.max_steps``: a mission's covers transit, station and return
+        together, not one leg), so the step passed makes that count the decisions this
+        episode has left (issue 30: a leg's count had on-station searches value their lines
+        against a time-out 700 decisions too early)."""
+        return self.planner.config.max_steps - (self.max_steps - self.steps)
 
     def advance(self, event: DecisionEvent | None) -> Outcome | None:
         """Fly one decision period sample by sample, judging each; the outcome or None.

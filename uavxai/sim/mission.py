@@ -37,6 +37,9 @@ from uavxai.sim.episode import Episode, Observer
 from uavxai.vocabulary import HOLD, Outcome
 
 CONFLICT_FACTOR = 2.0  # the orbit ahead must keep 2 d_min from every believed intruder
+# "orbiting" only within this share of the radius from the circle (the share a settled orbit
+# holds, tests/test_sim_mission.py); farther, the words say it is still joining the orbit
+ON_ORBIT_SHARE = 0.1
 
 
 class Phase(StrEnum):
@@ -93,15 +96,12 @@ class Mission(Observer):
         self.outcome: Outcome | None = None
         self.service_points: list[tuple[float, float, float, float]] = []
         self._battery_low = False
-        self.leg_start_step = 0
         self._own_xy: tuple[float, float] | None = None
         self._horizon_s = 16.0
         self.suspended = False  # the operator flies elsewhere (uavxai.sim.operator)
 
     # ------------------------------------------------------------------------- phases
     def _enter(self, phase: Phase, t: float, why: str, ep: Episode) -> None:
-        if phase in (Phase.TRANSIT, Phase.RETURNING):
-            self.leg_start_step = ep.steps  # the planner's step budget counts per leg
         self.phase = phase
         if phase in (Phase.TRANSIT, Phase.RETURNING):  # the height of where it now goes
             ep.path.altitude(self.goal[2], t)
@@ -228,7 +228,6 @@ class Mission(Observer):
         if not self.suspended:
             return
         self.suspended = False
-        self.leg_start_step = ep.steps
         if not self.serving:
             ep.path.altitude(self.goal[2], ep.state.t)
         self.announce(f"AUTO: mission resumed, {self.phase.value.replace('_', ' ')}", None)
@@ -263,16 +262,37 @@ def orbit_clearance(
     c: MissionConfig, own: Ownship, intruders: Sequence[Intruder], horizon_s: float
 ) -> tuple[float, str | None, float]:
     """(smallest predicted separation, who, when) between the ownship flying the orbit ahead
-    for ``horizon_s`` at its speed and every intruder on its believed constant turn."""
-    if not intruders:
-        return math.inf, None, 0.0
+    for ``horizon_s`` at its speed and every intruder on its believed constant turn, less
+    twice each track's position error."""
     t = np.arange(0.0, horizon_s + 1e-9, 0.5)
     cx, cy, h = c.station
     phase0 = math.atan2(own.x - cx, own.y - cy)  # the ownship's angle on the circle
     rate = (1.0 if c.clockwise else -1.0) * own.speed / c.radius_m
     ang = phase0 + rate * t
     path = np.stack([cx + c.radius_m * np.sin(ang), cy + c.radius_m * np.cos(ang)], axis=1)
-    path = np.column_stack([path, np.full(len(t), h)])
+    return clearance(t, np.column_stack([path, np.full(len(t), h)]), intruders, sigmas=2.0)
+
+
+def straight_clearance(
+    own: Ownship, intruders: Sequence[Intruder], horizon_s: float
+) -> tuple[float, str | None, float]:
+    """:func:`clearance` of the ownship flying straight on from where it is, at its ground
+    velocity, for ``horizon_s``, against each intruder's track as believed (no error taken
+    off): the next decision period's prediction of an orbit decision."""
+    t = np.arange(0.0, horizon_s + 1e-9, 0.5)
+    vx, vy = own.ground_velocity or (
+        own.speed * math.sin(own.heading), own.speed * math.cos(own.heading)
+    )
+    path = np.column_stack([own.x + vx * t, own.y + vy * t, np.full(len(t), own.h)])
+    return clearance(t, path, intruders, sigmas=0.0)
+
+
+def clearance(
+    t: np.ndarray, path: np.ndarray, intruders: Sequence[Intruder], sigmas: float
+) -> tuple[float, str | None, float]:
+    """(smallest predicted separation, who, when) between the ownship at ``path`` (T, 3)
+    at times ``t`` and every intruder on its believed constant turn, less ``sigmas`` times
+    each track's position error."""
     best, who, when = math.inf, None, 0.0
     for i in intruders:
         speed, w = math.hypot(i.vx, i.vy), i.turn_rate
@@ -282,8 +302,9 @@ def orbit_clearance(
         else:  # constant turn, clockwise positive
             xs = i.x + speed / w * (np.cos(psi0) - np.cos(psi0 + w * t))
             ys = i.y + speed / w * (np.sin(psi0 + w * t) - np.sin(psi0))
-        d = np.sqrt((path[:, 0] - xs) ** 2 + (path[:, 1] - ys) ** 2 + (h - i.h - i.vh * t) ** 2)
-        d = d - 2.0 * i.sigma_m  # the track's uncertainty shrinks the room believed
+        hs = i.h + i.vh * t
+        d = np.sqrt((path[:, 0] - xs) ** 2 + (path[:, 1] - ys) ** 2 + (path[:, 2] - hs) ** 2)
+        d = d - sigmas * i.sigma_m  # the track's uncertainty shrinks the room believed
         k = int(np.argmin(d))
         if d[k] < best:
             best, who, when = float(d[k]), f"intruder {str(i.id).removeprefix('intruder-')}", t[k]
@@ -323,24 +344,45 @@ def orbit_step(
         return OrbitStep(None, f"{who} would pass the orbit at {sep:.0f} m in {when:.0f} s")
     x, y, h = orbit.centre
     ep.path.orbit(x, y, h, orbit.radius_m, orbit.clockwise, orbit.speed_mps, ep.state.t)
-    off = math.hypot(own.x - x, own.y - y) - orbit.radius_m
-    where = (
-        f"orbiting ({x:.0f}, {y:.0f}) at {orbit.radius_m:.0f} m radius, {h:.0f} m height"
-        if abs(off) <= ep.judge.goal_radius_m
-        else f"joining the orbit about ({x:.0f}, {y:.0f}), {abs(off):.0f} m "
-        f"{'outside' if off > 0 else 'inside'} its {orbit.radius_m:.0f} m radius"
-    )
-    near = f"; {who} predicted to pass it at {sep:.0f} m in {when:.0f} s" if who else ""
+    period = ep.planner.config.decision_period_s  # the record's field is over one period
+    next_period = straight_clearance(own, intruders, period)[0]
+    said = orbit_words(orbit, own, (sep, who, when), CONFLICT_FACTOR * d_min)
     decision = Decision(
         bank_cmd_rad=float(ep.world.ownship_command()["bank_cmd_rad"]),
         accel_mps2=0.0,
         action=HOLD,
         children=[],
-        predicted_min_separation_m=sep,
+        predicted_min_separation_m=next_period,
         branch_min_separation_m=sep,
         confidence=1.0,
         planner="orbit",
         d_min_m=d_min,
-        words=(f"{ep.plan_label()}: {where}{near}", ""),
+        words=(f"{ep.plan_label()}: {said}", ""),
     )
     return OrbitStep(decision, None)
+
+
+def orbit_words(
+    orbit: Orbit, own: Ownship, clearance: tuple[float, str | None, float], limit_m: float
+) -> str:
+    """What an orbit decision says: on the circle or still joining it (how far from the
+    centre), and the orbit's prediction worded as the conditional it is: intruders holding
+    their present turn, each track's 2-sigma error taken off, never flown (issue 30: an
+    aircraft 400 m out was said to be orbiting at 300 m, and a pass predicted at 151 m was
+    flown at 99 m)."""
+    x, y, h = orbit.centre
+    r = orbit.radius_m
+    d = math.hypot(own.x - x, own.y - y)
+    if abs(d - r) <= ON_ORBIT_SHARE * r:
+        where = f"orbiting ({x:.0f}, {y:.0f}) at {r:.0f} m radius, {h:.0f} m height"
+    else:
+        where = f"joining the orbit about ({x:.0f}, {y:.0f}), {d:.0f} m from its centre, "
+        where += f"radius {r:.0f} m"
+    sep, who, when = clearance
+    if who is None:
+        return where
+    return (
+        f"{where}; {who} predicted to pass the orbit ahead at {sep:.0f} m in {when:.0f} s if "
+        f"it holds its present turn (2-sigma track error taken off; the orbit is left below "
+        f"{limit_m:.0f} m)"
+    )

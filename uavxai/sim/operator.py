@@ -57,15 +57,14 @@ class Leg:
 
 class Route(Observer):
     """Legs flown in order, the avoidance planner flying every one of them. Has the
-    interface the episode asks of a mission: ``goal``, ``decide``, ``leg_start_step``,
-    ``outcome``, ``serving``."""
+    interface the episode asks of a mission: ``goal``, ``decide``, ``outcome``,
+    ``serving``."""
 
     def __init__(self, op: Operator, legs: Sequence[Leg], label: str) -> None:
         self.op = op
         self.legs = list(legs)
         self.label = label
         self.index = 0
-        self.leg_start_step = 0
         self.outcome: Outcome | None = None
         self.serving = False
         self._loiter_from: float | None = None  # when the loiter of this leg began
@@ -91,7 +90,6 @@ class Route(Observer):
         return (leg.x + r * math.sin(b), leg.y + r * math.cos(b), leg.h)
 
     def start(self, ep: Episode) -> None:
-        self.leg_start_step = ep.steps
         self._begin(ep)
 
     def _begin(self, ep: Episode) -> None:
@@ -140,7 +138,6 @@ class Route(Observer):
     def _next(self, ep: Episode, leg: Leg) -> None:
         self.op.reached(ep, leg)
         self.index += 1
-        self.leg_start_step = ep.steps
         if self.leg is None:  # the last item flown: loiter there, as ArduPlane does
             self.legs.append(_with(leg, loiter_s=math.inf, seq=None, speed_mps=None))
             ep.path.announce(f"{self.label}: last item reached, loitering", None)

@@ -46,6 +46,8 @@ def explain(decision: Decision) -> tuple[str, str]:
         parts.append(f"{_short(chosen.action)} {_meets(chosen)}")
     else:
         hold = by_action.get(HOLD)
+        if _all_end(decision):
+            parts.append(_all_end(decision))
         if hold is not None and hold.flies != chosen.flies:
             parts.append(_reference(hold, chosen, decision))
         parts.append(f"{_short(chosen.action)} {_keeps(chosen, decision)}")
@@ -67,14 +69,49 @@ def counterfactual(decision: Decision) -> str:
         return f"{head}: {_cornered_loser(runner, chosen, decision)}"
     if _conflict(runner, decision.d_min_m):
         if not _conflict(chosen, decision.d_min_m):
-            return f"{head}: it {_meets(runner)}, a predicted collision"
+            return f"{head}: it {_meets(runner)}, {_breach(runner, decision.d_min_m)}"
         return f"{head}: it {_meets(runner)} too; {_q_against(runner, chosen, decision)}"
     reason = _q_against(runner, chosen, decision)
     if math.isfinite(runner.predicted_min_separation_m) and runner.closest_intruder is not None:
         reason += f"; it {_keeps(runner, decision)}"
-    if runner.outcome in ("out_of_bounds", "timeout"):
-        reason += f"; its best line ends {runner.outcome.replace('_', ' ')}"
+    elif runner.outcome in _ENDS:  # _keeps says it otherwise
+        reason += f"; its best line {_ends(runner, chosen)}"
     return f"{head}: {reason}"
+
+
+_ENDS = ("out_of_bounds", "timeout")  # line ends the words name (goal: "reaches the goal")
+
+
+def _ends(c: ChildStats, chosen: ChildStats | None) -> str:
+    """How an option's best line ends, "too" when the chosen one's ends so as well: then it
+    is no reason against it (issue 30: "ends out of bounds" given as the reason when every
+    option did and action order decided)."""
+    same = chosen is not None and c is not chosen and chosen.outcome == c.outcome
+    return _end_words(c.outcome) + (" too" if same else "")
+
+
+def _all_end(decision: Decision) -> str:
+    """ "every option ends out of bounds" when no option escapes that end, else ""."""
+    ends = {c.outcome for c in decision.children}
+    if len(ends) != 1 or not ends <= set(_ENDS):
+        return ""
+    return "every option " + _end_words(ends.pop())
+
+
+def _end_words(outcome: str) -> str:
+    return "ends out of bounds" if outcome == "out_of_bounds" else "ends at the time-out"
+
+
+def _breach(c: ChildStats, d_min: float) -> str:
+    """What a conflict predicted: a collision (inside ``d_min``), or a pass inside the
+    margin kept beyond it, which the search counts as one (issue 30)."""
+    m = c.meets
+    if m is None or m.miss_m < d_min:
+        return "a predicted collision"
+    return (
+        f"inside the {m.needed_m - d_min:.0f} m margin kept beyond the {d_min:.0f} m collision "
+        "distance for what that intruder may do, which the search counts as a collision"
+    )
 
 
 def runner_up(
@@ -104,8 +141,8 @@ def _reference(hold: ChildStats, chosen: ChildStats, decision: Decision) -> str:
     held = ACTIONS[HOLD].phrase
     if _conflict(hold, decision.d_min_m):
         return f"{held} {_meets(hold)}"
-    if hold.outcome in ("out_of_bounds", "timeout"):
-        return f"{held} ends {hold.outcome.replace('_', ' ')}"
+    if hold.outcome in _ENDS and chosen.outcome != hold.outcome:
+        return f"{held} {_ends(hold, chosen)}"
     if _tied(hold, chosen):  # e.g. near the goal, where every line reaches it
         return f"{held} is as good (Q {chosen.q:.3f}), {_why_this_one(chosen, hold, decision)}"
     if hold.q > chosen.q:  # chosen for its simulations, not its value: say so, not "lower"
@@ -211,6 +248,9 @@ def _keeps(c: ChildStats, decision: Decision) -> str:
         )
     if c.outcome == "goal":
         text += " and reaches the goal"
+    elif c.outcome in _ENDS:
+        chosen = next((o for o in decision.children if o.action == decision.action), None)
+        text += f" and {_ends(c, chosen)}"
     return text
 
 
@@ -291,6 +331,9 @@ def decision_record(
             "heading": own.heading,
             "bank": own.bank,
             "vertical": own.vertical,  # the vertical command (+1 climbing, -1 descending)
+            # the speeds the planner may fly (None: the planner's own): an operator's airspeed
+            # or the orbit's caps it, and a speed change beyond it changes nothing
+            "speed_band": None if own.speed_band is None else list(own.speed_band),
         },
         # What the planner believed (SPEC §4): the track and how sure it was of it.
         "intruders": [
