@@ -321,3 +321,26 @@ def test_mcts_beats_the_learned_baselines_on_collisions() -> None:
         assert sum(rate[("mcts", n)] for n in (20, 40)) < sum(
             rate[(baseline, n)] for n in (20, 40)
         ), rate
+
+
+def test_a_campaign_extended_with_another_seed_merges_without_ownship_goal(
+    tmp_path: Path,
+) -> None:
+    """`uavxai evaluate --seed N` flies other encounters to the same goal, the service point of
+    the scenario file's own seed, so that a campaign extended later merges (issue 30)."""
+    scenario = tmp_path / "s.yaml"
+    scenario.write_text("name: extend\nseed: 5\nservice: {planner: random, steps: 5}\n")
+    runs = {"first": [], "later": ["--seed", "7"]}
+    for name, seed in runs.items():
+        args = ["evaluate", str(scenario), "--methods", "none", "--intruders", "3", "--episodes",
+                "2", *seed, "--out", str(tmp_path / name)]  # fmt: skip
+        assert main(args) == 0
+    _, first = _read(tmp_path / "first" / "episodes.csv")
+    _, later = _read(tmp_path / "later" / "episodes.csv")
+    goal = ("goal_x", "goal_y", "goal_h")
+    assert [first[0][k] for k in goal] == [later[0][k] for k in goal]
+    assert sorted(int(r["seed"]) for r in first + later) == [5, 6, 7, 8]
+    out = tmp_path / "both"
+    assert main(["merge", str(tmp_path / "first"), str(tmp_path / "later"), "--out", str(out)]) == 0
+    _, rows = _read(out / "results.csv")
+    assert [(r["method"], r["episodes"]) for r in rows] == [("none", "4")]

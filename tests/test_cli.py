@@ -178,8 +178,13 @@ def test_service_prints_a_short_table_and_writes_the_json(
     lines = text.splitlines()
     assert len(lines) <= 35, text
     assert not text.lstrip().startswith("{")
-    assert "sum_rate_bps" in text and str(out / "summary.json") in text
-    assert "10 values" in text  # a per-user list is summarised, not printed whole
+    assert str(out / "summary.json") in text
+    # labelled values with units, not the JSON's raw keys (issue 30)
+    assert "sum_rate_bps" not in text and "e+0" not in text
+    assert f"sum rate           {summary['sum_rate_bps'] / 1e6:.2f} Mbit/s" in text
+    assert f"users at QoS       {summary['qos_satisfied']} of 10" in text
+    x, y, h = summary["service_point"]
+    assert f"x {x:.0f} m, y {y:.0f} m, height {h:.0f} m" in text
 
 
 def test_report_table_keeps_to_its_row_limit(tmp_path: Path, capsys) -> None:

@@ -73,3 +73,46 @@ def test_a_campaign_logs_its_progress(tmp_path: Path, capsys: pytest.CaptureFixt
     )
     err = capsys.readouterr().err
     assert "none x3: goal: 3/3 (100 %)" in err
+
+
+def test_a_missions_bar_counts_what_it_will_fly_and_ends_full() -> None:
+    """The bar's total is the decisions the mission will take (transit, time on station,
+    return), refined as it flies, not the step budget (2 max_steps + service_s), and at the
+    end it is the decisions flown: the bar ends at 100 % (issue 30)."""
+    import dataclasses
+
+    from rich.console import Console
+    from rich.progress import Progress
+
+    from uavxai.avoidance.planners import make_planner
+    from uavxai.avoidance.types import PlannerConfig
+    from uavxai.sim.build import fly
+    from uavxai.sim.episode import Observer
+    from uavxai.sim.mission import mission_of
+    from uavxai.sim.observers import ProgressBar
+
+    class Totals(Observer):
+        def __init__(self) -> None:
+            self.rows: list[tuple[float, float | None]] = []
+
+        def on_period(self, ep, event, flown_min_m) -> None:
+            task = progress.tasks[bar.task]
+            self.rows.append((task.completed, task.total))
+
+    station = (1000.0, 1000.0, 120.0)
+    sc = default_scenario("mission-progress", intruders={"count": 0}, seed=1)
+    mission = dataclasses.replace(mission_of(sc, station), service_s=60.0)
+    totals = Totals()
+    with Progress(console=Console(file=io.StringIO())) as progress:
+        bar = ProgressBar(progress, sc.name, sc.avoidance.max_steps)
+        planner = make_planner("mcts_fast", PlannerConfig.from_scenario(sc))
+        r = fly(sc, planner, station, dynamics="kinematic", mission=mission,
+                observers=[bar, totals])  # fmt: skip
+        end = progress.tasks[bar.task]
+    assert r.summary["mission"]["phases"].keys() == {"transit", "on_station", "returning"}
+    assert end.completed == end.total == r.steps
+    budget = 2 * sc.avoidance.max_steps + 60
+    assert r.steps < budget / 4  # the old total would have left the bar at a quarter
+    # once the first legs' speed is known, every estimate is within 10 % of what was flown
+    for done, total in totals.rows[20:]:
+        assert total is not None and abs(total - r.steps) <= 0.1 * r.steps, (done, total)

@@ -9,14 +9,15 @@ meet the same encounters (the same start, goal and intruders) and any row of
 'mcts', 20, 17))"
 
 (scenario file, method, intruders, seed; ``dynamics='jsbsim'`` for a JSBSim row; and
-``goal=(goal_x, goal_y, goal_h)`` of the row if the scenario has no ``ownship.goal`` and the
-campaign ran with another ``--seed`` than the file's, since the goal is then the service
-point of that seed).
+``goal=(goal_x, goal_y, goal_h)`` of the row for a campaign run from Python on a scenario
+without ``ownship.goal`` whose seed was changed; `uavxai evaluate --seed N` flies to the goal
+of the file's own seed, so its rows need no goal given).
 
 Every episode is flown by the one episode engine (:func:`uavxai.sim.build.fly`), on the
 kinematic encounter model or in JSBSim, with the planner's commands going straight to the
 autopilot (no MAVLink, no recording); the goal is the scenario's (``ownship.goal``, else the
-service point of the campaign's scenario), the same for every episode and as ``uavxai run``.
+service point of the campaign's scenario at the seed its file names, whatever ``--seed``
+says), the same for every episode and as ``uavxai run``.
 
 A scenario with an ``encounters`` section (SPEC "Encounter campaigns") flies episode ``i`` as
 encounter ``i`` (:func:`uavxai.sim.encounter.fly_encounter`, seed ``scenario.seed + i``, one
@@ -695,7 +696,9 @@ def merge_campaigns(sources: Sequence[str | Path], out: str | Path, title: str =
         what = "; ".join(f"{src}: ({', '.join(map(str, g))})" for g, src in goals.items())
         raise UserError(
             f"these campaigns flew to different goals ({what}), so the same seed is not the same "
-            "encounter; a scenario without ownship.goal flies to the service point of its seed."
+            "encounter; a scenario without ownship.goal flies to the service point of its "
+            "file's seed (`uavxai evaluate --seed N` keeps it; a campaign written before that, "
+            "or run from Python on a scenario whose seed was changed, has another)."
         )
     sources_of: dict[tuple[str, int], set[Path]] = {}
     for (m, n, _), src in flown_by.items():
@@ -784,6 +787,19 @@ def _read_rows(path: Path, columns: Sequence[str]) -> list[dict]:
     return rows
 
 
+def _campaign_goal(scenario: Scenario, goal: Sequence[float] | None, console) -> tuple:
+    """Where every episode flies, said on ``console``: ``goal``, or None: the scenario's
+    (``ownship.goal``, else its service point). `uavxai evaluate --seed N` passes the goal of
+    the scenario file's own seed, so that a campaign extended with another seed flies to the
+    same goal and merges with the first."""
+    from uavxai.sim.build import episode_goal
+
+    goal = tuple(float(g) for g in (episode_goal(scenario) if goal is None else goal))
+    where = "ownship.goal" if scenario.ownship.goal is not None else "the service point"
+    console.print(f"goal ({where}): ({goal[0]:.0f}, {goal[1]:.0f}, {goal[2]:.0f}) m")
+    return goal
+
+
 def evaluate_command(
     scenario: Scenario,
     methods: list[str],
@@ -793,18 +809,18 @@ def evaluate_command(
     workers: int,
     ray_address: str | None,
     out: Path,
+    goal: Sequence[float] | None = None,
     resume: bool = False,
 ) -> dict:
-    """The `uavxai evaluate` command: run the campaign with a progress bar, journal each
-    finished episode (:mod:`uavxai.journal`), write ``results.csv``, ``episodes.csv`` and the
-    plots into ``out``; return a short report. ``resume``: take the episodes journaled in
-    ``out`` by an interrupted run of the same campaign and fly only the others."""
+    """The `uavxai evaluate` command: the campaign with a progress bar, each finished episode
+    journaled (:mod:`uavxai.journal`), ``results.csv``, ``episodes.csv`` and the plots in
+    ``out``; a short report back. ``goal``: see :func:`_campaign_goal`; ``resume``: fly only
+    what an interrupted run of the same campaign did not journal in ``out``."""
     import torch
     from rich.console import Console
 
     from uavxai.journal import Journal, campaign_header, read_journal
     from uavxai.progress import progress_bar
-    from uavxai.sim.build import episode_goal
 
     torch.set_num_threads(1)
     _check(scenario, methods, intruders, episodes, dynamics, workers)
@@ -815,9 +831,7 @@ def evaluate_command(
     # Piped output gets a wide table rather than column names cut to fit 80 characters.
     console = Console(stderr=True, width=None if sys.stderr.isatty() else 200)
     wall0 = time.perf_counter()
-    goal = episode_goal(scenario)
-    where = "ownship.goal" if scenario.ownship.goal is not None else "the service point"
-    console.print(f"goal ({where}): ({goal[0]:.0f}, {goal[1]:.0f}, {goal[2]:.0f}) m")
+    goal = _campaign_goal(scenario, goal, console)
     header = campaign_header(scenario, methods, intruders, episodes, dynamics, goal, _versions())
     before = read_journal(out, header) if resume else {}
     if resume:

@@ -23,12 +23,31 @@ from typing import Any, NoReturn
 
 from uavxai.errors import UserError
 from uavxai.outputs import NO_SPACE, OutputError, output_error, write_output
+from uavxai.vocabulary import SERVICE_PLANNERS
 
 EXIT_OK, EXIT_INTERNAL, EXIT_BAD_INPUT = 0, 1, 2
 
 
+class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Every option's help ends with its default, where it has one to show (a default of
+    None or False means "not given", which the help text itself explains)."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        if action.default in (None, False, argparse.SUPPRESS) or "%(default)" in text:
+            return text
+        if action.option_strings or action.nargs in (argparse.OPTIONAL, argparse.ZERO_OR_MORE):
+            return f"{text} (default: %(default)s)"
+        return text
+
+
 class _Parser(argparse.ArgumentParser):
-    """argparse, but a bad flag is a `UserError` (exit 2, one paragraph, no usage dump)."""
+    """argparse, but a bad flag is a `UserError` (exit 2, one paragraph, no usage dump), and
+    help shows every option's default."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("formatter_class", _HelpFormatter)
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str) -> NoReturn:
         raise UserError(f"{self.prog}: {message}. See `{self.prog} --help`.")
@@ -99,15 +118,32 @@ def _mavlink_url(text: str) -> str:
 
 
 def _dynamics() -> tuple[str, ...]:
-    from uavxai.sim.build import DYNAMICS  # the registry of worlds
+    # the names alone (uavxai.vocabulary): building the parser must not import the dynamics,
+    # JSBSim and MAVLink, which every command (`explain`, `scenarios`) would wait for
+    from uavxai.vocabulary import DYNAMICS_MODELS
 
-    return tuple(DYNAMICS)
+    return DYNAMICS_MODELS
 
 
 def _avoidance_methods() -> tuple[str, ...]:
-    from uavxai.avoidance.planners import PLANNERS  # the registry, not a copy of its names
+    from uavxai.vocabulary import AVOIDANCE_PLANNERS  # the registry's names, checked there
 
-    return tuple(PLANNERS)
+    return AVOIDANCE_PLANNERS
+
+
+_SCENARIO_HELP = "a scenario file, or the name of a shipped one (`uavxai scenarios` lists them)"
+
+
+def _add_scenario(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("scenario", metavar="SCENARIO.yaml", help=_SCENARIO_HELP)
+
+
+def _add_force(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--force",
+        action="store_true",
+        help="overwrite an existing output folder (only one that uavxai made)",
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -128,6 +164,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_service(sub)
     _add_explain(sub)
     _add_validate(sub)
+    sub.add_parser("scenarios", help="list the shipped scenarios: name, what it flies, file")
     return p
 
 
@@ -138,9 +175,9 @@ def _add_run(sub: argparse._SubParsersAction) -> None:
         help="the co-simulation in JSBSim over MAVLink: service point, then the mission "
         "(transit, on station, home) or the transit-only episode",
     )
-    r.add_argument("scenario", metavar="SCENARIO.yaml")
+    _add_scenario(r)
     r.add_argument("--out", type=Path, help="output folder (default runs/<scenario name>)")
-    r.add_argument("--seed", type=_seed, help="override the scenario's seed")
+    r.add_argument("--seed", type=_seed, help="override the scenario's seed (default: its own)")
     r.add_argument(
         "--episodes", type=_positive_int, default=1, help="seeded runs (seed, seed+1, ...)"
     )
@@ -170,14 +207,19 @@ def _add_run(sub: argparse._SubParsersAction) -> None:
         metavar="X",
         help="pace simulated time at X times the wall clock (default: flat out)",
     )
-    r.add_argument("--force", action="store_true", help="overwrite an existing output folder")
+    _add_force(r)
 
 
 def _add_train(sub: argparse._SubParsersAction) -> None:
     """`uavxai train`: a learned planner of either stage."""
     t = sub.add_parser("train", help="train a learned planner (progress bar)")
-    t.add_argument("scenario", metavar="SCENARIO.yaml")
-    t.add_argument("--stage", choices=("service", "avoidance"), default="service")
+    _add_scenario(t)
+    t.add_argument(
+        "--stage",
+        choices=("service", "avoidance"),
+        default="service",
+        help="which stage's planner to train",
+    )
     t.add_argument(
         "--algo",
         required=True,
@@ -191,37 +233,54 @@ def _add_train(sub: argparse._SubParsersAction) -> None:
         help="service: fine-tune the universal model on this layout instead of training one "
         "from scratch",
     )
-    t.add_argument("--seed", type=_seed)
+    t.add_argument("--seed", type=_seed, help="override the scenario's seed (default: its own)")
     t.add_argument("--out", type=Path, help="output folder (default runs/train-<stage>-<algo>)")
-    t.add_argument("--force", action="store_true")
+    _add_force(t)
 
 
 def _add_evaluate(sub: argparse._SubParsersAction) -> None:
     """`uavxai evaluate`: a Monte Carlo campaign of the avoidance methods."""
     e = sub.add_parser("evaluate", help="Monte Carlo campaign of the avoidance stage")
-    e.add_argument("scenario", metavar="SCENARIO.yaml")
+    _add_scenario(e)
     e.add_argument(
         "--methods",
         required=True,
+        metavar="LIST",
         type=_csv_list(str, "--methods", _avoidance_methods()),
-        help=f"comma-separated: {','.join(_avoidance_methods())}",
+        # ", " between names: help wraps at spaces, never inside a method's name
+        help=f"comma-separated avoidance methods, any of: {', '.join(_avoidance_methods())}",
     )
     e.add_argument(
         "--intruders",
+        metavar="LIST",
         type=_csv_list(int, "--intruders"),
         help="comma-separated intruder counts, e.g. 5,10,20,40 (required, except for a "
         "scenario with `encounters`, which refuses it: each episode flies its encounter's one "
         "intruder)",
     )
-    e.add_argument("--episodes", type=_positive_int, default=100)
-    e.add_argument("--dynamics", choices=_dynamics(), default="kinematic")
+    e.add_argument(
+        "--episodes",
+        type=_positive_int,
+        default=100,
+        help="episodes per method and intruder count (episode i flies seed + i)",
+    )
+    e.add_argument(
+        "--dynamics",
+        choices=_dynamics(),
+        default="kinematic",
+        help="kinematic: the planner's own model, fast; jsbsim: every aircraft in JSBSim",
+    )
     e.add_argument("--workers", type=_positive_int, default=1, help="local worker processes")
     e.add_argument(
         "--ray", metavar="ADDRESS", help="run on a Ray cluster (`auto`, ray://host:port)"
     )
-    e.add_argument("--seed", type=_seed)
-    e.add_argument("--out", type=Path)
-    e.add_argument("--force", action="store_true")
+    e.add_argument(
+        "--seed",
+        type=_seed,
+        help="first episode's seed (default: the scenario's); another seed extends a campaign",
+    )
+    e.add_argument("--out", type=Path, help="output folder (default runs/<scenario name>-evaluate)")
+    _add_force(e)
     e.add_argument(
         "--resume",
         action="store_true",
@@ -236,25 +295,38 @@ def _add_merge(sub: argparse._SubParsersAction) -> None:
         "merge",
         help="pool campaign folders of one scenario (other methods, counts or seeds) into one",
     )
-    m.add_argument("sources", metavar="CAMPAIGN_DIR", nargs="+", type=Path)
-    m.add_argument("--out", type=Path, required=True)
-    m.add_argument("--force", action="store_true")
+    m.add_argument(
+        "sources",
+        metavar="CAMPAIGN_DIR",
+        nargs="+",
+        type=Path,
+        help="output folders of `uavxai evaluate` (or `uavxai merge`) to pool",
+    )
+    m.add_argument("--out", type=Path, required=True, help="the merged campaign's folder")
+    _add_force(m)
 
 
 def _add_service(sub: argparse._SubParsersAction) -> None:
     """`uavxai service`: the service-point stage alone."""
     s = sub.add_parser("service", help="the service-point stage alone")
-    s.add_argument("scenario", metavar="SCENARIO.yaml")
-    s.add_argument("--planner", choices=("d3qn", "dqn", "random", "grid"))
-    s.add_argument("--seed", type=_seed)
-    s.add_argument("--out", type=Path)
-    s.add_argument("--force", action="store_true")
+    _add_scenario(s)
+    s.add_argument(
+        "--planner",
+        choices=SERVICE_PLANNERS,
+        help="the service-point planner (default: the scenario's service.planner); grid is "
+        "the exhaustive reference optimum, slow",
+    )
+    s.add_argument("--seed", type=_seed, help="override the scenario's seed (default: its own)")
+    s.add_argument("--out", type=Path, help="output folder (default runs/<scenario name>-service)")
+    _add_force(s)
 
 
 def _add_explain(sub: argparse._SubParsersAction) -> None:
     """`uavxai explain`: a run's decisions in words."""
     x = sub.add_parser("explain", help="explain a decision of a run in words")
-    x.add_argument("run_dir", metavar="RUN_DIR", type=Path)
+    x.add_argument(
+        "run_dir", metavar="RUN_DIR", type=Path, help="the output folder of `uavxai run`"
+    )
     x.add_argument(
         "--decision",
         type=int,
@@ -266,7 +338,7 @@ def _add_explain(sub: argparse._SubParsersAction) -> None:
 def _add_validate(sub: argparse._SubParsersAction) -> None:
     """`uavxai validate`: check a scenario file."""
     v = sub.add_parser("validate", help="check a scenario file and exit")
-    v.add_argument("scenario", metavar="SCENARIO.yaml")
+    _add_scenario(v)
 
 
 def _version() -> str:
@@ -524,11 +596,24 @@ def cmd_validate(args: argparse.Namespace) -> int:
 def cmd_service(args: argparse.Namespace) -> int:
     sc = _load(args)
     out = prepare_out_dir(args.out or Path("runs") / f"{sc.name}-service", args.force, args.argv)
+    from uavxai.progress import progress_bar
+    from uavxai.service.report import service_lines
     from uavxai.service.stage import run_service_stage
 
-    summary = run_service_stage(sc, planner=args.planner)
+    planner = args.planner or sc.service.planner
+    with progress_bar() as bar:
+        # the exact grid search takes tens of seconds: a bar of the lattice points settled
+        task = bar.add_task(f"{planner} search", total=None) if planner == "grid" else None
+
+        def settled(done: int, total: int) -> None:
+            bar.update(task, completed=done, total=total)
+
+        summary = run_service_stage(sc, planner, settled if task is not None else None)
     path = write_output(out / "summary.json", json.dumps(summary, indent=2, default=float) + "\n")
-    print_report(f"service point ({sc.name})", summary, path)
+    print(f"service point of '{sc.name}'")
+    for line in service_lines(summary):
+        print(f"  {line}")
+    print(f"full report: {path}")
     return EXIT_OK
 
 
@@ -573,6 +658,12 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     out = prepare_out_dir(args.out or Path("runs") / f"{sc.name}-evaluate", args.force,
                           args.argv, keep=args.resume)  # fmt: skip
     from uavxai.campaign import evaluate_command
+    from uavxai.scenario import load_scenario
+    from uavxai.sim.build import episode_goal
+
+    # the goal of the file's own seed: --seed draws other encounters, not another goal, so a
+    # campaign extended with another --seed merges with the first (`uavxai merge`)
+    goal = episode_goal(load_scenario(args.scenario)) if args.seed is not None else None
 
     evaluate_command(
         sc,
@@ -583,6 +674,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         workers=args.workers,
         ray_address=args.ray,
         out=out,
+        goal=goal,
         resume=args.resume,
     )
     return EXIT_OK
@@ -691,6 +783,19 @@ def cmd_explain(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def cmd_scenarios(args: argparse.Namespace) -> int:
+    from uavxai.paths import invocation, scenario_catalogue
+
+    rows = scenario_catalogue()
+    width = max(len(name) for name, _, _ in rows)
+    for name, about, path in rows:
+        print(f"{name:<{width}}  {about}")
+        print(f"{'':<{width}}  {path}")
+    example = "demo" if any(name == "demo" for name, _, _ in rows) else rows[0][0]
+    print(f"run one by name: {invocation()} run {example}  (or the path of a copy you edited)")
+    return EXIT_OK
+
+
 COMMANDS = {
     "run": cmd_run,
     "train": cmd_train,
@@ -699,6 +804,7 @@ COMMANDS = {
     "service": cmd_service,
     "explain": cmd_explain,
     "validate": cmd_validate,
+    "scenarios": cmd_scenarios,
 }
 
 

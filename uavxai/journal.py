@@ -68,6 +68,8 @@ class Journal:
         # O_NOFOLLOW: an output folder's files are never written through a link.
         flags = os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_NOFOLLOW
         try:
+            # a campaign run from Python (evaluate_command) has no command that made ``folder``
+            self.path.parent.mkdir(parents=True, exist_ok=True)
             fd = os.open(self.path, flags, 0o644)
         except OSError as exc:
             raise UserError(f"cannot write the campaign journal {self.path} ({exc}).") from None

@@ -6,6 +6,7 @@ are the sub-packages `uavxai.aircraft` and `uavxai.scenarios` (see pyproject.tom
 
 from __future__ import annotations
 
+import os
 from importlib.resources import files
 from pathlib import Path
 
@@ -62,3 +63,41 @@ def resolve_scenario(path: str | Path) -> Path:
         f"{text[:200]}: no such scenario file (expected a .yaml file, or the name of a shipped "
         f"scenario: {', '.join(shipped)})."
     )
+
+
+def invocation(argv0: str | None = None) -> str:
+    """How the user can start uavxai again from where they are: ``uavxai`` when that name on
+    PATH is this program, else the path of the running script (``.venv/bin/uavxai`` after
+    `make demo`, whose venv is not activated), or ``python -m uavxai`` for a module run."""
+    import shlex
+    import shutil
+    import sys
+
+    argv0 = sys.argv[0] if argv0 is None else argv0
+    script = Path(argv0)
+    if script.name in ("__main__.py", "-m", "-c", "") or not script.is_file():
+        return f"{shlex.quote(sys.executable)} -m uavxai"
+    on_path = shutil.which("uavxai")
+    if on_path is not None and Path(on_path).resolve() == script.resolve():
+        return "uavxai"
+    shown = argv0 if os.sep in argv0 else str(script.resolve())
+    return shlex.quote(shown)
+
+
+def scenario_catalogue() -> list[tuple[str, str, Path]]:
+    """Every shipped scenario: (name, one line on what it flies, its file). The line is the
+    first sentence of the file's leading comment (the scenario schema has no description
+    key), cut to 100 characters."""
+    rows = []
+    for name in shipped_scenarios():
+        path = scenarios_dir() / f"{name}.yaml"
+        comment = []
+        with path.open(encoding="utf-8") as f:
+            for line in f:
+                if not line.startswith("#"):
+                    break
+                comment.append(line.lstrip("#").strip())
+        text = " ".join(comment)
+        first = text.split(". ")[0].rstrip(".") + "." if text else "(no description)"
+        rows.append((name, first if len(first) <= 100 else first[:97] + "...", path))
+    return rows

@@ -113,6 +113,9 @@ AVOIDANCE_PLANNERS = (
 # horizontal plane and dqn / safe_dqn were trained on the paper's nine: they refuse it.
 VERTICAL_PLANNERS = ("mcts", "mcts_fast", "exhaustive", "mcts_vertical", "mcts_daa", "none")
 SERVICE_PLANNERS = ("d3qn", "dqn", "random", "grid")
+# The worlds a campaign flies in (`uavxai evaluate --dynamics`; uavxai.sim.build.DYNAMICS
+# builds them): named here so that the command line need not import JSBSim's side to list them.
+DYNAMICS_MODELS = ("jsbsim", "kinematic")
 
 
 class Outcome(StrEnum):

@@ -32,6 +32,9 @@ ceiling (``_rate_ceiling``, no DP) drops most boxes before the DP is run.
 from __future__ import annotations
 
 import itertools
+import math
+import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -214,13 +217,38 @@ class GridResult:
     evaluations: int  # DP solves (boxes and single positions)
 
 
+Progress = Callable[[int, int], None]  # (lattice points settled, lattice points in all)
+
+
+class Told:
+    """Calls a :data:`Progress` callback at most every ``every_s`` (the search's loops are
+    tight; a bar needs a few updates a second, not thousands)."""
+
+    def __init__(self, progress: Progress | None, every_s: float = 0.25) -> None:
+        self.progress, self.every_s = progress, every_s
+        self.last = -math.inf
+
+    def due(self) -> bool:
+        return self.progress is not None and time.monotonic() - self.last >= self.every_s
+
+    def __call__(self, settled: int, total: int, force: bool = False) -> None:
+        if self.progress is not None and (force or self.due()):
+            self.last = time.monotonic()
+            self.progress(settled, total)
+
+
 def solve_grid(
-    channel: Channel, space: SearchSpace, power_levels: int, hint: np.ndarray | None = None
+    channel: Channel,
+    space: SearchSpace,
+    power_levels: int,
+    hint: np.ndarray | None = None,
+    progress: Progress | None = None,
 ) -> GridResult:
     """The exact optimum of position (on the lattice) and power levels, fading-free.
 
     ``hint`` (a position, e.g. a planner's answer) only seeds the incumbent: the lattice point
     nearest to it is evaluated exactly, so a good hint prunes more but never changes the result.
+    ``progress(settled, total)`` hears now and then how many lattice points are settled.
     """
     cost = dp_cost(channel.k, power_levels)
     if cost > MAX_DP_COST:
@@ -249,7 +277,7 @@ def solve_grid(
     best_levels, best_value = optimal_levels(channel, gains[best_index], power_levels)
     best_index, evaluations = _branch_and_bound(
         channel, gains, power_levels, boxes, (best_value, best_index), _failures(
-            channel, gains[best_index], best_levels, power_levels)
+            channel, gains[best_index], best_levels, power_levels), Told(progress)
     )
     levels, objective = optimal_levels(channel, gains[best_index], power_levels)
     return GridResult(
@@ -326,6 +354,7 @@ def _branch_and_bound(
     boxes: list[Box],
     incumbent: tuple[float, tuple[int, ...]],
     failures: int,
+    told: Told,
 ) -> tuple[tuple[int, ...], int]:
     """The lattice index of the optimum and the number of DP solves.
 
@@ -338,7 +367,10 @@ def _branch_and_bound(
     cap = _failure_cap(channel, peak, power_levels, best_value, failures)
     totals = useful_totals(channel, peak, power_levels, best_value, cap)
     evaluations, frontier = 2, boxes if len(totals) else []
+    total = int(np.prod(gains.shape[:3]))
     while frontier:
+        if told.due():
+            told(total - sum(_box_size(b) for b in frontier), total)
         peaks = np.array([gains[b].max(axis=(0, 1, 2)) for b in frontier])
         bounds = np.full(len(frontier), -np.inf)
         open_ = _rate_ceiling(channel, peaks) > best_value
@@ -355,7 +387,12 @@ def _branch_and_bound(
             children.extend(_split(box))
         frontier = children
         # Boxes left behind by an improved incumbent are pruned on their next bound.
+    told(total, total, force=True)
     return best_index, evaluations
+
+
+def _box_size(box: Box) -> int:
+    return math.prod(s.stop - s.start for s in box)
 
 
 def _split(box: Box) -> list[Box]:

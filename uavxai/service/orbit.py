@@ -195,9 +195,13 @@ def bound_tables(
     return rates, rates < channel.qos_rate_bps
 
 
-def solve_grid_orbit(objective: OrbitObjective, space: SearchSpace) -> grid.GridResult:
+def solve_grid_orbit(
+    objective: OrbitObjective, space: SearchSpace, progress: grid.Progress | None = None
+) -> grid.GridResult:
     """The exact optimum of ``objective`` over the lattice and the discrete levels (module
-    doc: best-first branch-and-bound with the Jensen bound)."""
+    doc: best-first branch-and-bound with the Jensen bound). ``progress(settled, total)``
+    hears now and then how many lattice points are settled (evaluated, or in a box whose
+    bound cannot beat the best found)."""
     channel, levels_n = objective.channel, objective.power_levels
     cost = grid.dp_cost(channel.k, levels_n)
     if cost > grid.MAX_DP_COST:
@@ -234,11 +238,15 @@ def solve_grid_orbit(objective: OrbitObjective, space: SearchSpace) -> grid.Grid
     heapq.heapify(heap)
     evaluations = len(tiles)
     best_value, best_index = -np.inf, tuple(s.start for s in tiles[0])
+    total, told = int(np.prod(shape)), grid.Told(progress)
     while heap and -heap[0][0] > best_value * (1.0 + 1e-12):
+        if told.due():
+            still = sum(grid._box_size(b) for nb, _, b in heap if -nb > best_value * (1.0 + 1e-12))
+            told(total - still, total)
         opened: list[BOX] = []
         while heap and len(opened) < OPEN_BATCH and -heap[0][0] > best_value * (1.0 + 1e-12):
             opened.append(heapq.heappop(heap)[2])
-        single = [b for b in opened if _size(b) == 1]
+        single = [b for b in opened if grid._box_size(b) == 1]
         if single:  # exact values of single centres
             index = np.array([[s.start for s in b] for b in single])
             exact = objective.optimal(mesh[tuple(index.T)])
@@ -246,11 +254,12 @@ def solve_grid_orbit(objective: OrbitObjective, space: SearchSpace) -> grid.Grid
             i = int(exact.argmax())
             if exact[i] > best_value:
                 best_value, best_index = float(exact[i]), tuple(int(v) for v in index[i])
-        children = [c for b in opened if _size(b) > 1 for c in grid._split(b)]
+        children = [c for b in opened if grid._box_size(b) > 1 for c in grid._split(b)]
         if children:
             evaluations += len(children)
             for b, box in zip(bounds(children), children, strict=True):
                 heapq.heappush(heap, (-float(b), next(counter), box))
+    told(total, total, force=True)
     position = mesh[best_index].copy()
     levels, value = objective.optimal_levels(position)
     return grid.GridResult(
@@ -261,7 +270,3 @@ def solve_grid_orbit(objective: OrbitObjective, space: SearchSpace) -> grid.Grid
         lattice_points=int(np.prod(shape)),
         evaluations=evaluations,
     )
-
-
-def _size(box: BOX) -> int:
-    return int(np.prod([s.stop - s.start for s in box]))

@@ -47,7 +47,7 @@ from uavxai.errors import CheckpointError, UserError
 from uavxai.paths import service_checkpoints_dir
 from uavxai.scenario import Scenario
 from uavxai.service import d3qn, universal
-from uavxai.service.grid import solve_grid
+from uavxai.service.grid import Progress, solve_grid
 from uavxai.service.orbit import OrbitObjective, solve_grid_orbit
 from uavxai.service.random_search import random_search
 
@@ -97,12 +97,19 @@ class ServiceResult:
         }
 
 
-def run_service_stage(scenario: Scenario, planner: str | None = None) -> dict[str, Any]:
+def run_service_stage(
+    scenario: Scenario, planner: str | None = None, progress: Progress | None = None
+) -> dict[str, Any]:
     """The summary fields of the service-point stage (what `uavxai service` prints)."""
-    return plan_service(scenario, planner).to_summary()
+    return plan_service(scenario, planner, progress).to_summary()
 
 
-def plan_service(scenario: Scenario, planner: str | None = None) -> ServiceResult:
+def plan_service(
+    scenario: Scenario, planner: str | None = None, progress: Progress | None = None
+) -> ServiceResult:
+    """The service point and power allocation of ``planner`` (default the scenario's);
+    ``progress(settled, total)`` hears how far the exact grid search is (the others are
+    quick)."""
     t0 = time.perf_counter()
     name = planner or scenario.service.planner
     if name not in PLANNERS:
@@ -116,9 +123,9 @@ def plan_service(scenario: Scenario, planner: str | None = None) -> ServiceResul
     }
     if name == "grid":
         if orbit is None:
-            best = solve_grid(env.channel, env.space, env.power_levels)
+            best = solve_grid(env.channel, env.space, env.power_levels, progress=progress)
         else:
-            best = solve_grid_orbit(orbit, env.space)
+            best = solve_grid_orbit(orbit, env.space, progress)
         levels, position = best.levels, best.position
         visited = np.array([env.space.start, position])
         extras.update(lattice_points=best.lattice_points, grid_evaluations=best.evaluations)

@@ -26,6 +26,7 @@ from uavxai.sim.mission import Mission, MissionConfig
 from uavxai.sim.operator import Operator, ScriptedOperator
 from uavxai.sim.picture import Picture
 from uavxai.surveillance.tracker import truth_beliefs
+from uavxai.vocabulary import DYNAMICS_MODELS
 
 
 def _jsbsim(scenario: Scenario, intruders, seed: int, tracks=None) -> Dynamics:
@@ -44,6 +45,7 @@ DYNAMICS: dict[str, Callable[..., Dynamics]] = {
     "jsbsim": _jsbsim,
     "kinematic": _kinematic,
 }
+assert tuple(DYNAMICS) == DYNAMICS_MODELS, tuple(DYNAMICS)  # the names the CLI offers
 
 
 def episode_goal(scenario: Scenario, service_point: Sequence[float] | None = None):

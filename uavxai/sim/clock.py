@@ -70,6 +70,10 @@ class Clock:
         return self.sample_ticks / self.rate_hz
 
     @property
+    def decision_s(self) -> float:
+        return self.decision_ticks / self.rate_hz
+
+    @property
     def samples_per_decision(self) -> int:
         return self.decision_ticks // self.sample_ticks
 

@@ -325,10 +325,9 @@ class Episode:
             "avoidance_planner": self.planner.name,
             "intruders": self.state.n - 1,
         }
-        if failure:
-            summary["failure"] = failure
-        if self.world.lost_intruders:  # failed in flight and replaced (JSBSim)
-            summary["intruders_lost"] = list(self.world.lost_intruders)
+        # always present (README's summary fields): null and [] when nothing failed
+        summary["failure"] = failure or None
+        summary["intruders_lost"] = list(self.world.lost_intruders)  # failed in flight, replaced
         counters = self.path.close()
         if counters is not None:
             summary["bridge"] = counters

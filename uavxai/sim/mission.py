@@ -171,6 +171,24 @@ class Mission(Observer):
         elif math.dist(p, c.home) < ep.judge.goal_radius_m:
             self.outcome = Outcome.COMPLETED
 
+    def remaining_s(self, own: Sequence[float], speed_mps: float, goal_radius_m: float) -> float:
+        """An estimate of the flight time left, from ``own`` (x, y), the legs flown at
+        ``speed_mps``: the rest of the transit (to the orbit), the service time left, and the
+        way home from the orbit (straight legs, ending ``goal_radius_m`` short; detours for
+        traffic are not foreseen, so the estimate is refined as it flies)."""
+        c = self.config
+        speed = max(float(speed_mps), 1.0)
+        if self.phase == Phase.RETURNING:
+            return max(math.dist(own[:2], c.home[:2]) - goal_radius_m, 0.0) / speed
+        home_m = math.dist(c.station[:2], c.home[:2]) - c.radius_m - goal_radius_m
+        left = max(c.service_s - self.on_station_s, 0.0)
+        if c.return_home:
+            left += max(home_m, 0.0) / speed
+        if self.phase == Phase.TRANSIT:
+            to_orbit = math.dist(own[:2], c.station[:2]) - c.radius_m - goal_radius_m
+            left += max(to_orbit, 0.0) / speed
+        return left
+
     # ------------------------------------------------------------------------ decisions
     def decide(self, ep: Episode, own: Ownship, intruders: list[Intruder]) -> Decision | None:
         """On station: the orbit's decision (re-sent, the orbit ahead checked), or None when

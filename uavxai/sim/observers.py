@@ -231,23 +231,65 @@ class Pacing(Observer):
 
 
 class ProgressBar(Observer):
-    """One task of a rich progress bar, advanced per decision."""
+    """One task of a rich progress bar, advanced per decision. Its total is what the episode
+    is expected to fly: the decisions taken so far and an estimate of those left (the legs
+    still to fly, at the ground speed flown on legs so far, and the time left on station),
+    refined every decision; at the end, the decisions flown, so that the bar ends full."""
 
     def __init__(self, progress, name: str, total: int) -> None:
         self.progress = progress
         self.name = name
         self.task = progress.add_task(name, total=total)
+        self._last: tuple[float, float, float] | None = None  # t, x, y at the last period
+        self._leg_m = self._leg_s = 0.0  # flown on legs (not while serving): their speed
 
     def on_start(self, ep: Episode) -> None:
-        self.progress.update(self.task, total=ep.max_steps)  # a mission's budget is longer
+        self._last = (ep.state.t, *map(float, ep.state.pos[0, :2]))
+        self.progress.update(self.task, total=expected_steps(ep, self._speed(ep)))
 
     def on_period(self, ep: Episode, event: DecisionEvent, flown_min_m: float) -> None:
-        self.progress.update(self.task, advance=1, description=f"{self.name} t={ep.state.t:5.0f}s")
+        t, x, y = ep.state.t, *map(float, ep.state.pos[0, :2])
+        if self._last is not None and (ep.mission is None or not ep.mission.serving):
+            self._leg_m += math.hypot(x - self._last[1], y - self._last[2])
+            self._leg_s += t - self._last[0]
+        self._last = (t, x, y)
+        self.progress.update(
+            self.task,
+            advance=1,
+            total=expected_steps(ep, self._speed(ep)),
+            description=f"{self.name} t={t:5.0f}s",
+        )
+
+    def _speed(self, ep: Episode) -> float:
+        """The ground speed of the legs flown so far (the planner may fly them faster or
+        slower than cruise); before 5 s of them, the airspeed now."""
+        if self._leg_s >= 5.0:
+            return self._leg_m / self._leg_s
+        return float(ep.state.airspeed[0])
 
     def on_end(self, ep: Episode, summary: dict) -> None:
         self.progress.update(
-            self.task, completed=ep.max_steps, description=f"{self.name}: {summary['outcome']}"
+            self.task,
+            total=ep.steps,
+            completed=ep.steps,
+            description=f"{self.name}: {summary['outcome']}",
         )
+
+
+def expected_steps(ep: Episode, speed_mps: float) -> int:
+    """Decisions the episode will take in all, as far as can be told now: those taken, plus
+    the remaining flight (a mission's legs and time on station, or the way to the goal) at
+    ``speed_mps`` on the legs, one decision per period; never more than the episode's
+    budget."""
+    own = ep.state.pos[0]
+    speed = max(float(speed_mps), 1.0)
+    if ep.mission is not None:
+        left_s = ep.mission.remaining_s(own, speed, ep.judge.goal_radius_m)
+    else:
+        gap = math.dist(own[:2], ep.goal[:2]) - ep.judge.goal_radius_m
+        left_s = max(gap, 0.0) / speed
+    left = math.ceil(left_s / ep.clock.decision_s)
+    return min(ep.steps + max(left, 1), ep.max_steps)
 
 
 class Energy(Observer):

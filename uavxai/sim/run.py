@@ -17,6 +17,7 @@ import numpy as np
 from rich.console import Console
 
 from uavxai import __version__
+from uavxai.paths import invocation
 from uavxai.scenario import Scenario
 from uavxai.sim.build import episode_goal, fly
 from uavxai.sim.command import MavlinkPath
@@ -31,6 +32,7 @@ from uavxai.sim.observers import (
     Throughput,
     Trust,
 )
+from uavxai.sim.quicklook import PLOT, QuickLook
 
 console = Console(stderr=True, soft_wrap=True)
 
@@ -112,12 +114,14 @@ def run_episode(
     # (the intruders, with an instant decision; everyone, with a latency).
     planner = Companion(sc.avoidance.planner, config, checkpoint, scenario=sc)
     channel = Channel.from_scenario(sc, users=service.users)
+    energy = Energy()
     observers = [
         Throughput(channel, service.power_w),
-        Energy(),
+        energy,
         Trust(),
         TrajectoryCSV(out / "trajectory.csv"),
         DecisionsJSONL(out / "decisions.jsonl"),
+        QuickLook(out / PLOT, channel, service.power_w, energy, sc.avoidance.d_min_m),
     ]
     mission = mission_of(sc, goal)
     if mission is not None:
@@ -279,9 +283,10 @@ def report(summary: dict, out: Path, rerun_file: Path | None, spawn: bool) -> No
             f"Mbit/s {where}; decision p50 {e['decision_ms']['p50'] or 0:.1f} ms; "
             f"{e['sim_realtime_factor'] or 0:.1f}x real time"
         )
+        console.print(_safety_line(e))
         if e.get("mission", {}).get("delivered_bits") is not None:
             console.print(_mission_line(e["mission"]))
-    console.print(f"outputs in {out}/ (summary.json, trajectory.csv, decisions.jsonl)")
+    console.print(f"outputs in {out}/ (summary.json, trajectory.csv, decisions.jsonl, {PLOT})")
     rrd = rerun_file or out / "run.rrd"  # written with or without --spawn
     if len(eps) > 1 and rerun_file is None:
         rrd = out / "episode-000" / "run.rrd"
@@ -290,7 +295,27 @@ def report(summary: dict, out: Path, rerun_file: Path | None, spawn: bool) -> No
         viewer_cmd = str(viewer) if viewer.exists() else "rerun"
         console.print(f"recording: {rrd}  — open it with:  {viewer_cmd} {rrd}")
     first = out if len(eps) == 1 else out / "episode-000"
-    console.print(f"explain a decision:  uavxai explain {first} --decision 0")
+    console.print(f"explain a decision:  {invocation()} explain {first} --decision 0")
+
+
+def _safety_line(e: dict) -> str:
+    """Near mid-air collision or not, how far the explanations' predictions were from the
+    flight (summary.json's ``trust``), and why JSBSim stopped or lost an intruder, if it did."""
+    err = (e.get("trust") or {}).get("separation_error_m") or {}
+    trust = (
+        "no predictions to check"
+        if err.get("p95") is None
+        else f"mean {err['mean']:.0f} m, p95 {err['p95']:.0f} m, max {err['max']:.0f} m"
+    )
+    line = (
+        f"  safety: NMAC {'yes' if e.get('nmac') else 'no'}; predicted against flown "
+        f"separation (trust): {trust}"
+    )
+    if e.get("failure"):
+        line += f"; dynamics failure: {e['failure']}"
+    if e.get("intruders_lost"):
+        line += f"; {len(e['intruders_lost'])} intruder(s) lost in flight and replaced"
+    return line
 
 
 def _mission_line(m: dict) -> str:
