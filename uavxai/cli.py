@@ -759,6 +759,19 @@ def _internal_error(exc: BaseException) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """The program (``argv`` None: ``sys.argv``; given, a caller in Python): its exit code.
+    As the program, signals that come once the command is done are ignored: its files are
+    whole, the process is ending, and a ``KeyboardInterrupt`` raised inside the interpreter's
+    shutdown would print a traceback and cut the tidying of its worker processes short."""
+    code = _main(argv)
+    if argv is None:
+        from uavxai.processes import ignore_interrupts
+
+        ignore_interrupts()
+    return code
+
+
+def _main(argv: Sequence[str] | None) -> int:
     os.environ.setdefault("JSBSIM_DEBUG", "0")
     os.environ.setdefault("MAVLINK20", "1")
     _sigterm_as_interrupt()
@@ -778,7 +791,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"uavxai: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
-        print("uavxai: interrupted", file=sys.stderr)
+        from uavxai.processes import interrupts_deferred
+
+        with interrupts_deferred(deliver=False):  # a second signal: already ending for one
+            print("uavxai: interrupted", file=sys.stderr)
         return 130
     except BrokenPipeError:
         # the reader went away (`uavxai explain RUN | head`): not an error of ours. Point
