@@ -48,7 +48,7 @@ import numpy as np
 
 from uavxai.avoidance.planners import PLANNERS
 from uavxai.errors import UserError
-from uavxai.outputs import csv_cell, write_output
+from uavxai.outputs import csv_cell, write_figure, write_output
 from uavxai.processes import interrupts_deferred
 from uavxai.scenario import Scenario
 from uavxai.sim.build import DYNAMICS as _DYNAMICS
@@ -660,10 +660,8 @@ def plot_results(results: Sequence[dict], out: Path, title: str = "") -> list[Pa
         if title:
             ax.set_title(title, fontsize=9)
         fig.tight_layout()
-        png = io.BytesIO()
-        fig.savefig(png, format="png")
+        write_figure(out / name, fig)
         plt.close(fig)
-        write_output(out / name, png.getvalue())
         paths.append(out / name)
     return paths
 

@@ -11,8 +11,10 @@
 - :func:`ignore_interrupts`: a child leaves SIGINT and SIGTERM to its parent, which closes or
   kills it in order (a Ctrl-C or a SIGTERM sent to the whole process group does not kill a
   recorder before the run has closed its recording).
+- :func:`raise_on_interrupt`: the command line's SIGINT and SIGTERM, a ``KeyboardInterrupt``
+  (the command stops and saves what it has), once.
 - :func:`interrupts_deferred`: while outputs are saved, SIGINT and SIGTERM are noted, not
-  raised; the save ends whole and the interruption is delivered after it.
+  raised; the save ends whole and the signal is delivered after it.
 """
 
 from __future__ import annotations
@@ -43,8 +45,24 @@ def die_with_parent(parent: int | None) -> None:
         os._exit(1)
 
 
+def raise_on_interrupt(once: bool) -> None:
+    """SIGINT and SIGTERM raise ``KeyboardInterrupt`` in the main thread: the command stops
+    and saves what it has. ``once``: only the first one does and later ones are ignored, for
+    the process is ending already (the program; a caller in Python keeps its own Ctrl-C)."""
+
+    def interrupt(signum: int, frame: object) -> None:
+        if once:
+            ignore_interrupts()  # before raising: nothing can come between
+        raise KeyboardInterrupt(f"signal {signum}")
+
+    if threading.current_thread() is threading.main_thread():
+        for sig in _INTERRUPTS:
+            signal.signal(sig, interrupt)
+
+
 def ignore_interrupts() -> None:
-    """SIGINT and SIGTERM ignored: the parent handles them and stops this process itself."""
+    """SIGINT and SIGTERM ignored: in a child, whose parent handles them and stops it
+    itself; in the program, once it is ending."""
     for sig in _INTERRUPTS:
         signal.signal(sig, signal.SIG_IGN)
 
@@ -52,7 +70,7 @@ def ignore_interrupts() -> None:
 @contextlib.contextmanager
 def interrupts_deferred(deliver: bool = True) -> Iterator[list[int]]:
     """SIGINT and SIGTERM noted, not raised, while the body runs (a save that must end
-    whole); at its end, ``KeyboardInterrupt`` if one came and ``deliver`` (False: the caller
+    whole); at its end the first that came is sent again if ``deliver`` (False: the caller
     is already ending for an interruption, and a second one changes nothing). Yields the list
     of the signals that came. Outside the main thread signals cannot be handled, and nothing
     changes."""
@@ -71,5 +89,6 @@ def interrupts_deferred(deliver: bool = True) -> Iterator[list[int]]:
         for sig, handler in previous.items():  # None: a handler not set from Python
             signal.signal(sig, signal.SIG_DFL if handler is None else handler)
     if caught and deliver:
-        raise KeyboardInterrupt(f"signal {caught[0]} (deferred until the outputs were saved)")
+        # sent again, to the handler now in place: what it does with a signal it does now
+        signal.raise_signal(caught[0])
 
