@@ -119,6 +119,27 @@ def test_sigkill_of_a_campaign_leaves_no_process(tmp_path: Path) -> None:
     assert len(started) >= 5  # the forkserver, the tracker and the workers were there
 
 
+def test_sigkill_of_a_run_leaves_no_process(tmp_path: Path) -> None:
+    """`uavxai run` flies with a companion planner and a recorder in processes of their
+    own: both die with it."""
+    from uavxai.paths import scenarios_dir
+
+    out = tmp_path / "run"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "uavxai", "run", str(scenarios_dir() / "head_on.yaml"),
+         "--out", str(out), "--realtime", "4"],
+        env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
+    )  # fmt: skip
+    decisions = out / "decisions.jsonl"
+    _wait_for(lambda: decisions.exists() and decisions.stat().st_size > 0, proc, "decision")
+    children = [p for p in _session(proc.pid) if p.pid != proc.pid]
+    assert len(children) >= 2  # the companion and the recorder (and the resource tracker)
+    proc.kill()
+    proc.wait(timeout=60)
+    left = _session_ends(proc.pid, 5.0)
+    assert not left, f"processes left 5 s after SIGKILL: {[p.pid for p in left]}"
+
+
 def test_sigterms_during_the_save_of_an_interrupted_campaign_leave_whole_files(
     tmp_path: Path,
 ) -> None:
