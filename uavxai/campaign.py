@@ -332,9 +332,14 @@ def _run_pool(scenario, tasks, order, common, workers, on_done) -> dict[int, dic
         # running episodes (they ignore SIGTERM: killed); the caller keeps what finished.
         with interrupts_deferred():  # a second signal must not leave them running
             processes = list(getattr(pool, "_processes", {}).values())
+            manager = getattr(pool, "_executor_manager_thread", None)
             pool.shutdown(wait=False, cancel_futures=True)
             for p in processes:
                 p.kill()
+            # Its thread sees them die and tidies up; let it finish before the interpreter's
+            # exit wakes it (Python 3.11 races there: "Bad file descriptor" at exit).
+            if manager is not None:
+                manager.join(timeout=10)
         raise
     pool.shutdown()
     return rows
@@ -884,19 +889,25 @@ def evaluate_command(
             raise
         finally:
             journal.close()
-    with interrupts_deferred():  # a signal now waits for the files: they end whole
-        results = summarise(rows)
-        out.mkdir(parents=True, exist_ok=True)
-        episode_columns, result_columns = columns_of(rows)
-        write_csv(out / "episodes.csv", episode_columns, rows)
-        write_csv(out / "results.csv", result_columns, results)
-        plots = plot_results(results, out, f"{scenario.name}, {dynamics}, {episodes} episodes")
+    results, plots = _save(rows, out, f"{scenario.name}, {dynamics}, {episodes} episodes")
     wall = time.perf_counter() - wall0
     console.print(results_table(results))
     if scenario.encounters is not None:
         console.print(daa_table(results))
     console.print(f"wrote {out / 'results.csv'}, {out / 'episodes.csv'} and {len(plots)} plots")
     return {"episodes": len(rows), "wall_s": wall, "results": results}
+
+
+def _save(rows: list[dict], out: Path, title: str) -> tuple[list[dict], list[Path]]:
+    """A finished campaign's ``episodes.csv``, ``results.csv`` and plots; a signal that comes
+    meanwhile waits for them to be whole. Its results and the plots' paths."""
+    with interrupts_deferred():
+        results = summarise(rows)
+        out.mkdir(parents=True, exist_ok=True)
+        episode_columns, result_columns = columns_of(rows)
+        write_csv(out / "episodes.csv", episode_columns, rows)
+        write_csv(out / "results.csv", result_columns, results)
+        return results, plot_results(results, out, title)
 
 
 def _keep_finished(rows: list[dict], out: Path, console) -> None:
