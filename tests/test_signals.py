@@ -1,9 +1,11 @@
 """Signals against the command line, with real processes (issue 30): a killed campaign leaves
 no process behind, repeated SIGTERMs never cut an output short, and no traceback is shown.
 
-Each test starts `uavxai evaluate` in its own session (``start_new_session``): every process it
-starts (multiprocessing's forkserver and resource tracker, the pool's workers) shares that
-session, which is how the tests find them. Waits poll for progress with generous deadlines.
+The command-line tests start `uavxai evaluate` or `uavxai run` in a session of its own
+(``start_new_session``): every process it starts (multiprocessing's forkserver and resource
+tracker, the pool's workers, the companion planner, the recorder) shares that session, which is
+how the tests find them. Waits poll for progress with generous deadlines. The last tests send
+signals to this process itself, to check :mod:`uavxai.processes` alone.
 """
 
 from __future__ import annotations
@@ -179,3 +181,38 @@ def test_sigterms_during_the_final_save_wait_for_it(tmp_path: Path) -> None:
         assert (out / name).read_bytes().startswith(b"\x89PNG"), name
     assert not list(out.glob(".*.part"))
     assert not _session_ends(proc.pid)
+
+
+@pytest.fixture
+def own_signal_handlers():
+    """The test changes this process's SIGINT and SIGTERM handlers; they are put back."""
+    previous = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    yield
+    for sig, handler in previous.items():
+        signal.signal(sig, handler)
+
+
+def test_a_signal_during_a_deferred_save_comes_after_it(own_signal_handlers) -> None:
+    from uavxai.processes import interrupts_deferred, raise_on_interrupt
+
+    raise_on_interrupt(once=False)
+    saved = []
+    with pytest.raises(KeyboardInterrupt), interrupts_deferred() as caught:
+        signal.raise_signal(signal.SIGTERM)
+        saved.append("the rest of the save")
+    assert saved == ["the rest of the save"] and caught == [signal.SIGTERM]
+    with interrupts_deferred(deliver=False) as caught:  # already ending: dropped
+        signal.raise_signal(signal.SIGINT)
+    assert caught == [signal.SIGINT]
+    with pytest.raises(KeyboardInterrupt):  # the handlers are back
+        signal.raise_signal(signal.SIGINT)
+
+
+def test_the_program_is_interrupted_once(own_signal_handlers) -> None:
+    from uavxai.processes import raise_on_interrupt
+
+    raise_on_interrupt(once=True)
+    with pytest.raises(KeyboardInterrupt):
+        signal.raise_signal(signal.SIGTERM)
+    signal.raise_signal(signal.SIGTERM)  # ignored: the program is ending already
+    signal.raise_signal(signal.SIGINT)
