@@ -49,10 +49,11 @@ import numpy as np
 
 from uavxai.avoidance.planners import PLANNERS
 from uavxai.errors import UserError
-from uavxai.outputs import csv_cell, write_output
+from uavxai.outputs import csv_cell, write_figure, write_output
+from uavxai.processes import interrupts_deferred
 from uavxai.scenario import Scenario
 from uavxai.sim.build import DYNAMICS as _DYNAMICS
-from uavxai.vocabulary import OUTCOMES
+from uavxai.vocabulary import OUTCOMES, Outcome
 
 METHODS = tuple(PLANNERS)  # the planner registry's names, not a copy of them
 DYNAMICS = tuple(_DYNAMICS)
@@ -174,6 +175,10 @@ def run_campaign_episode(
     else:
         intruders = draw_intruders(sc, np.random.default_rng(seed), n_intruders)
         r = fly(sc, _planner(scenario, method), goal, dynamics=dynamics, intruders=intruders)
+    if r.outcome is Outcome.INTERRUPTED:
+        # a signal to this process: the campaign stops here (its caller keeps the finished
+        # episodes), and a flight cut short is no episode of its results
+        raise KeyboardInterrupt("episode interrupted")
     ms = r.decision_ms
     return {
         "method": method,
@@ -224,6 +229,22 @@ def _init_worker() -> None:
     import torch
 
     torch.set_num_threads(1)
+
+
+def _init_pool_worker(start_method: str, owner: int) -> None:
+    """A local pool's worker: it dies with its parent (the forkserver, or with ``spawn`` the
+    campaign's process ``owner``) and leaves SIGINT and SIGTERM to the campaign's process,
+    which keeps the finished episodes and kills it."""
+    from uavxai.forkserver_preload import FORKSERVER_PID
+    from uavxai.processes import die_with_parent, ignore_interrupts
+
+    if start_method == "forkserver":  # the pid is there if the forkserver is ours
+        parent = int(os.environ[FORKSERVER_PID]) if FORKSERVER_PID in os.environ else None
+    else:
+        parent = owner
+    die_with_parent(parent)
+    ignore_interrupts()
+    _init_worker()
 
 
 def _run_task(scenario: Scenario, task: Task, dynamics: str, goal: Sequence[float]) -> dict:
@@ -282,11 +303,20 @@ def run_campaign(
 
 
 def _run_pool(scenario, tasks, order, common, workers, on_done) -> dict[int, dict]:
-    context = multiprocessing.get_context(
-        "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
-    )
+    from uavxai import forkserver_preload
+
+    method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
+    context = multiprocessing.get_context(method)
+    if method == "forkserver":
+        # The forkserver (started with the first worker, once per process) dies with this
+        # process, and so its workers too: a killed campaign leaves no process behind.
+        os.environ[forkserver_preload.STARTED_BY] = str(os.getpid())
+        context.set_forkserver_preload(["__main__", forkserver_preload.__name__])
     rows: dict[int, dict] = {}
-    pool = ProcessPoolExecutor(workers, mp_context=context, initializer=_init_worker)
+    pool = ProcessPoolExecutor(
+        workers, mp_context=context, initializer=_init_pool_worker,
+        initargs=(method, os.getpid()),
+    )  # fmt: skip
     pending: dict[Future, int] = {
         pool.submit(_run_task, scenario, tasks[k], *common): k for k in order
     }
@@ -300,11 +330,17 @@ def _run_pool(scenario, tasks, order, common, workers, on_done) -> dict[int, dic
                     on_done(rows[k])
     except BaseException:
         # Interrupted (Ctrl-C, SIGTERM) or failed: stop the workers now, not after their
-        # running episodes; the caller keeps what finished.
-        processes = list(getattr(pool, "_processes", {}).values())
-        pool.shutdown(wait=False, cancel_futures=True)
-        for p in processes:
-            p.terminate()
+        # running episodes (they ignore SIGTERM: killed); the caller keeps what finished.
+        with interrupts_deferred():  # a second signal must not leave them running
+            processes = list(getattr(pool, "_processes", {}).values())
+            manager = getattr(pool, "_executor_manager_thread", None)
+            pool.shutdown(wait=False, cancel_futures=True)
+            for p in processes:
+                p.kill()
+            # Its thread sees them die and tidies up; let it finish before the interpreter's
+            # exit wakes it (Python 3.11 races there: "Bad file descriptor" at exit).
+            if manager is not None:
+                manager.join(timeout=10)
         raise
     pool.shutdown()
     return rows
@@ -630,10 +666,8 @@ def plot_results(results: Sequence[dict], out: Path, title: str = "") -> list[Pa
         if title:
             ax.set_title(title, fontsize=9)
         fig.tight_layout()
-        png = io.BytesIO()
-        fig.savefig(png, format="png")
+        write_figure(out / name, fig)
         plt.close(fig)
-        write_output(out / name, png.getvalue())
         paths.append(out / name)
     return paths
 
@@ -707,11 +741,12 @@ def merge_campaigns(sources: Sequence[str | Path], out: str | Path, title: str =
     for r in results:
         if len(sources_of[(r["method"], r["intruders"])]) == 1:
             r["decision_ms_p50"] = p50.get((r["method"], r["intruders"]), r["decision_ms_p50"])
-    out.mkdir(parents=True, exist_ok=True)
-    episode_columns, result_columns = columns_of(episodes)
-    write_csv(out / "results.csv", result_columns, results)
-    write_csv(out / "episodes.csv", episode_columns, episodes)
-    plot_results(results, out, title)
+    with interrupts_deferred():  # a signal now waits for the files: they end whole
+        out.mkdir(parents=True, exist_ok=True)
+        episode_columns, result_columns = columns_of(episodes)
+        write_csv(out / "results.csv", result_columns, results)
+        write_csv(out / "episodes.csv", episode_columns, episodes)
+        plot_results(results, out, title)
     return results
 
 
@@ -868,18 +903,25 @@ def evaluate_command(
             raise
         finally:
             journal.close()
-    results = summarise(rows)
-    out.mkdir(parents=True, exist_ok=True)
-    episode_columns, result_columns = columns_of(rows)
-    write_csv(out / "episodes.csv", episode_columns, rows)
-    write_csv(out / "results.csv", result_columns, results)
-    plots = plot_results(results, out, f"{scenario.name}, {dynamics}, {episodes} episodes")
+    results, plots = _save(rows, out, f"{scenario.name}, {dynamics}, {episodes} episodes")
     wall = time.perf_counter() - wall0
     console.print(results_table(results))
     if scenario.encounters is not None:
         console.print(daa_table(results))
     console.print(f"wrote {out / 'results.csv'}, {out / 'episodes.csv'} and {len(plots)} plots")
     return {"episodes": len(rows), "wall_s": wall, "results": results}
+
+
+def _save(rows: list[dict], out: Path, title: str) -> tuple[list[dict], list[Path]]:
+    """A finished campaign's ``episodes.csv``, ``results.csv`` and plots; a signal that comes
+    meanwhile waits for them to be whole. Its results and the plots' paths."""
+    with interrupts_deferred():
+        results = summarise(rows)
+        out.mkdir(parents=True, exist_ok=True)
+        episode_columns, result_columns = columns_of(rows)
+        write_csv(out / "episodes.csv", episode_columns, rows)
+        write_csv(out / "results.csv", result_columns, results)
+        return results, plot_results(results, out, title)
 
 
 def _keep_finished(rows: list[dict], out: Path, console) -> None:
@@ -889,14 +931,17 @@ def _keep_finished(rows: list[dict], out: Path, console) -> None:
     order = {(m, n, e): k for k, (m, n, e) in enumerate(sorted(
         (r["method"], r["intruders"], r["episode"]) for r in rows))}  # fmt: skip
     rows = sorted(rows, key=lambda r: order[(r["method"], r["intruders"], r["episode"])])
-    out.mkdir(parents=True, exist_ok=True)
-    episode_columns, result_columns = columns_of(rows)
-    write_csv(out / "episodes.csv", episode_columns, rows)
-    write_csv(out / "results.csv", result_columns, summarise(rows))
-    console.print(
-        f"interrupted: kept the {len(rows)} finished episodes in {out / 'episodes.csv'} and "
-        f"{out / 'results.csv'}; the same command with --resume flies the others"
-    )
+    # Already ending for a signal: another one (a second Ctrl-C, a supervisor's repeated
+    # SIGTERM) must not cut the files short, and changes nothing after them.
+    with interrupts_deferred(deliver=False):
+        out.mkdir(parents=True, exist_ok=True)
+        episode_columns, result_columns = columns_of(rows)
+        write_csv(out / "episodes.csv", episode_columns, rows)
+        write_csv(out / "results.csv", result_columns, summarise(rows))
+        console.print(
+            f"interrupted: kept the {len(rows)} finished episodes in {out / 'episodes.csv'} "
+            f"and {out / 'results.csv'}; the same command with --resume flies the others"
+        )
 
 
 def results_table(results: Sequence[dict]):

@@ -808,19 +808,6 @@ COMMANDS = {
 }
 
 
-def _sigterm_as_interrupt() -> None:
-    """SIGTERM ends a run like Ctrl-C does: files closed whole, a summary marked
-    ``interrupted``, finished episodes kept, worker processes stopped."""
-    import signal
-    import threading
-
-    def interrupt(signum, frame) -> None:
-        raise KeyboardInterrupt(f"signal {signum}")
-
-    if threading.current_thread() is threading.main_thread():
-        signal.signal(signal.SIGTERM, interrupt)
-
-
 def _mark_incomplete(folder: Path | None, reason: str) -> None:
     """Record in an output folder's marker that the command did not finish writing it: the
     marker's JSON gains ``"incomplete": REASON`` (best effort: the disk may be full)."""
@@ -865,9 +852,30 @@ def _internal_error(exc: BaseException) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """The program (``argv`` None: ``sys.argv``; given, a caller in Python): its exit code.
+
+    SIGTERM ends a command like Ctrl-C does: files closed whole, a summary marked
+    ``interrupted``, finished episodes kept, worker processes stopped; exit code 130. As the
+    program, only the first signal does: later ones are ignored, as are signals that come once
+    the command is done (the process is ending, its files are whole, and a
+    ``KeyboardInterrupt`` raised while it saves or shuts down would cut that short)."""
+    from uavxai.processes import ignore_interrupts, raise_on_interrupt
+
+    program = argv is None
+    raise_on_interrupt(once=program)
+    try:
+        code = _main(argv)
+        if program:
+            ignore_interrupts()
+    except KeyboardInterrupt:  # the first signal, come just as the command ended
+        print("uavxai: interrupted", file=sys.stderr)
+        code = 130
+    return code
+
+
+def _main(argv: Sequence[str] | None) -> int:
     os.environ.setdefault("JSBSIM_DEBUG", "0")
     os.environ.setdefault("MAVLINK20", "1")
-    _sigterm_as_interrupt()
     parser = build_parser()
     try:
         args = parser.parse_args(argv)

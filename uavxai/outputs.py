@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import io
 import os
 import tempfile
 from pathlib import Path
@@ -72,6 +73,24 @@ def write_output(path: str | Path, data: str | bytes) -> Path:
             raise output_error(path, exc) from None
         raise
     return path
+
+
+def write_figure(path: str | Path, fig, **savefig_kwargs) -> Path:
+    """A matplotlib figure written whole (:func:`write_output`), in the format its name
+    ends with (``.png``, ``.pdf``)."""
+    buf = io.BytesIO()
+    fig.savefig(buf, format=Path(path).suffix.lstrip(".") or "png", **savefig_kwargs)
+    return write_output(path, buf.getvalue())
+
+
+def write_torch(path: str | Path, obj: object) -> Path:
+    """``torch.save(obj)`` written whole (:func:`write_output`): a checkpoint is never left
+    half-written by a full disk or a signal."""
+    import torch
+
+    buf = io.BytesIO()
+    torch.save(obj, buf)
+    return write_output(path, buf.getvalue())
 
 
 def csv_cell(value):

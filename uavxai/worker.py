@@ -12,9 +12,10 @@ on where it runs:
   failure among posted calls is raised at the next answer or at :meth:`Worker.close`.
 
 The process is started with ``spawn`` (no fork of a process that holds JSBSim, rerun and
-torch threads), ignores Ctrl-C (the parent handles it and then closes the worker in order,
-so a recording interrupted by the user is still complete), and reports a failure by name
-rather than hanging.
+torch threads), ignores Ctrl-C and SIGTERM (the parent handles them and then closes the
+worker in order, so a recording interrupted by the user, or by a SIGTERM sent to the whole
+process group, is still complete), dies with its parent (even one killed by SIGKILL:
+:mod:`uavxai.processes`) and reports a failure by name rather than hanging.
 """
 
 from __future__ import annotations
@@ -22,21 +23,22 @@ from __future__ import annotations
 import contextlib
 import multiprocessing as mp
 import os
-import signal
 import traceback
 from collections.abc import Callable
 from multiprocessing.connection import Connection
 
 from uavxai.errors import UserError
+from uavxai.processes import die_with_parent, ignore_interrupts
 
 _BATCH = 64  # posted calls per pipe message: one pickle and one write instead of many
 _REPLY, _POST = True, False
 
 
-def _serve(conn: Connection, factory: Callable, args: tuple, kwargs: dict) -> None:
+def _serve(conn: Connection, parent: int, factory: Callable, args: tuple, kwargs: dict) -> None:
     """The worker's loop: build the object, then run batches of calls until told to stop.
     Every answer is ("ok", value) or ("error", text)."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    die_with_parent(parent)
+    ignore_interrupts()
     try:
         obj = factory(*args, **kwargs)
     except Exception as exc:  # noqa: BLE001 - reported to the parent, which raises it
@@ -81,7 +83,10 @@ class Worker:
         ctx = mp.get_context("spawn")
         self._conn, child = ctx.Pipe()
         self._proc = ctx.Process(
-            target=_serve, args=(child, factory, args, kwargs), name=f"uavxai-{name}", daemon=True
+            target=_serve,
+            args=(child, os.getpid(), factory, args, kwargs),
+            name=f"uavxai-{name}",
+            daemon=True,
         )
         self._proc.start()
         child.close()

@@ -56,6 +56,7 @@ from uavxai.avoidance.types import (
     check_plan_inputs,
 )
 from uavxai.errors import CheckpointError
+from uavxai.outputs import write_torch
 from uavxai.paths import avoidance_checkpoints_dir
 
 ALGOS = ("dqn", "safe_dqn")
@@ -167,8 +168,10 @@ def save_checkpoint(
     n_nearest: int,
     meta: dict,
 ) -> None:
-    """``model.pt``: the networks' weights and what is needed to rebuild and feed them."""
-    torch.save(
+    """``model.pt``: the networks' weights and what is needed to rebuild and feed them
+    (written whole: :func:`~uavxai.outputs.write_torch`)."""
+    write_torch(
+        path,
         {
             "format": CHECKPOINT_FORMAT,
             "algo": algo,
@@ -179,7 +182,6 @@ def save_checkpoint(
             "state_dicts": {k: net.state_dict() for k, net in nets.items()},
             "meta": meta,
         },
-        path,
     )
 
 

@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import copy
 import csv
+import io
 import json
 import math
 import time
@@ -61,6 +62,7 @@ from uavxai.avoidance.types import N_ACTIONS, PlannerConfig
 from uavxai.errors import UserError
 from uavxai.geometry import bearing, wrap_angle
 from uavxai.learning.env import EncounterEnv, default_goal, episode_intruders
+from uavxai.outputs import write_figure, write_output
 from uavxai.scenario import Scenario, Start
 
 
@@ -673,11 +675,12 @@ def _write_outputs(
     save_checkpoint(
         out / "model.pt", algo, result.nets, hidden=hp.hidden, n_nearest=hp.n_nearest, meta=meta
     )
-    (out / "model.json").write_text(json.dumps({"algo": algo, **meta}, indent=2) + "\n")
-    with (out / "learning_curve.csv").open("w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=CURVE_COLUMNS)
-        w.writeheader()
-        w.writerows(result.curve)
+    write_output(out / "model.json", json.dumps({"algo": algo, **meta}, indent=2) + "\n")
+    curve = io.StringIO()
+    w = csv.DictWriter(curve, fieldnames=CURVE_COLUMNS)
+    w.writeheader()
+    w.writerows(result.curve)
+    write_output(out / "learning_curve.csv", curve.getvalue())
     plot_learning_curve(result.curve, out / "learning_curve.png", f"{algo} on {scenario.name}")
 
 
@@ -709,5 +712,5 @@ def plot_learning_curve(curve: list[dict], path: Path, title: str) -> None:
     bottom.set_xlabel("episode")
     bottom.grid(alpha=0.3)
     fig.tight_layout()
-    fig.savefig(path)
+    write_figure(path, fig)
     plt.close(fig)

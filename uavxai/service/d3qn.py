@@ -36,6 +36,7 @@ from torch import nn
 
 from uavxai.comms.service_env import MOVES, ServiceEnv
 from uavxai.errors import CheckpointError
+from uavxai.outputs import write_torch
 
 CHECKPOINT_FORMAT = "uavxai.service.branching-q/1"
 
@@ -280,7 +281,8 @@ def _update(q, target, optimizer, batch, cfg: D3QNConfig) -> float:
 def save_checkpoint(
     path: Path, net: BranchingQNetwork, algo: str, cfg: D3QNConfig, meta: dict[str, Any]
 ) -> None:
-    torch.save(
+    write_torch(  # whole or not at all
+        path,
         {
             "format": CHECKPOINT_FORMAT,
             "algo": algo,
@@ -293,7 +295,6 @@ def save_checkpoint(
             "meta": meta,
             "state_dict": net.state_dict(),
         },
-        path,
     )
 
 

@@ -33,6 +33,7 @@ from __future__ import annotations
 import argparse
 import copy
 import csv
+import io
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -42,6 +43,7 @@ import numpy as np
 import torch
 
 from uavxai.comms.service_env import ServiceEnv
+from uavxai.outputs import write_figure, write_output
 from uavxai.scenario import Scenario
 from uavxai.service import d3qn, dqn
 from uavxai.service.grid import solve_grid
@@ -252,21 +254,22 @@ def _random_curve(env: ServiceEnv, episodes: int, seed: int, progress, task) -> 
 
 def _write_csv(path: Path, runs: dict[str, dict[str, Any]]) -> None:
     fields = ["algo", "episode", "epsilon", "return_bps", "train_objective", "greedy_objective"]
-    with path.open("w", newline="") as f:
-        writer = csv.writer(f)
-        writer.writerow(fields)
-        for name, run in runs.items():
-            for row in run["curve"]:
-                writer.writerow(
-                    [
-                        name,
-                        row["episode"],
-                        f"{row['epsilon']:.4f}",
-                        f"{row['return']:.6g}",
-                        f"{row['train_objective']:.6g}",
-                        f"{row['greedy_objective']:.6g}",
-                    ]
-                )
+    buf = io.StringIO()
+    writer = csv.writer(buf)
+    writer.writerow(fields)
+    for name, run in runs.items():
+        for row in run["curve"]:
+            writer.writerow(
+                [
+                    name,
+                    row["episode"],
+                    f"{row['epsilon']:.4f}",
+                    f"{row['return']:.6g}",
+                    f"{row['train_objective']:.6g}",
+                    f"{row['greedy_objective']:.6g}",
+                ]
+            )
+    write_output(path, buf.getvalue())  # whole or not at all
 
 
 def _plot(
@@ -316,7 +319,7 @@ def _plot(
         f"{sc.name}: K = {c.users.k}, {c.access}, {c.environment}, fading {c.fading}, "
         f"seed {sc.seed}"
     )
-    fig.savefig(path, dpi=110)
+    write_figure(path, fig, dpi=110)
     plt.close(fig)
 
 

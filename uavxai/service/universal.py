@@ -59,6 +59,7 @@ from uavxai.comms.service_env import (
     levels_to_power,
 )
 from uavxai.errors import CheckpointError
+from uavxai.outputs import write_output, write_torch
 from uavxai.service.layouts import random_problem
 
 if TYPE_CHECKING:
@@ -624,7 +625,8 @@ FINETUNE = UniversalConfig(
 # ------------------------------------------------------------------------------- checkpoints
 def save(path: Path, net: SetQNetwork, algo: str, meta: dict[str, Any]) -> None:
     """``path`` (state dict and sizes, loadable with ``weights_only=True``) and a JSON beside."""
-    torch.save(
+    write_torch(  # whole or not at all
+        path,
         {
             "format": CHECKPOINT_FORMAT,
             "algo": algo,
@@ -634,9 +636,8 @@ def save(path: Path, net: SetQNetwork, algo: str, meta: dict[str, Any]) -> None:
             "dueling": net.dueling,
             "state_dict": net.state_dict(),
         },
-        path,
     )
-    path.with_suffix(".json").write_text(json.dumps(meta, indent=2, default=str) + "\n")
+    write_output(path.with_suffix(".json"), json.dumps(meta, indent=2, default=str) + "\n")
 
 
 def load(path: str | Path) -> tuple[SetQNetwork, dict[str, Any]]:

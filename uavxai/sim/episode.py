@@ -19,6 +19,7 @@ import numpy as np
 
 from uavxai.avoidance.types import Decision, Intruder, Ownship, Planner
 from uavxai.dynamics.state import TrafficState
+from uavxai.processes import interrupts_deferred
 from uavxai.sim.clock import Clock
 from uavxai.sim.command import CommandPath, Dynamics
 from uavxai.sim.judge import Judge
@@ -289,7 +290,11 @@ class Episode:
         return outcome
 
     def run(self) -> EpisodeResult:
-        """Fly to the end; observers are closed whatever happens."""
+        """Fly to the end; observers are closed whatever happens. A signal (SIGINT, SIGTERM)
+        ends the flight as ``interrupted``; while the episode is then saved (its summary,
+        the observers' files) signals wait, so the files end whole: one that comes then is
+        raised after the save (``KeyboardInterrupt``), unless the episode is already
+        interrupted."""
         outcome: Outcome = Outcome.TIMEOUT
         try:
             for o in self.observers:
@@ -303,10 +308,19 @@ class Episode:
                         break
             except KeyboardInterrupt:
                 outcome = Outcome.INTERRUPTED
-            return self.finish(outcome)
-        finally:
-            for o in self.observers:
-                o.close()
+        except BaseException:
+            with interrupts_deferred():
+                self._close_observers()
+            raise
+        with interrupts_deferred(deliver=outcome is not Outcome.INTERRUPTED):
+            try:
+                return self.finish(outcome)
+            finally:
+                self._close_observers()
+
+    def _close_observers(self) -> None:
+        for o in self.observers:
+            o.close()
 
     def finish(self, outcome: Outcome) -> EpisodeResult:
         wall = time.perf_counter() - self.wall0

@@ -16,6 +16,7 @@ import numpy as np
 
 from uavxai.avoidance.types import Ownship
 from uavxai.dynamics.state import TrafficState
+from uavxai.outputs import write_output
 from uavxai.sim.episode import DecisionEvent, Episode, Observer, stats
 from uavxai.vocabulary import Outcome
 
@@ -216,6 +217,26 @@ class Rerun(Observer):
 
     def close(self) -> None:
         self.recorder.close()
+
+
+class SummaryJSON(Observer):
+    """``summary.json``: the episode's summary plus ``extra`` (what the run knows beside the
+    flight: the service point, versions), written whole (temporary file + rename) when the
+    episode closes its observers, last of them. It belongs to the episode's save, during which
+    a signal waits (:meth:`Episode.run`): an interrupted run still ends with it."""
+
+    def __init__(self, path: Path, extra: dict) -> None:
+        self.path = path
+        self._extra = extra
+        self._summary: dict | None = None
+
+    def on_end(self, ep: Episode, summary: dict) -> None:
+        summary.update(self._extra)  # the episode's result carries them too
+        self._summary = summary
+
+    def close(self) -> None:
+        if self._summary is not None:
+            write_output(self.path, json.dumps(self._summary, indent=2) + "\n")
 
 
 class Pacing(Observer):

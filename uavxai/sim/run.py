@@ -17,7 +17,9 @@ import numpy as np
 from rich.console import Console
 
 from uavxai import __version__
+from uavxai.outputs import write_output
 from uavxai.paths import invocation
+from uavxai.processes import interrupts_deferred
 from uavxai.scenario import Scenario
 from uavxai.sim.build import episode_goal, fly
 from uavxai.sim.command import MavlinkPath
@@ -29,6 +31,7 @@ from uavxai.sim.observers import (
     ProgressBar,
     Rerun,
     Service,
+    SummaryJSON,
     Throughput,
     Trust,
 )
@@ -135,6 +138,12 @@ def run_episode(
         observers.append(Pacing(realtime))
     if progress is not None:
         observers.append(ProgressBar(progress, sc.name, sc.avoidance.max_steps))
+    extra = {
+        **service.to_summary(),
+        "goal_is_service_point": sc.ownship.goal is None,
+        "versions": versions(),
+    }
+    observers.append(SummaryJSON(out / "summary.json", extra))  # last: once the files are closed
     try:
         result = fly(
             sc,
@@ -150,12 +159,9 @@ def run_episode(
             mission=mission,
         )
     finally:
-        planner.close()
-    summary = result.summary
-    summary.update(service.to_summary())
-    summary["goal_is_service_point"] = sc.ownship.goal is None
-    summary["versions"] = versions()
-    return summary
+        with interrupts_deferred():  # the planner's process is closed in order, not cut off
+            planner.close()
+    return result.summary
 
 
 def _replanner(sc: Scenario):
@@ -249,8 +255,7 @@ def run_command(
                 realtime=realtime,
                 progress=progress,
             )
-            (ep_out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
-            results.append(summary)
+            results.append(summary)  # its summary.json is written: see SummaryJSON
             if summary["outcome"] == "interrupted":
                 break
     if episodes == 1:
@@ -262,7 +267,9 @@ def run_command(
             "episodes": results,
             **aggregate(results),
         }
-        (out / "summary.json").write_text(json.dumps(final, indent=2) + "\n")
+        interrupted = any(e["outcome"] == "interrupted" for e in results)
+        with interrupts_deferred(deliver=not interrupted):
+            write_output(out / "summary.json", json.dumps(final, indent=2) + "\n")
     report(final, out, rerun_file, spawn)
     return final
 
