@@ -8,7 +8,7 @@ export JSBSIM_DEBUG := 0
 export RAY_USAGE_STATS_ENABLED := 0
 export MPLBACKEND := Agg
 
-.PHONY: venv demo test test-slow lint bench clean
+.PHONY: venv demo test test-slow test-bluesky lint bench clean
 venv: $(STAMP)
 
 # The constraints file pins torch to the CPU wheel (torch==2.13.0) for our own installs.
@@ -30,6 +30,17 @@ test: $(STAMP)
 test-slow: $(STAMP)
 	$(BIN)/python -m pytest -q -m slow
 
+# The mvp planner against BlueSky's own MVP (tests/test_avoidance_mvp.py -k bluesky). BlueSky
+# needs numpy below 2.4, so it gets a small venv of its own; uavxai is read from the tree.
+BLUESKY := .venv-bluesky
+test-bluesky:
+	@test -x $(BLUESKY)/bin/python || $(PYTHON) -m venv $(BLUESKY)
+	$(BLUESKY)/bin/python -m pip --disable-pip-version-check -q install \
+		-r tests/requirements-bluesky.txt 2> $(BLUESKY)/pip-warnings.log || \
+		{ cat $(BLUESKY)/pip-warnings.log; exit 1; }
+	UAVXAI_BLUESKY=1 PYTHONPATH=$(CURDIR) $(BLUESKY)/bin/python -m pytest -q -p no:cacheprovider \
+		tests/test_avoidance_mvp.py -k bluesky
+
 lint: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/lint-imports
@@ -38,4 +49,4 @@ bench: $(STAMP)
 	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done
 
 clean:
-	rm -rf $(VENV) build dist *.egg-info .pytest_cache .ruff_cache
+	rm -rf $(VENV) $(BLUESKY) build dist *.egg-info .pytest_cache .ruff_cache
