@@ -385,7 +385,8 @@ def test_speed_outside_the_aircrafts_range_is_clamped(limited, asked, flown, via
     else:
         got = planner_says(bridge, gcs, change_speed(asked))
         assert acks(got) == [] and bridge.take_operator_commands() == []
-        assert sink.calls == [{"speed_target_mps": flown}]
+        # the airspeed flown, and the autopilot's ceiling (an operator's speed: issue 28)
+        assert sink.calls == [{"speed_target_mps": flown, "speed_max_mps": flown}]
     assert statustexts(got) == [f"clamped: speed {asked:.4g} -> {flown:.0f} m/s"]
     assert bridge.counters["clamped_commands"] == 1
 
@@ -540,7 +541,8 @@ def test_commands_exactly_at_the_limits_are_not_reported_as_clamped():
     for call in sink.calls:
         assert abs(call.get("bank_cmd_rad", 0.0)) <= math.radians(35.0)
         assert abs(call.get("accel_cmd_mps2", 0.0)) <= 0.3
-    assert sink.calls[-2:] == [{"alt_target_m": 250.0}, {"speed_target_mps": 12.0}]
+    assert sink.calls[-2:] == [{"alt_target_m": 250.0},
+                               {"speed_target_mps": 12.0, "speed_max_mps": 12.0}]  # fmt: skip
 
 
 def test_limits_must_be_sane():

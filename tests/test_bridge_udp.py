@@ -282,7 +282,8 @@ def test_change_speed_from_a_station_is_acknowledged_and_becomes_an_aim():
     # the planner's own DO_CHANGE_SPEED is flown, and not acknowledged onto the ground link
     receive(gcs)
     assert bridge.feed(CommandEncoder(1, 1).change_speed(21.0)) == 1
-    assert sink.calls == [{"speed_target_mps": pytest.approx(21.0)}]
+    assert sink.calls == [{"speed_target_mps": pytest.approx(21.0),
+                           "speed_max_mps": pytest.approx(21.0)}]  # fmt: skip
     assert of_type(receive(gcs, quiet_s=0.2), "COMMAND_ACK") == []
     assert bridge.take_operator_commands() == []
     bridge.close()
