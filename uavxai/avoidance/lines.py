@@ -45,6 +45,10 @@ class LineMeasure:
     t_closest_s: float | None  # when, from the decision
     meets: tuple[int, float, float, float] | None  # (intruder index, time, miss, needed)
     horizon_s: float  # how far ahead the line reaches
+    # Other intruders whose track error (their margin at their closest approach) could bring
+    # them closer than ``closest`` on its predicted track: (index, closest approach less that
+    # margin, m), the least first. The prediction is not sure which intruder passes closest.
+    unsure: tuple[tuple[int, float], ...] = ()
 
 
 def measure_line(
@@ -67,6 +71,7 @@ def measure_line(
     n_int = tracks[0].count if tracks else 0
     best = np.full(n_int, math.inf)
     best_t = np.full(n_int, math.nan)
+    best_margin = np.zeros(n_int)  # each track's margin at its closest approach
     meets = None
     horizon = 0.0
     for own, level, (code, t_event) in zip(samples, levels, ends, strict=True):
@@ -87,6 +92,8 @@ def measure_line(
             closer = kept[k, cols] < best
             best = np.where(closer, kept[k, cols], best)
             best_t = np.where(closer, t[k, cols], best_t)
+            if track.margin is not None:  # the sub-step's end margin, as the search holds it
+                best_margin = np.where(closer, track.margin[k + 1, cols], best_margin)
             if code == COLLISION and meets is None:
                 meets = _first_conflict(dist, track, d_min_m, t0, dt)
         if code != NONE:
@@ -98,7 +105,10 @@ def measure_line(
     if meets is not None:
         who, when, needed = meets
         met = (who, when, float(best[who]), needed)
-    return LineMeasure(float(best[j]), j, float(best_t[j]), met, horizon)
+    could = np.maximum(best - best_margin, 0.0)
+    unsure = tuple((int(i), float(could[i])) for i in np.argsort(could, kind="stable")
+                   if i != j and could[i] < best[j])  # fmt: skip
+    return LineMeasure(float(best[j]), j, float(best_t[j]), met, horizon, unsure)
 
 
 def _chord_distances(own: np.ndarray, intruders: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -172,6 +182,7 @@ def with_measure(child: ChildStats, m: LineMeasure, ids: Sequence) -> ChildStats
         closest_intruder=ids[m.closest] if m.closest >= 0 else None,
         time_to_closest_s=m.t_closest_s,
         meets=meets,
+        unsure=tuple((ids[i], could) for i, could in m.unsure),
     )
 
 

@@ -343,6 +343,9 @@ class ChildStats:
     # the action whose manoeuvre this one flies once its commands are clamped (a bank step
     # beyond the bank limit, a speed change beyond the speed limit); None: itself
     effect: int | None = None
+    # other intruders whose track error could bring them closer than ``closest_intruder`` on
+    # that line: (id, closest approach on its predicted track less its margin there, m)
+    unsure: tuple[tuple[int | str, float], ...] = ()
 
     @property
     def flies(self) -> int:
@@ -521,6 +524,7 @@ class Decision:
                     "collision_share": c.collision_share,
                     "meets": None if c.meets is None else asdict(c.meets),
                     "flies": action_name(c.flies),
+                    "unsure": [[who, m] for who, m in c.unsure],
                 }
                 for c in self.children
             ],

@@ -251,7 +251,22 @@ def _keeps(c: ChildStats, decision: Decision) -> str:
     elif c.outcome in _ENDS:
         chosen = next((o for o in decision.children if o.action == decision.action), None)
         text += f" and {_ends(c, chosen)}"
+    if c.closest_intruder is not None and c.unsure:
+        text += f"; {_unsure(c)}"
     return text
+
+
+UNSURE_SHOWN = 2  # intruders named; the others counted
+
+
+def _unsure(c: ChildStats) -> str:
+    """The intruders the prediction is not sure of: within the margin kept for what each may
+    do and its track error, it could pass closer than the one named (issue 30: "keeps N m
+    from k" named one intruder while another passed closer)."""
+    named = ", ".join(f"{_name(who)} (could pass at {m:.0f} m)"
+                      for who, m in c.unsure[:UNSURE_SHOWN])  # fmt: skip
+    more = len(c.unsure) - UNSURE_SHOWN
+    return f"less sure of {named}" + (f" and {more} more" if more > 0 else "")
 
 
 def _support(decision: Decision) -> str:
