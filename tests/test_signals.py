@@ -216,3 +216,22 @@ def test_the_program_is_interrupted_once(own_signal_handlers) -> None:
         signal.raise_signal(signal.SIGTERM)
     signal.raise_signal(signal.SIGTERM)  # ignored: the program is ending already
     signal.raise_signal(signal.SIGINT)
+
+
+def test_the_command_line_called_from_python_gives_the_callers_handlers_back(tmp_path) -> None:
+    """A test runner (or any caller) keeps its own SIGINT/SIGTERM handling once `main`
+    returns (issue 30: pytest ignored SIGTERM after the CLI had run in-process)."""
+    from uavxai.cli import main
+
+    def mine(signum, frame) -> None:
+        pass
+
+    before = {s: signal.signal(s, mine) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        scenario = Path(__file__).resolve().parents[1] / "scenarios" / "head_on.yaml"
+        assert main(["validate", str(scenario)]) == 0
+        assert signal.getsignal(signal.SIGINT) is mine
+        assert signal.getsignal(signal.SIGTERM) is mine
+    finally:
+        for s, h in before.items():
+            signal.signal(s, h)

@@ -859,17 +859,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     program, only the first signal does: later ones are ignored, as are signals that come once
     the command is done (the process is ending, its files are whole, and a
     ``KeyboardInterrupt`` raised while it saves or shuts down would cut that short)."""
-    from uavxai.processes import ignore_interrupts, raise_on_interrupt
+    from uavxai.processes import ignore_interrupts, raise_on_interrupt, restored_interrupts
 
     program = argv is None
-    raise_on_interrupt(once=program)
-    try:
-        code = _main(argv)
-        if program:
-            ignore_interrupts()
-    except KeyboardInterrupt:  # the first signal, come just as the command ended
-        print("uavxai: interrupted", file=sys.stderr)
-        code = 130
+    # A caller in Python (a test runner) gets its own signal handlers back when the command
+    # returns (issue 30: pytest ignored SIGTERM for 15 s after the CLI had run in-process).
+    with contextlib.nullcontext() if program else restored_interrupts():
+        raise_on_interrupt(once=program)
+        try:
+            code = _main(argv)
+            if program:
+                ignore_interrupts()
+        except KeyboardInterrupt:  # the first signal, come just as the command ended
+            print("uavxai: interrupted", file=sys.stderr)
+            code = 130
     return code
 
 

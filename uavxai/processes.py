@@ -68,6 +68,21 @@ def ignore_interrupts() -> None:
 
 
 @contextlib.contextmanager
+def restored_interrupts() -> Iterator[None]:
+    """The SIGINT and SIGTERM handlers in place before the body, put back after it (main
+    thread only: elsewhere nothing can change them)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {sig: signal.getsignal(sig) for sig in _INTERRUPTS}
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():  # None: a handler not set from Python
+            signal.signal(sig, signal.SIG_DFL if handler is None else handler)
+
+
+@contextlib.contextmanager
 def interrupts_deferred(deliver: bool = True) -> Iterator[list[int]]:
     """SIGINT and SIGTERM noted, not raised, while the body runs (a save that must end
     whole); at its end the first that came is sent again if ``deliver`` (False: the caller
@@ -82,12 +97,10 @@ def interrupts_deferred(deliver: bool = True) -> Iterator[list[int]]:
     def note(signum: int, frame: object) -> None:
         caught.append(signum)
 
-    previous = {sig: signal.signal(sig, note) for sig in _INTERRUPTS}
-    try:
+    with restored_interrupts():
+        for sig in _INTERRUPTS:
+            signal.signal(sig, note)
         yield caught
-    finally:
-        for sig, handler in previous.items():  # None: a handler not set from Python
-            signal.signal(sig, signal.SIG_DFL if handler is None else handler)
     if caught and deliver:
         # sent again, to the handler now in place: what it does with a signal it does now
         signal.raise_signal(caught[0])
