@@ -90,7 +90,13 @@ def test_sigterm_on_evaluate_keeps_finished_episodes_and_stops_the_workers(tmp_p
         env={**os.environ, "JSBSIM_DEBUG": "0"}, stdout=subprocess.PIPE,
         stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
-    time.sleep(25.0)
+    # mid-campaign: once episodes have finished (journaled), however loaded the machine is
+    journal = out / "episodes.journal.jsonl"
+    deadline = time.monotonic() + 300.0
+    while time.monotonic() < deadline and proc.poll() is None and (
+        not journal.exists() or journal.read_text().count("\n") < 3
+    ):
+        time.sleep(0.2)
     children = subprocess.run(
         ["pgrep", "-P", str(proc.pid)], capture_output=True, text=True
     ).stdout.split()

@@ -254,7 +254,11 @@ class Episode:
         episode's (``self.max_steps``: a mission's covers transit, station and return
         together, not one leg), so the step passed makes that count the decisions this
         episode has left (issue 30: a leg's count had on-station searches value their lines
-        against a time-out 700 decisions too early)."""
+        against a time-out 700 decisions too early). Without a mission the episode's limit is
+        the planner's own ``max_steps``, or an encounter's observation window, which ends the
+        flight without being a deadline the ownship must beat: the planner counts its own."""
+        if self.mission is None:
+            return self.steps
         return self.planner.config.max_steps - (self.max_steps - self.steps)
 
     def advance(self, event: DecisionEvent | None) -> Outcome | None:
