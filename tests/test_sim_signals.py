@@ -8,6 +8,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -87,9 +88,14 @@ def test_sigterm_on_evaluate_keeps_finished_episodes_and_stops_the_workers(tmp_p
     proc = subprocess.Popen(
         [sys.executable, "-m", "uavxai", "evaluate", str(scenario), "--methods", "none",
          "--intruders", "5", "--episodes", "400", "--workers", "2", "--out", str(out)],
-        env={**os.environ, "JSBSIM_DEBUG": "0"}, stdout=subprocess.PIPE,
+        env={**os.environ, "JSBSIM_DEBUG": "0"}, stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
+    # stderr read as it comes (a full pipe would stall the campaign); its end is the end of
+    # every process that holds it: uavxai and anything it started
+    said: list[str] = []
+    reader = threading.Thread(target=lambda: said.append(proc.stderr.read()), daemon=True)
+    reader.start()
     # mid-campaign: once episodes have finished (journaled), however loaded the machine is
     journal = out / "episodes.journal.jsonl"
     deadline = time.monotonic() + 300.0
@@ -101,7 +107,17 @@ def test_sigterm_on_evaluate_keeps_finished_episodes_and_stops_the_workers(tmp_p
         ["pgrep", "-P", str(proc.pid)], capture_output=True, text=True
     ).stdout.split()
     proc.send_signal(signal.SIGTERM)
-    _, err = proc.communicate(timeout=60)
+    try:
+        proc.wait(timeout=60)
+    finally:
+        if proc.poll() is None:  # say what is left before failing
+            tree = subprocess.run(["ps", "-o", "pid,ppid,stat,args", "--ppid", str(proc.pid)],
+                                  capture_output=True, text=True).stdout  # fmt: skip
+            proc.kill()
+            pytest.fail(f"uavxai still running 60 s after SIGTERM; its children:\n{tree}")
+    reader.join(timeout=30)
+    assert not reader.is_alive(), "a process uavxai started still holds its stderr"
+    err = said[0]
     assert proc.returncode == 130, err
     assert "Traceback" not in err and "kept the" in err
     rows = (out / "episodes.csv").read_text().splitlines()
