@@ -308,10 +308,7 @@ def _run_pool(scenario, tasks, order, common, workers, on_done) -> dict[int, dic
     method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
     context = multiprocessing.get_context(method)
     if method == "forkserver":
-        # The forkserver (started with the first worker, once per process) dies with this
-        # process, and so its workers too: a killed campaign leaves no process behind.
-        os.environ[forkserver_preload.STARTED_BY] = str(os.getpid())
-        context.set_forkserver_preload(["__main__", forkserver_preload.__name__])
+        forkserver_preload.start(context)
     rows: dict[int, dict] = {}
     pool = ProcessPoolExecutor(
         workers, mp_context=context, initializer=_init_pool_worker,
