@@ -410,8 +410,10 @@ def _versions() -> dict[str, str]:
     import torch
 
     from uavxai import __version__
+    from uavxai.paths import source_digest
 
-    return {"uavxai": __version__, "jsbsim": jsbsim.__version__, "torch": torch.__version__}
+    return {"uavxai": __version__, "uavxai_sources": source_digest(),
+            "jsbsim": jsbsim.__version__, "torch": torch.__version__}  # fmt: skip
 
 
 def _remote_versions() -> dict[str, str]:
@@ -437,8 +439,9 @@ def _check_workers(ray) -> None:
         what = (f"lack the module {theirs['missing']}" if "missing" in theirs
                 else f"have {theirs}, this driver {mine}")  # fmt: skip
         raise UserError(
-            f"the Ray cluster's workers {what}. Install the same uavxai, jsbsim and torch on "
-            "every node (pip install uavxai[ray]==VERSION); see docs/cluster.md."
+            f"the Ray cluster's workers {what}. Install the same uavxai (the same code: "
+            "uavxai_sources is a digest of its files), jsbsim and torch on every node (pip "
+            "install uavxai[ray]==VERSION); see docs/cluster.md."
         )
 
 
