@@ -103,13 +103,13 @@ def _tidy(output: str, bindir: Path) -> str:
 
 def _wrap(text: str) -> str:
     """Wrap long lines as the README does: continuation lines indented past a label
-    (`  why:     `) or else four spaces past the line's own indent."""
+    (`  why:     `, `believed  `) or else four spaces past the line's own indent."""
     out = []
     for line in text.splitlines():
         if len(line) <= WIDTH:
             out.append(line)
             continue
-        label = re.match(r"^(\s*[a-z ]+:\s+)(?=\S)", line)
+        label = re.match(r"^(\s*(?:[a-z ]+:\s+|[a-z]+\s{2,}))(?=\S)", line)
         indent = " " * (len(label.group(1)) if label else len(line) - len(line.lstrip()) + 4)
         out.extend(textwrap.wrap(line, WIDTH, subsequent_indent=indent, break_on_hyphens=False))
     return "\n".join(out)
