@@ -19,7 +19,7 @@ autopilot (no MAVLink, no recording); the goal is the scenario's (``ownship.goal
 service point of the campaign's scenario at the seed its file names, whatever ``--seed``
 says), the same for every episode and as ``uavxai run``.
 
-A scenario with an ``encounters`` section (SPEC "Encounter campaigns") flies episode ``i`` as
+A scenario with an ``encounters`` section (docs/scenario.md "encounters") flies episode ``i`` as
 encounter ``i`` (:func:`uavxai.sim.encounter.fly_encounter`, seed ``scenario.seed + i``, one
 intruder: intruder counts are refused); its rows gain ``ENCOUNTER_COLUMNS`` and its results the
 weighted ``DAA_COLUMNS`` against ``none`` on the same seeds (docs/daa-metrics.md).
@@ -99,7 +99,7 @@ EPISODE_COLUMNS = (
     "goal_h",
 )
 GOAL_COLUMNS = EPISODE_COLUMNS[-3:]
-# Encounter campaigns (a scenario with `encounters`, SPEC "Encounter campaigns") add these:
+# Encounter campaigns (a scenario with `encounters`; docs/daa-metrics.md) add these:
 # per episode (uavxai.sim.encounter), and per method the weighted DAA estimates of
 # uavxai.daa_metrics.daa_summary against `none` on the same encounters.
 ENCOUNTER_COLUMNS = (

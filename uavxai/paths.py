@@ -1,7 +1,7 @@
 """Where the data that travels with the package lives (aircraft XML, scenarios, checkpoints).
 
 In the repository these are the top-level folders `aircraft/` and `scenarios/`; installed, they
-are the sub-packages `uavxai.aircraft` and `uavxai.scenarios` (see pyproject.toml).
+are the sub-packages `uavxai.aircraft` and `uavxai.scenarios` (see setup.py).
 """
 
 from __future__ import annotations

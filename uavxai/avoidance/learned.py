@@ -122,7 +122,7 @@ def observe_api(
     config: PlannerConfig,
     n_nearest: int = N_NEAREST,
 ) -> np.ndarray:
-    """:func:`observe` from the planner-API types (SPEC §7)."""
+    """:func:`observe` from the planner-API types (README, planner API)."""
     pos, vel = intruder_arrays(intruders)
     return observe(ownship_state(own), pos, vel, np.asarray(goal, float), config, n_nearest)
 
@@ -436,7 +436,7 @@ def _check_archive(p: Path, where: str, algo: str) -> None:
 
 # ------------------------------------------------------------------------------------ planners
 class LearnedPlanner:
-    """A greedy policy over trained Q-networks, in the planner API (SPEC §7).
+    """A greedy policy over trained Q-networks, in the planner API (README, planner API).
 
     Deterministic: the same inputs give the same decision, whatever the seed.
     """
