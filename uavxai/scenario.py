@@ -40,6 +40,8 @@ from uavxai.paths import aircraft_dir, resolve_scenario
 from uavxai.vocabulary import (
     ACTION_SETS,
     AVOIDANCE_PLANNERS,
+    CHANNEL_MODEL_NAMES,
+    CHANNEL_MODELS,
     SERVICE_PLANNERS,
     VERTICAL_PLANNERS,
 )
@@ -250,6 +252,27 @@ class Comms(_Model):
     power_levels: Annotated[int, Field(ge=2, le=32)] = 6
     qos_rate_bps: Annotated[float, Field(ge=0, le=1e12)] = 1.0e5
     access: Literal["shared", "ofdma"] = "shared"
+    channel: Literal[CHANNEL_MODEL_NAMES] = "al_hourani"  # type: ignore[valid-type]
+    shadowing: bool = False
+
+    @model_validator(mode="after")
+    def _shadowing(self) -> Comms:
+        """Shadowing is drawn with the fading, from a 3GPP model's sigma per LoS state."""
+        if not self.shadowing:
+            return self
+        if CHANNEL_MODELS[self.channel] is None:
+            raise ValueError(
+                f"comms.shadowing: true needs a channel with a shadow-fading sigma; "
+                f"comms.channel {self.channel} has none; allowed: comms.channel one of "
+                f"{', '.join(n for n, v in CHANNEL_MODELS.items() if v)}, or shadowing: false"
+            )
+        if self.fading == "none":
+            raise ValueError(
+                "comms.shadowing: true is drawn with the fading, and comms.fading: none draws "
+                "nothing (the fading-free mean channel); allowed: fading rayleigh or rician, or "
+                "shadowing: false"
+            )
+        return self
 
 
 def _checkpoint_exists(value: str | None, what: str) -> str | None:
@@ -731,7 +754,32 @@ class Scenario(_Model):
                 )
         self._flyable()
         self._encounters()
+        self._channel_range()
         return self
+
+    def _channel_range(self) -> None:
+        """A 3GPP channel holds for some UAV heights and horizontal distances only; the UAV
+        flies (and is served) anywhere in the world, the users stay in their region."""
+        valid = CHANNEL_MODELS[self.comms.channel]
+        if valid is None:
+            return
+        w, r = self.world, self.comms.users.region
+        what = f"comms.channel {self.comms.channel} ({valid.standard})"
+        if not (valid.h_min_m < w.h[0] and w.h[1] <= valid.h_max_m):
+            raise ValueError(
+                f"{what} holds for UAV heights {valid.h_min_m:g} m < h <= {valid.h_max_m:g} m "
+                f"and world.h is {list(w.h)}; allowed: world.h inside that range (below it "
+                "the standard falls back to terrestrial formulas that need a base-station mast)"
+            )
+        dx = max(r.x[1] - w.x[0], w.x[1] - r.x[0])
+        dy = max(r.y[1] - w.y[0], w.y[1] - r.y[0])
+        if math.hypot(dx, dy) > valid.d2d_max_m:
+            raise ValueError(
+                f"{what} holds for horizontal distances up to {valid.d2d_max_m:g} m, and a UAV "
+                f"in world x {list(w.x)}, y {list(w.y)} can be {math.hypot(dx, dy):.0f} m from a "
+                f"user in comms.users.region x {list(r.x)}, y {list(r.y)}; allowed: a world "
+                f"whose farthest point lies within {valid.d2d_max_m:g} m of the region"
+            )
 
     def _encounters(self) -> None:
         """An encounter scenario flies one sampled intruder per episode, to a fixed goal."""

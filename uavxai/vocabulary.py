@@ -113,6 +113,30 @@ AVOIDANCE_PLANNERS = (
 # horizontal plane and dqn / safe_dqn were trained on the paper's nine: they refuse it.
 VERTICAL_PLANNERS = ("mcts", "mcts_fast", "exhaustive", "mcts_vertical", "mcts_daa", "none")
 SERVICE_PLANNERS = ("d3qn", "dqn", "random", "grid")
+
+
+@dataclass(frozen=True)
+class ChannelValidity:
+    """Where a standard air-to-ground channel model holds (3GPP TR 36.777 Tables B-1 and B-2):
+    aerial heights ``h_min_m < h <= h_max_m`` above the ground node and horizontal distances
+    ``d2D <= d2d_max_m``. The scenario refuses a flight area that leaves it
+    (uavxai.scenario.Scenario); the formulas are uavxai.comms.pathloss."""
+
+    standard: str
+    h_min_m: float  # exclusive, as the standard writes "22.5 m < h_UT"
+    h_max_m: float  # inclusive
+    d2d_max_m: float
+
+
+# The air-to-ground channel models a scenario can select (`comms.channel`), by name. The
+# paper's Al-Hourani fit has no such range (None): it is a function of the elevation angle only.
+CHANNEL_MODELS: dict[str, ChannelValidity | None] = {
+    "al_hourani": None,
+    "uma_av": ChannelValidity("3GPP TR 36.777 UMa-AV", 22.5, 300.0, 4_000.0),
+    "umi_av": ChannelValidity("3GPP TR 36.777 UMi-AV", 22.5, 300.0, 4_000.0),
+    "rma_av": ChannelValidity("3GPP TR 36.777 RMa-AV", 10.0, 300.0, 10_000.0),
+}
+CHANNEL_MODEL_NAMES = tuple(CHANNEL_MODELS)
 # The worlds a campaign flies in (`uavxai evaluate --dynamics`; uavxai.sim.build.DYNAMICS
 # builds them): named here so that the command line need not import JSBSim's side to list them.
 DYNAMICS_MODELS = ("jsbsim", "kinematic")

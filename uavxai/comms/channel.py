@@ -23,6 +23,13 @@ band and sigma^2/K of the noise, with no intra-cell interference.
 
 Small-scale fading H_k has unit mean: ``rayleigh`` is |CN(0, 1)|^2 (exponential), ``rician`` a
 unit-power Rician with K-factor ``RICIAN_K_FACTOR_DB``, ``none`` is H_k = 1.
+
+The large-scale model (P_LoS and the path loss of each state in eq 2) is ``comms.channel``:
+the paper's Al-Hourani model above, or a 3GPP TR 36.777 aerial model (uavxai.comms.pathloss,
+which also says why the mean path loss averages in dB). With ``comms.shadowing`` a 3GPP
+channel's draws also draw each link's LoS state and log-normal shadowing, per user and per
+position, wherever the fading is drawn (after it, from the same rng); the mean gain stays the
+gain at the mean path loss (2).
 """
 
 from __future__ import annotations
@@ -32,18 +39,14 @@ from typing import Literal
 
 import numpy as np
 
+from uavxai.comms.pathloss import ENVIRONMENTS as ENVIRONMENTS
+from uavxai.comms.pathloss import MODELS, LargeScale, Links
+from uavxai.comms.pathloss import SPEED_OF_LIGHT_MPS as SPEED_OF_LIGHT_MPS
+from uavxai.comms.pathloss import free_space_loss_db as free_space_loss_db
+from uavxai.comms.pathloss import los_probability as los_probability
 from uavxai.scenario import Comms, Scenario
 
-SPEED_OF_LIGHT_MPS = 299_792_458.0
 RICIAN_K_FACTOR_DB = 10.0  # a strong specular path, typical of a UAV above the clutter
-
-# Al-Hourani's fitted S-curve (a, b) and the excess losses (eta_LoS, eta_NLoS) in dB.
-ENVIRONMENTS: dict[str, tuple[float, float, float, float]] = {
-    "suburban": (4.88, 0.43, 0.1, 21.0),
-    "urban": (9.61, 0.16, 1.0, 20.0),
-    "dense_urban": (12.08, 0.11, 1.6, 23.0),
-    "highrise_urban": (27.23, 0.08, 2.3, 34.0),
-}
 
 Fading = Literal["rayleigh", "rician", "none"]
 Access = Literal["shared", "ofdma"]
@@ -64,17 +67,6 @@ def draw_users(scenario: Scenario) -> np.ndarray:
     return np.column_stack([xy, np.zeros(len(xy))])
 
 
-def free_space_loss_db(distance_m: np.ndarray, carrier_hz: float) -> np.ndarray:
-    """20 log10(4 pi f_c d / c)."""
-    return 20.0 * np.log10(4.0 * np.pi * carrier_hz * distance_m / SPEED_OF_LIGHT_MPS)
-
-
-def los_probability(elevation_deg: np.ndarray, environment: str) -> np.ndarray:
-    """Al-Hourani's LoS probability; the fit takes the elevation angle in degrees."""
-    a, b, _, _ = ENVIRONMENTS[environment]
-    return 1.0 / (1.0 + a * np.exp(-b * (elevation_deg - a)))
-
-
 @dataclass(frozen=True)
 class Channel:
     """The channel of one scenario: K users' positions plus the link parameters (SI units)."""
@@ -88,6 +80,8 @@ class Channel:
     access: Access
     p_max_w: float
     qos_rate_bps: float
+    model: str = "al_hourani"  # comms.channel, a key of uavxai.comms.pathloss.MODELS
+    shadowing: bool = False
 
     @classmethod
     def from_scenario(cls, scenario: Scenario, users: np.ndarray | None = None) -> Channel:
@@ -102,6 +96,8 @@ class Channel:
             access=c.access,
             p_max_w=c.p_max_w,
             qos_rate_bps=c.qos_rate_bps,
+            model=c.channel,
+            shadowing=c.shadowing,
         )
 
     @property
@@ -111,21 +107,22 @@ class Channel:
     # ------------------------------------------------------------------ large-scale channel
     def geometry(self, uav: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Distance (m) and elevation angle (degrees) to each user: two arrays ``(..., K)``."""
-        delta = np.asarray(uav, dtype=float)[..., None, :] - self.users  # (..., K, 3)
-        distance = np.linalg.norm(delta, axis=-1)
-        elevation_deg = np.degrees(np.arcsin(np.clip(delta[..., 2] / distance, -1.0, 1.0)))
-        return distance, elevation_deg
+        links = Links.between(uav, self.users)
+        return links.d3d, links.elevation_deg
+
+    def large_scale(self, uav: np.ndarray, users: np.ndarray | None = None) -> LargeScale:
+        """P_LoS, path loss and shadowing sigma per state of each link ``(..., K)`` under
+        ``comms.channel`` (``users`` default: the channel's)."""
+        links = Links.between(uav, self.users if users is None else users)
+        return MODELS[self.model].large_scale(links, self.carrier_hz / 1e9, self.environment)
+
+    def p_los(self, uav: np.ndarray) -> np.ndarray:
+        """The LoS probability of each link ``(..., K)`` under ``comms.channel``."""
+        return self.large_scale(uav).p_los
 
     def path_loss_db(self, uav: np.ndarray) -> np.ndarray:
         """Mean path loss (2) in dB, ``(..., K)``."""
-        _, _, eta_los, eta_nlos = ENVIRONMENTS[self.environment]
-        distance, elevation_deg = self.geometry(uav)
-        p_los = los_probability(elevation_deg, self.environment)
-        return (
-            free_space_loss_db(distance, self.carrier_hz)
-            + p_los * eta_los
-            + (1.0 - p_los) * eta_nlos
-        )
+        return self.large_scale(uav).mean_db()
 
     def mean_gain(self, uav: np.ndarray) -> np.ndarray:
         """Gain (3) averaged over small-scale fading (H = 1), linear, ``(..., K)``."""
@@ -145,13 +142,27 @@ class Channel:
         im = scatter * rng.standard_normal(shape)
         return re**2 + im**2
 
+    def draw_channel(
+        self, rng: np.random.Generator, uav: np.ndarray, users: np.ndarray | None = None
+    ) -> np.ndarray:
+        """The factor ``(..., K)`` on the mean gain of the links from ``uav`` (..., 3): fading
+        H, times, with ``shadowing``, 10^(-(PL_drawn - PL_mean) / 10) for a drawn LoS state and
+        shadowing (drawn after H, so the fading stream is the same with or without it)."""
+        users = self.users if users is None else users
+        shape = np.shape(uav)[:-1] + (len(users),)
+        h = self.draw_fading(rng, shape)
+        if self.shadowing and self.fading != "none":
+            ls = self.large_scale(uav, users)
+            h = h * 10.0 ** (-(ls.draw_db(rng) - ls.mean_db()) / 10.0)
+        return h
+
     def gain(self, uav: np.ndarray, rng: np.random.Generator | None = None) -> np.ndarray:
-        """Instantaneous gain (3): the mean gain times fresh fading drawn from ``rng``
-        (``rng=None`` or ``fading: none`` gives the mean gain)."""
+        """Instantaneous gain (3): the mean gain times fresh fading (and shadowing, if
+        drawn) from ``rng`` (``rng=None`` or ``fading: none`` gives the mean gain)."""
         g = self.mean_gain(uav)
         if rng is None or self.fading == "none":
             return g
-        return g * self.draw_fading(rng, g.shape)
+        return g * self.draw_channel(rng, uav)
 
     # ------------------------------------------------------------------ link budget
     def sinr(self, gain: np.ndarray, power_w: np.ndarray) -> np.ndarray:

@@ -43,6 +43,17 @@ USERS_COLUMNS = ("t", "user", "x", "y")
 ServiceRow = tuple[float, int, float, float, float]
 
 
+def user_positions(channel: Channel, users_pos: np.ndarray) -> np.ndarray:
+    """``users_pos`` as an array ``(K, 3)`` or ``(N, K, 3)``, or a clear error."""
+    users = np.asarray(users_pos, dtype=float)
+    if users.shape[-2:] != (channel.k, 3):
+        raise UserError(
+            f"user positions must be (K, 3) or (N, K, 3) with K = {channel.k}, got shape "
+            f"{users.shape}"
+        )
+    return users
+
+
 def rates_at(
     channel: Channel,
     uav_pos: np.ndarray,
@@ -57,12 +68,7 @@ def rates_at(
     else (carrier, environment, noise, access, K) is the channel's.
     """
     uav = np.asarray(uav_pos, dtype=float).reshape(-1, 3)
-    users = np.asarray(users_pos, dtype=float)
-    if users.shape[-2:] != (channel.k, 3):
-        raise UserError(
-            f"user positions must be (K, 3) or (N, K, 3) with K = {channel.k}, got shape "
-            f"{users.shape}"
-        )
+    users = user_positions(channel, users_pos)
     # Channel.geometry broadcasts uav (N, 1, 3) against its users; give it per-sample users
     # through a copy (frozen dataclass) that is only used for the path loss.
     moved = replace(channel, users=users)
@@ -171,11 +177,16 @@ class Delivery:
         power = self.power_w if power_w is None else self._check_power(power_w)
         power = np.broadcast_to(power, (n, k))
         # One draw per sample, in time order, whatever else happens: the stream and hence
-        # service.csv do not depend on avoidance or on batching.
+        # service.csv do not depend on avoidance or on batching. Shadowing (if drawn) is drawn
+        # at the flown position and reused for the planned one: the two rates compared while
+        # avoiding then differ by the geometry only.
         if self.channel.fading == "none":
             fading = None
         else:
-            fading = np.stack([self.channel.draw_fading(self.rng, (k,)) for _ in range(n)])
+            users_n = np.broadcast_to(user_positions(self.channel, users_pos), (n, k, 3))
+            fading = np.stack(
+                [self.channel.draw_channel(self.rng, uav[i], users_n[i]) for i in range(n)]
+            )
         sinr, rate = rates_at(self.channel, uav, users_pos, power, fading)
 
         planned_rate = None

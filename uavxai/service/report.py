@@ -50,9 +50,8 @@ def service_lines(summary: dict[str, Any]) -> list[str]:
             f"{bit_rate(summary.get('orbit_sum_rate_bps'))}, "
             f"{summary.get('orbit_qos_satisfied')} of {k} users at QoS"
         )
-    channel = ", ".join(
-        f"{summary[key]}" for key in ("access", "environment", "fading") if key in summary
-    )
+    keys = ("channel", "access", "environment", "fading")
+    channel = ", ".join(f"{summary[key]}" for key in keys if key in summary)
     if channel:
         lines.append(f"channel            {channel}")
     if summary.get("lattice_points") is not None:

@@ -119,6 +119,7 @@ def plan_service(
     extras: dict[str, Any] = {
         "access": scenario.comms.access,
         "environment": scenario.comms.environment,
+        "channel": scenario.comms.channel,
         "fading": scenario.comms.fading,
     }
     if name == "grid":

@@ -50,7 +50,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from uavxai.comms.channel import ENVIRONMENTS, Channel, free_space_loss_db, los_probability
+from uavxai.comms.channel import ENVIRONMENTS, Channel, free_space_loss_db
 from uavxai.comms.service_env import (
     GAIN_REFERENCE_DISTANCE_M,
     MOVES,
@@ -99,7 +99,7 @@ def observe(env: ServiceEnv, position: np.ndarray | None = None) -> Observation:
             offset,
             np.hypot(offset[:, 0], offset[:, 1]),
             elevation / 90.0,
-            los_probability(elevation, ch.environment),
+            ch.p_los(pos),  # the channel model's (comms.channel)
             (gain_db[0] - ref_db) / 10.0,
             gain_db[1:].T - gain_db[0][:, None],  # (K, 6): dB per move
             np.log2(np.maximum(rate[0], 1e-9) / qos) / 4.0,
