@@ -42,63 +42,57 @@ def uav_at(d2d: float, h: float) -> np.ndarray:
 
 
 # ------------------------------------------------------------------ tabulated points by hand
-def test_uma_av_at_h50_d500_2ghz():
-    ls = one_user("uma_av", 2.0).large_scale(uav_at(500.0, 50.0))
-    # d3D = sqrt(500^2 + 50^2) = 502.4938
-    # LoS:  28.0 + 22 log(502.4938) + 20 log(2) = 28 + 59.4249 + 6.0206 = 93.4455
-    assert float(ls.pl_los_db[0]) == pytest.approx(93.4455, abs=1e-3)
-    # NLoS: -17.5 + (46 - 7 log 50) log(502.4938) + 20 log(40 pi 2 / 3)
-    #     = -17.5 + (46 - 11.8928) * 2.70113 + 38.4619 = 113.0904
-    assert float(ls.pl_nlos_db[0]) == pytest.approx(113.0904, abs=1e-3)
+# (model, f_c GHz, d2D, h) -> (P_LoS, PL_LoS dB, PL_NLoS dB, sigma_LoS dB, sigma_NLoS dB)
+HAND = {
+    # UMa-AV, h = 50 m, d2D = 500 m, 2 GHz; d3D = sqrt(500^2 + 50^2) = 502.4938
     # d1 = max(460 log 50 - 700, 18) = 81.5262, p1 = 4300 log 50 - 3800 = 3505.571
     # P = 81.5262/500 + exp(-500/3505.571) (1 - 81.5262/500) = 0.163052 + 0.867077 * 0.836948
-    assert float(ls.p_los[0]) == pytest.approx(0.888749, abs=1e-6)
+    # LoS:  28.0 + 22 log(502.4938) + 20 log(2) = 28 + 59.4249 + 6.0206 = 93.4455
+    # NLoS: -17.5 + (46 - 7 log 50) log(502.4938) + 20 log(40 pi 2 / 3)
+    #     = -17.5 + (46 - 11.8928) * 2.70113 + 38.4619 = 113.0904
     # sigma_LoS = 4.64 exp(-0.0066 * 50) = 3.33581; sigma_NLoS = 6
-    assert float(ls.sigma_los_db[0]) == pytest.approx(3.33581, abs=1e-5)
-    assert float(ls.sigma_nlos_db[0]) == 6.0
-
-
-def test_umi_av_at_h100_d300_2ghz():
-    ls = one_user("umi_av", 2.0).large_scale(uav_at(300.0, 100.0))
-    # d3D = 316.2278; PL_FS = 20 log(40 pi 316.2278 * 2 / 3) = 88.4624
-    # fitted LoS = 30.9 + (22.25 - 0.5 * 2) log(316.2278) + 20 log 2 = 30.9 + 53.125 + 6.0206
-    # LoS = max(88.4624, 90.0456) = 90.0456
-    assert float(ls.pl_los_db[0]) == pytest.approx(90.0456, abs=1e-3)
-    # NLoS = max(90.0456, 32.4 + (43.2 - 7.6 * 2) log(316.2278) + 20 log 2) = 108.4206
-    assert float(ls.pl_nlos_db[0]) == pytest.approx(108.4206, abs=1e-3)
+    ("uma_av", 2.0, 500.0, 50.0): (0.888749, 93.4455, 113.0904, 3.33581, 6.0),
+    # UMi-AV, h = 100 m, d2D = 300 m, 2 GHz; d3D = 316.2278
     # d1 = max(294.05 * 2 - 432.94, 18) = 155.16, p1 = 233.98 * 2 - 0.95 = 467.01
     # P = 155.16/300 + exp(-300/467.01) (1 - 155.16/300) = 0.5172 + 0.526062 * 0.4828
-    assert float(ls.p_los[0]) == pytest.approx(0.771170, abs=1e-6)
+    # PL_FS = 20 log(40 pi 316.2278 * 2 / 3) = 88.4624
+    # fitted LoS = 30.9 + (22.25 - 0.5 * 2) log(316.2278) + 20 log 2 = 30.9 + 53.125 + 6.0206
+    # LoS = max(88.4624, 90.0456) = 90.0456
+    # NLoS = max(90.0456, 32.4 + (43.2 - 7.6 * 2) log(316.2278) + 20 log 2) = 108.4206
     # sigma_LoS = max(5 exp(-0.01 * 100), 2) = max(1.8394, 2) = 2 (the floor); NLoS 8
-    assert float(ls.sigma_los_db[0]) == 2.0
-    assert float(ls.sigma_nlos_db[0]) == 8.0
-    # at 50 m the exponential is above the floor: 5 exp(-0.5) = 3.03265
-    assert float(UMiAV().sigma_los_db(np.array(50.0))) == pytest.approx(3.03265, abs=1e-5)
-
-
-def test_rma_av_at_h30_d1000_700mhz():
-    ls = one_user("rma_av", 0.7).large_scale(uav_at(1000.0, 30.0))
-    # d3D = 1000.4499; 20 log(40 pi 0.7 / 3) = 29.3443
-    # LoS = max(23.9 - 1.8 log 30, 20) log(1000.4499) + 29.3443 = 21.2412 * 3.000195 + 29.3443
-    assert float(ls.pl_los_db[0]) == pytest.approx(93.0714, abs=1e-3)
-    # NLoS = max(93.0714, -12 + (35 - 5.3 log 30) log(1000.4499) + 29.3443) = 98.8628
-    assert float(ls.pl_nlos_db[0]) == pytest.approx(98.8628, abs=1e-3)
+    ("umi_av", 2.0, 300.0, 100.0): (0.771170, 90.0456, 108.4206, 2.0, 8.0),
+    # RMa-AV, h = 30 m, d2D = 1 km, 700 MHz; d3D = 1000.4499; 20 log(40 pi 0.7 / 3) = 29.3443
     # d1 = max(1350.8 log 30 - 1602, 18) = 393.2954, p1 = max(15021 log 30 - 16053, 1000)
     # = 6134.838; P = 0.3932954 + exp(-1000/6134.838) (1 - 0.3932954) = 0.908744
-    assert float(ls.p_los[0]) == pytest.approx(0.908744, abs=1e-6)
+    # LoS = max(23.9 - 1.8 log 30, 20) log(1000.4499) + 29.3443 = 21.2412 * 3.000195 + 29.3443
+    # NLoS = max(93.0714, -12 + (35 - 5.3 log 30) log(1000.4499) + 29.3443) = 98.8628
     # sigma_LoS = 4.2 exp(-0.0046 * 30) = 3.65861; NLoS 6
-    assert float(ls.sigma_los_db[0]) == pytest.approx(3.65861, abs=1e-5)
-    assert float(ls.sigma_nlos_db[0]) == 6.0
-
-
-def test_rma_av_maxima_bind_high_up():
-    ls = one_user("rma_av", 0.7).large_scale(uav_at(100.0, 300.0))
-    # h = 300: 23.9 - 1.8 log 300 = 19.44 < 20, so the slope is 20 and LoS is free space:
+    ("rma_av", 0.7, 1000.0, 30.0): (0.908744, 93.0714, 98.8628, 3.65861, 6.0),
+    # RMa-AV, h = 300 m, d2D = 100 m, 700 MHz: both maxima bind. P = 1 (h > 40 m).
+    # 23.9 - 1.8 log 300 = 19.44 < 20, so the slope is 20 and LoS is free space:
     # d3D = 316.2278, PL = 20 log(316.2278) + 29.3443 = 79.3437
-    assert float(ls.pl_los_db[0]) == pytest.approx(79.3437, abs=1e-3)
-    # NLoS fitted = -12 + (35 - 5.3 log 300) * 2.5 + 29.3443 = 72.0219 < LoS: the max is LoS
-    assert float(ls.pl_nlos_db[0]) == pytest.approx(79.3437, abs=1e-3)
-    assert float(ls.p_los[0]) == 1.0  # h > 40 m
+    # NLoS fitted = -12 + (35 - 5.3 log 300) * 2.5 + 29.3443 = 72.0219 < LoS: NLoS = LoS
+    # sigma_LoS = 4.2 exp(-0.0046 * 300) = 1.05663
+    ("rma_av", 0.7, 100.0, 300.0): (1.0, 79.3437, 79.3437, 1.05663, 6.0),
+}
+
+
+@pytest.mark.parametrize(("point", "expected"), HAND.items(), ids=lambda v: str(v))
+def test_tabulated_point_by_hand(point, expected):
+    model, fc, d2d, h = point
+    ls = one_user(model, fc).large_scale(uav_at(d2d, h))
+    p, los, nlos, sigma_los, sigma_nlos = expected
+    assert float(ls.p_los[0]) == pytest.approx(p, abs=1e-6)
+    assert float(ls.pl_los_db[0]) == pytest.approx(los, abs=1e-3)
+    assert float(ls.pl_nlos_db[0]) == pytest.approx(nlos, abs=1e-3)
+    assert float(ls.sigma_los_db[0]) == pytest.approx(sigma_los, abs=1e-5)
+    assert float(ls.sigma_nlos_db[0]) == sigma_nlos
+
+
+def test_umi_av_sigma_floor():
+    # at 50 m the exponential is above the 2 dB floor: 5 exp(-0.5) = 3.03265; at 100 m below
+    assert float(UMiAV().sigma_los_db(np.array(50.0))) == pytest.approx(3.03265, abs=1e-5)
+    assert float(UMiAV().sigma_los_db(np.array(100.0))) == 2.0
 
 
 # ------------------------------------------------------------------- limits and continuity
