@@ -50,8 +50,12 @@ def service_lines(summary: dict[str, Any]) -> list[str]:
             f"{bit_rate(summary.get('orbit_sum_rate_bps'))}, "
             f"{summary.get('orbit_qos_satisfied')} of {k} users at QoS"
         )
-    keys = ("channel", "access", "environment", "fading")
-    channel = ", ".join(f"{summary[key]}" for key in keys if key in summary)
+    # comms.environment is Al-Hourani's parameter set: said only where it is used
+    keys = ["channel", "access", "fading"]
+    if summary.get("channel", "al_hourani") == "al_hourani":
+        keys.insert(2, "environment")
+    words = [f"{summary[key]}" for key in keys if key in summary]
+    channel = ", ".join(words + (["shadowing"] if summary.get("shadowing") else []))
     if channel:
         lines.append(f"channel            {channel}")
     if summary.get("lattice_points") is not None:

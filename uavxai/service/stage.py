@@ -121,6 +121,7 @@ def plan_service(
         "environment": scenario.comms.environment,
         "channel": scenario.comms.channel,
         "fading": scenario.comms.fading,
+        "shadowing": scenario.comms.shadowing,
     }
     if name == "grid":
         if orbit is None:
