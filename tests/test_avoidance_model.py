@@ -13,13 +13,13 @@ from uavxai.avoidance.model import (
     NONE,
     OUT_OF_BOUNDS,
     EncounterModel,
-    G,
     Track,
     ownship_air,
     ownship_state,
     place_children,
 )
 from uavxai.avoidance.types import Ownship, PlannerConfig
+from uavxai.units import G
 
 RIGHT_HOLD = 7  # bank right, hold speed
 HOLD = 4

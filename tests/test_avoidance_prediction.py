@@ -17,7 +17,6 @@ from uavxai.avoidance.model import (
     NONE,
     STATE_DIM,
     EncounterModel,
-    G,
     Track,
     intruder_margin,
     manoeuvre_spread,
@@ -26,6 +25,7 @@ from uavxai.avoidance.model import (
 )
 from uavxai.errors import UserError
 from uavxai.scenario import default_scenario
+from uavxai.units import G
 
 HOLD = 4  # hold bank, hold speed
 

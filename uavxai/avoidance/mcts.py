@@ -42,7 +42,6 @@ from uavxai.avoidance.model import (
     TIMEOUT,
     Children,
     EncounterModel,
-    G,
     Track,
     accel_command,
     bank_command,
@@ -62,6 +61,7 @@ from uavxai.avoidance.types import (
     SearchTree,
     check_plan_inputs,
 )
+from uavxai.units import G
 
 _VALUE_OF = np.array(TERMINAL_VALUE)
 

@@ -55,9 +55,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from uavxai.avoidance.types import Ownship, PlannerConfig
+from uavxai.units import G
 from uavxai.vocabulary import ACTIONS
-
-G = 9.80665  # m/s^2
 
 # Columns of a state row. VCMD: the vertical command of the vertical action set (+1 climb,
 # 0 the leg's height, -1 descend), which persists like the bank command (0 with the paper's).

@@ -43,7 +43,6 @@ from uavxai.avoidance.model import (
     PHI,
     PSI,
     EncounterModel,
-    G,
     Segment,
     V,
     accel_command,
@@ -61,6 +60,7 @@ from uavxai.avoidance.types import (
     check_plan_inputs,
 )
 from uavxai.geometry import bearing
+from uavxai.units import G
 
 LOOKAHEAD_S = 20.0  # BlueSky's default is 300 s for 5 NM zones; 50 m zones need far less
 RESO_FACTOR_H = 1.01  # BlueSky's asas_marh: horizontal resolution margin

@@ -16,10 +16,9 @@ from uavxai.dynamics.energy import SHAFT_POWER_HP, THROTTLE, WATTS_PER_HP, Batte
 from uavxai.dynamics.fdm import load_fdm
 from uavxai.dynamics.geodesy import LocalFrame
 from uavxai.errors import UserError
+from uavxai.units import FT, KT
 
 log = logging.getLogger(__name__)
-
-FT = 0.3048  # JSBSim speaks feet
 
 # Autopilot inputs (SI)
 ENGAGED = "ap/engaged"
@@ -42,7 +41,6 @@ TURB_SEVERITY = "atmosphere/turbulence/milspec/severity"  # probability-of-excee
 TURB_W20 = "atmosphere/turbulence/milspec/windspeed_at_20ft_AGL-fps"
 TURB_SEED = "atmosphere/randomseed"
 TURB_MILSPEC = 3
-KT = 1852.0 / 3600.0  # m/s per knot
 
 # MIL-F-8785C: below 1000 ft the intensity scales with the wind speed at 20 ft (light 15 kt,
 # moderate 30 kt, severe 45 kt); above 2000 ft it follows the probability of exceedance

@@ -11,8 +11,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from uavxai.dynamics.aircraft import FT, KT, TURBULENCE, wind_ne_from
+from uavxai.dynamics.aircraft import TURBULENCE, wind_ne_from
 from uavxai.errors import UserError
+from uavxai.units import FT, KT
 
 
 @dataclass(frozen=True)

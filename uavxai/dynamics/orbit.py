@@ -28,8 +28,7 @@ import math
 from collections.abc import Sequence
 
 from uavxai.errors import UserError
-
-G = 9.80665
+from uavxai.units import G
 
 # Fraction of the bank limit the steady orbit may use, so that the correction loop keeps
 # roll authority (and the wind's varying ground speed is absorbed) without hitting the limit.

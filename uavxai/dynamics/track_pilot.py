@@ -37,8 +37,8 @@ from typing import Protocol
 import numpy as np
 
 from uavxai.geometry import wrap_angle
+from uavxai.units import G
 
-G = 9.80665
 LOOKAHEAD_S = 8.0  # cross-track error turned into a course error over V x this
 COURSE_TIME_S = 4.0  # a course error is corrected with this time constant
 ALONG_GAIN = 0.05  # speed target per metre of along-track error, 1/s

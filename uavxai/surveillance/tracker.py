@@ -41,10 +41,10 @@ from uavxai.avoidance.types import Intruder
 from uavxai.dynamics.state import TrafficState
 from uavxai.errors import UserError
 from uavxai.surveillance.adsb import Report, Surveillance, SurveillanceConfig
+from uavxai.units import G
 
 X, Y, VX, VY, W, H, VH = range(7)
 DIM = 7
-G = 9.80665
 
 
 @dataclass(frozen=True)
