@@ -4,12 +4,20 @@ from north (aviation); positions are local ENU metres."""
 from __future__ import annotations
 
 import math
+from typing import overload
 
 import numpy as np
 
 
-def wrap_angle(angle: float) -> float:
-    """``angle`` in (-pi, pi]."""
+@overload
+def wrap_angle(angle: float) -> float: ...
+@overload
+def wrap_angle(angle: np.ndarray) -> np.ndarray: ...
+def wrap_angle(angle: float | np.ndarray) -> float | np.ndarray:
+    """``angle`` in (-pi, pi], element-wise for an array. Through atan2, not a modulo: a
+    small angle comes back to the last bit (``(a + pi) % 2pi - pi`` rounds it to pi's ulp)."""
+    if isinstance(angle, np.ndarray):
+        return np.arctan2(np.sin(angle), np.cos(angle))
     return math.atan2(math.sin(angle), math.cos(angle))
 
 
