@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from uavxai.avoidance.model import turn_positions
+from uavxai.geometry import turn_positions
 from uavxai.units import FT, G
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # test fixtures

@@ -21,9 +21,9 @@ from uavxai.avoidance.model import (
     intruder_margin,
     manoeuvre_spread,
     ownship_state,
-    turn_positions,
 )
 from uavxai.errors import UserError
+from uavxai.geometry import turn_positions
 from uavxai.scenario import default_scenario
 from uavxai.units import G
 

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from uavxai.geometry import wrap_angle
+from uavxai.geometry import closest_point_of_approach, wrap_angle
 
 
 @pytest.mark.parametrize(
@@ -39,3 +39,27 @@ def test_wrap_angle_of_an_array_is_the_float_one_element_by_element():
     turns = (a - out) / (2 * math.pi)
     np.testing.assert_allclose(turns, np.round(turns), atol=1e-9)
     np.testing.assert_array_equal(out, [[wrap_angle(float(x)) for x in row] for row in a])
+
+
+def test_closest_point_of_approach_of_straight_lines():
+    # (a) head-on, offset 30 m sideways: CPA in 1000 / 40 s at 30 m
+    # (b) diverging: CPA now, at the present distance
+    # (c) parallel at the same velocity (no relative motion): now, the present distance
+    # (d) CPA later than the horizon: measured at the horizon
+    rel = np.array([[30.0, 1000.0, 0.0], [100.0, 0.0, 10.0], [50.0, 50.0, 0.0],
+                    [0.0, 5000.0, 0.0]])  # fmt: skip
+    rv = np.array([[0.0, -40.0, 0.0], [5.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, -10.0, 0.0]])
+    t, d = closest_point_of_approach(rel, rv, 120.0)
+    np.testing.assert_allclose(t, [25.0, 0.0, 0.0, 120.0], atol=1e-9)
+    np.testing.assert_allclose(d, [30.0, math.hypot(100, 10), math.hypot(50, 50), 3800.0])
+
+
+def test_closest_point_of_approach_is_the_minimum_over_time():
+    rng = np.random.default_rng(11)
+    rel, rv = rng.normal(0, 500, (50, 3)), rng.normal(0, 30, (50, 3))
+    t, d = closest_point_of_approach(rel, rv, 60.0)
+    grid = np.linspace(0.0, 60.0, 60001)
+    dist = np.linalg.norm(rel[None] + grid[:, None, None] * rv[None], axis=2)  # (T, N)
+    np.testing.assert_allclose(d, dist.min(axis=0), atol=1e-3)
+    assert np.all(np.abs(t - grid[dist.argmin(axis=0)]) <= 2e-3 + 1e-9)
+    assert np.all(d <= dist.min(axis=0) + 1e-9)

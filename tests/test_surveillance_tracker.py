@@ -221,7 +221,7 @@ def _track_in_wind(seed: int, wind_known: bool) -> tuple[float, float]:
     """A target turning at OMEGA through an air mass that a 10 m/s wind carries (a trochoid
     over the ground), seen through default ADS-B for 25 s: (turn-rate estimate, distance
     from where it really is 10 s later to where the planner's model puts it)."""
-    from uavxai.avoidance.model import turn_positions
+    from uavxai.geometry import turn_positions
 
     wind = tuple(WIND[:2]) if wind_known else (0.0, 0.0)
     surv, tracker = Surveillance(SurveillanceConfig(), seed), Tracker(wind_mps=wind)

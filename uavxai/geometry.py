@@ -41,3 +41,49 @@ def closest_approach(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndar
     s = np.clip(-np.einsum("ij,ij->i", d0, dv) / np.where(a > 0, a, 1.0), 0.0, 1.0)
     closest = d0 + s[:, None] * dv
     return float(np.sqrt(np.min(np.einsum("ij,ij->i", closest, closest))))
+
+
+def closest_point_of_approach(
+    rel: np.ndarray, rel_vel: np.ndarray, horizon_s: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """(time, distance) of the closest point of approach, (N,) each, of N straight-line
+    relative motions: positions ``rel`` (N, 3) now, velocities ``rel_vel`` (N, 3). The time
+    is clipped to [0, ``horizon_s``]: a pair already diverging has its CPA now, one that
+    comes closest later than the horizon is measured at the horizon."""
+    closing = np.sum(rel_vel * rel_vel, axis=1)
+    t = np.clip(-np.sum(rel * rel_vel, axis=1) / np.maximum(closing, 1e-9), 0.0, horizon_s)
+    return t, np.sqrt(np.sum((rel + rel_vel * t[:, None]) ** 2, axis=1))
+
+
+def turn_positions(
+    pos: np.ndarray,
+    vel: np.ndarray,
+    t: np.ndarray,
+    turn_rate: np.ndarray | None = None,
+    wind: tuple[float, float] = (0.0, 0.0),
+) -> np.ndarray:
+    """(T, N, 3) positions at times ``t`` (T,) of aircraft now at ``pos`` (N, 3) with
+    ground velocity ``vel`` (N, 3), turning at ``turn_rate`` (N,) rad/s clockwise (None:
+    straight) at constant speed and climb rate. The turn is through the air mass, which the
+    steady ``wind`` (east, north, m/s) carries: the air-relative velocity rotates, the wind
+    drifts the circle over the ground (the tracker's frame, :mod:`uavxai.surveillance.tracker`).
+    The one constant-turn prediction of uavxai: the planners' intruder tracks and the
+    mission's clearance checks fly it."""
+    pos, vel = np.asarray(pos, dtype=float), np.asarray(vel, dtype=float)
+    t = np.asarray(t, dtype=float)
+    if turn_rate is None or not np.any(turn_rate):
+        return pos[None, :, :] + t[:, None, None] * vel[None, :, :]
+    w = np.asarray(turn_rate, dtype=float)[None, :]
+    # v(s) = v0 e^{-i w s} (clockwise in the x + iy plane); its integral to t is
+    # v0 t e^{-i w t / 2} sinc(w t / 2 pi), exact and smooth through w = 0.
+    wt = w * t[:, None]
+    drift = complex(*wind)
+    v0 = vel[:, 0] + 1j * vel[:, 1] - drift  # through the air
+    dxy = v0[None, :] * t[:, None] * np.exp(-0.5j * wt) * np.sinc(wt / (2.0 * np.pi))
+    if drift:
+        dxy = dxy + drift * t[:, None]
+    out = np.empty((t.size, pos.shape[0], 3))
+    out[:, :, 0] = pos[None, :, 0] + dxy.real
+    out[:, :, 1] = pos[None, :, 1] + dxy.imag
+    out[:, :, 2] = pos[None, :, 2] + t[:, None] * vel[None, :, 2]
+    return out

@@ -56,6 +56,7 @@ from uavxai.avoidance.types import (
     check_plan_inputs,
 )
 from uavxai.errors import CheckpointError
+from uavxai.geometry import closest_point_of_approach
 from uavxai.outputs import write_torch
 from uavxai.paths import avoidance_checkpoints_dir
 
@@ -97,9 +98,7 @@ def observe(
         v, psi = float(state[3]), float(state[4])
         rel = rel[nearest]
         rv = np.asarray(vel, dtype=float)[nearest] - (v * math.sin(psi), v * math.cos(psi), 0.0)
-        closing = np.sum(rv * rv, axis=1)
-        tcpa = np.clip(-np.sum(rel * rv, axis=1) / np.maximum(closing, 1e-9), 0.0, TCPA_MAX_S)
-        dcpa = np.sqrt(np.sum((rel + rv * tcpa[:, None]) ** 2, axis=1))
+        tcpa, dcpa = closest_point_of_approach(rel, rv, TCPA_MAX_S)
         cpa[: len(nearest), 0] = dcpa / SCALE_M
         cpa[: len(nearest), 1] = tcpa / TCPA_SCALE_S
     return np.concatenate([base, cpa.ravel()])

@@ -18,8 +18,8 @@ the ground, where the intruders' tracks and the goal are.
 
 Intruders come as a :class:`Track`: their positions at the segment's sub-step instants,
 predicted at constant velocity or, with their estimated turn rate, on a constant-rate turn
-(:func:`turn_positions`), and optionally a *margin* per intruder and instant that the
-separation must clear on top of ``d_min``: ``uncertainty_k`` sigmas of the track's position
+(:func:`uavxai.geometry.turn_positions`), and optionally a *margin* per intruder and instant
+that the separation must clear on top of ``d_min``: ``uncertainty_k`` sigmas of the track's position
 error, plus how far the intruder could stray from its prediction by banking anywhere within
 its limit (:func:`manoeuvre_spread`, covered ``reach_horizon_s`` ahead), see
 :func:`intruder_margin`. A line that enters that grown zone counts as a collision, and its
@@ -55,6 +55,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from uavxai.avoidance.types import Ownship, PlannerConfig
+from uavxai.geometry import turn_positions
 from uavxai.units import G
 from uavxai.vocabulary import ACTIONS
 
@@ -247,38 +248,6 @@ class Track:
 _INDEX_MIN = 6  # below this many intruders a plain distance test is as fast as the grid
 _NO_INTRUDERS = np.zeros(0, dtype=int)
 _NO_INTRUDERS.flags.writeable = False
-
-
-def turn_positions(
-    pos: np.ndarray,
-    vel: np.ndarray,
-    t: np.ndarray,
-    turn_rate: np.ndarray | None = None,
-    wind: tuple[float, float] = (0.0, 0.0),
-) -> np.ndarray:
-    """(T, N, 3) positions at times ``t`` (T,) of aircraft now at ``pos`` (N, 3) with
-    ground velocity ``vel`` (N, 3), turning at ``turn_rate`` (N,) rad/s clockwise (None:
-    straight) at constant speed and climb rate. The turn is through the air mass, which the
-    steady ``wind`` (east, north, m/s) carries: the air-relative velocity rotates, the wind
-    drifts the circle over the ground (the tracker's frame, :mod:`uavxai.surveillance.tracker`)."""
-    pos, vel = np.asarray(pos, dtype=float), np.asarray(vel, dtype=float)
-    t = np.asarray(t, dtype=float)
-    if turn_rate is None or not np.any(turn_rate):
-        return pos[None, :, :] + t[:, None, None] * vel[None, :, :]
-    w = np.asarray(turn_rate, dtype=float)[None, :]
-    # v(s) = v0 e^{-i w s} (clockwise in the x + iy plane); its integral to t is
-    # v0 t e^{-i w t / 2} sinc(w t / 2 pi), exact and smooth through w = 0.
-    wt = w * t[:, None]
-    drift = complex(*wind)
-    v0 = vel[:, 0] + 1j * vel[:, 1] - drift  # through the air
-    dxy = v0[None, :] * t[:, None] * np.exp(-0.5j * wt) * np.sinc(wt / (2.0 * np.pi))
-    if drift:
-        dxy = dxy + drift * t[:, None]
-    out = np.empty((t.size, pos.shape[0], 3))
-    out[:, :, 0] = pos[None, :, 0] + dxy.real
-    out[:, :, 1] = pos[None, :, 1] + dxy.imag
-    out[:, :, 2] = pos[None, :, 2] + t[:, None] * vel[None, :, 2]
-    return out
 
 
 def manoeuvre_spread(

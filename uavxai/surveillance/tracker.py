@@ -23,7 +23,7 @@ constant-turn model over the ground fits. Reports are moved into the air mass (p
 the wind's drift since t = 0, velocity less the wind) and beliefs back (the drift and the wind
 added), so beliefs are over the ground as before, with ``turn_rate`` the air-relative one
 (the aircraft's heading rate, g tan(bank) / airspeed); the planner's model predicts the same
-way (:func:`uavxai.avoidance.model.turn_positions` with its wind).
+way (:func:`uavxai.geometry.turn_positions` with its wind).
 
 Why not filterpy: its EKF class would only hold the same matrices, its IMM works on linear
 filters, and the whole filter is a few numpy lines here.
