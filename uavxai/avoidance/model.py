@@ -57,16 +57,19 @@ import numpy as np
 from uavxai.avoidance.types import Ownship, PlannerConfig
 from uavxai.geometry import turn_positions
 from uavxai.units import G
-from uavxai.vocabulary import ACTIONS
+from uavxai.vocabulary import ACTIONS, Outcome
 
 # Columns of a state row. VCMD: the vertical command of the vertical action set (+1 climb,
 # 0 the leg's height, -1 descend), which persists like the bank command (0 with the paper's).
 X, Y, H, V, PSI, PHI, PHI_CMD, VCMD = range(8)
 STATE_DIM = 8
 
-# Terminal codes (SearchTree.terminal uses the same numbers).
-NONE, GOAL, COLLISION, OUT_OF_BOUNDS, TIMEOUT = 0, 1, 2, 3, 4
-OUTCOME_NAMES = ("", "goal", "collision", "out_of_bounds", "timeout")
+# The search's terminal codes: how a line of the tree ends, as the small integers its numpy
+# arrays hold (SearchTree.terminal, Segment.event); no file holds them. Each is the Outcome at
+# its index in TERMINALS, 0 an open line; OUTCOME_NAMES reads a code back as the Outcome value.
+TERMINALS = (None, Outcome.GOAL, Outcome.COLLISION, Outcome.OUT_OF_BOUNDS, Outcome.TIMEOUT)
+NONE, GOAL, COLLISION, OUT_OF_BOUNDS, TIMEOUT = range(len(TERMINALS))
+OUTCOME_NAMES = tuple("" if o is None else o.value for o in TERMINALS)
 # Paper eqs 13/14: goal 1, collision 0, time-out 0.1; leaving the map counts as a failure (0).
 TERMINAL_VALUE = (math.nan, 1.0, 0.0, 0.0, 0.1)
 

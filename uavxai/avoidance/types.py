@@ -364,7 +364,7 @@ class SearchTree:
     value_sum: np.ndarray  # (M,) float
     min_sep: np.ndarray  # (M,) float, predicted min separation along the edge into this node
     closest: np.ndarray  # (M,) int, index (0-based, into the intruder list) of the closest one
-    terminal: np.ndarray  # (M,) int8: 0 none, 1 goal, 2 collision, 3 out of bounds, 4 time-out
+    terminal: np.ndarray  # (M,) int8: uavxai.avoidance.model.TERMINALS' codes, 0 none
     pos: np.ndarray  # (M, 3) ownship position at the node, for drawing the tree in 3-D
     t_closest: np.ndarray | None = None  # (M,) s from the decision to that closest approach
     state: np.ndarray | None = None  # (M, 7) encounter-model state (x, y, h, V, psi, phi, cmd)
