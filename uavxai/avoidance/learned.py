@@ -114,18 +114,6 @@ def _probe_observation(n_nearest: int) -> np.ndarray:
     return observe(state, pos, vel, np.array([1000.0, 1000.0, 100.0]), config, n_nearest)
 
 
-def observe_api(
-    own: Ownship,
-    intruders: Sequence[Intruder],
-    goal: Goal,
-    config: PlannerConfig,
-    n_nearest: int = N_NEAREST,
-) -> np.ndarray:
-    """:func:`observe` from the planner-API types (SPEC §7)."""
-    pos, vel = intruder_arrays(intruders)
-    return observe(ownship_state(own), pos, vel, np.asarray(goal, float), config, n_nearest)
-
-
 # ------------------------------------------------------------------------------------ networks
 class QNetwork(nn.Module):
     """An MLP from the observation to one Q-value per action."""

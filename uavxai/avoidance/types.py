@@ -14,14 +14,10 @@ from typing import TYPE_CHECKING, Protocol, runtime_checkable
 import numpy as np
 
 from uavxai.errors import UserError
-from uavxai.vocabulary import ACCEL_SIGNS, ACTION_SETS, BANK_SIGNS, N_ACTIONS, action_name
+from uavxai.vocabulary import ACTION_SETS, N_ACTIONS, action_name
 
 if TYPE_CHECKING:
     from uavxai.scenario import Scenario
-
-# The actions and their names live in uavxai.vocabulary (one table for every layer).
-BANK_CHOICES = BANK_SIGNS  # left, hold, right: one bank_step_deg change of the bank command
-ACCEL_CHOICES = ACCEL_SIGNS  # speed up, hold, slow down: times accel_mps2
 
 
 @dataclass(frozen=True)

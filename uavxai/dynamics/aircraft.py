@@ -27,7 +27,6 @@ ACCEL_CMD = "ap/accel-cmd-mps2"
 SPEED_TARGET = "ap/speed-target-mps"
 ALT_TARGET = "ap/alt-target-m"  # height above ground: the local frame's h
 BANK_LIMIT = "ap/bank-limit-rad"
-ROLL_RATE_LIMIT = "ap/roll-rate-limit-rad_sec"
 CLIMB_RATE_LIMIT = "ap/climb-rate-limit-mps"
 SPEED_MIN = "ap/speed-min-mps"
 SPEED_MAX = "ap/speed-max-mps"

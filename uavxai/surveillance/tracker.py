@@ -40,7 +40,7 @@ import numpy as np
 from uavxai.avoidance.types import Intruder
 from uavxai.dynamics.state import TrafficState
 from uavxai.errors import UserError
-from uavxai.surveillance.adsb import Report, Surveillance, SurveillanceConfig
+from uavxai.surveillance.adsb import Report
 from uavxai.units import G
 
 X, Y, VX, VY, W, H, VH = range(7)
@@ -291,57 +291,3 @@ def truth_beliefs(state: TrafficState) -> list[Intruder]:
             )
         )
     return out
-
-
-class SurveillancePicture:
-    """Surveillance and tracking together: what the planner believes of the traffic.
-
-    Call :meth:`observe` with every state the dynamics produce (the reports are sampled and
-    delivered there), and call the object (``picture(state)``) for the beliefs at that
-    state's time; that call observes the state too, so a caller with one state per decision
-    works as well (with reports then delivered at the decision instants only). With
-    ``model: truth`` the beliefs are :func:`truth_beliefs`.
-    """
-
-    def __init__(
-        self,
-        config: SurveillanceConfig | None = None,
-        seed: int = 0,
-        tracker: TrackerConfig | None = None,
-        wind_mps: tuple[float, float] = (0.0, 0.0),
-    ) -> None:
-        self.config = config or SurveillanceConfig()
-        self.surveillance = Surveillance(self.config, seed)
-        self.tracker = Tracker(tracker, wind_mps)
-        self._t_observed: float | None = None
-
-    def sample(self, state: TrafficState) -> list[Report]:
-        """The reports delivered at ``state.t``, without feeding the tracker (for a caller
-        that sends the ADS-B ones over MAVLink and :meth:`ingest` s what comes back, plus
-        the onboard sensor's, which are not transmitted). Each instant is sampled once."""
-        if self._t_observed is not None and state.t <= self._t_observed:
-            return []
-        self._t_observed = state.t
-        if self.config.model == "truth":
-            return []
-        return self.surveillance.observe(state)
-
-    def ingest(self, reports: Iterable[Report]) -> None:
-        """Feed reports to the tracker (e.g. decoded from ADSB_VEHICLE by the bridge)."""
-        self.tracker.update(reports)
-
-    def observe(self, state: TrafficState) -> list[Report]:
-        """:meth:`sample` and :meth:`ingest` in one: the direct path without MAVLink."""
-        reports = self.sample(state)
-        self.ingest(reports)
-        return reports
-
-    def beliefs(self, t: float) -> list[Intruder]:
-        """The tracker's beliefs at ``t`` (without observing anything)."""
-        return self.tracker.beliefs(t)
-
-    def __call__(self, state: TrafficState) -> list[Intruder]:
-        if self.config.model == "truth":
-            return truth_beliefs(state)
-        self.observe(state)
-        return self.tracker.beliefs(state.t)
