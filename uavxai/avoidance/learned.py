@@ -23,7 +23,6 @@ explanations can be checked against the same physics as the tree search's.
 from __future__ import annotations
 
 import math
-import reprlib
 import time
 import zipfile
 from collections.abc import Sequence
@@ -55,7 +54,7 @@ from uavxai.avoidance.types import (
     action_name,
     check_plan_inputs,
 )
-from uavxai.errors import CheckpointError
+from uavxai.errors import CheckpointError, short_repr
 from uavxai.geometry import closest_point_of_approach
 from uavxai.outputs import write_torch
 from uavxai.paths import avoidance_checkpoints_dir
@@ -186,16 +185,6 @@ MAX_HIDDEN_WIDTH = 4096
 MAX_N_NEAREST = 64
 
 
-def _short_repr() -> reprlib.Repr:
-    """repr that stays short whatever a hostile file holds (keyword arguments need 3.12)."""
-    r = reprlib.Repr()
-    r.maxstring = r.maxother = 40
-    r.maxlist = r.maxtuple = r.maxdict = 4
-    r.maxlevel = 2
-    return r
-
-
-_SHORT = _short_repr()
 
 
 class _Source:
@@ -210,7 +199,7 @@ class _Source:
     def bad(self, field: str, value: object, allowed: str) -> CheckpointError:
         """The error for a declared field outside what this uavxai can load."""
         return CheckpointError(
-            f"{self.where} {self.p}: {field} = {_SHORT.repr(value)}; allowed: {allowed}. Use a "
+            f"{self.where} {self.p}: {field} = {short_repr(value)}; allowed: {allowed}. Use a "
             f"model.pt written by {self.retrain}."
         )
 
@@ -257,14 +246,14 @@ def _read_checkpoint(src: _Source) -> dict:
             f"expected a model.pt written by `uavxai train --stage avoidance --algo {algo}`."
         ) from None
     if not isinstance(ckpt, dict) or ckpt.get("format") != CHECKPOINT_FORMAT:
-        found = _SHORT.repr(ckpt.get("format")) if isinstance(ckpt, dict) else type(ckpt).__name__
+        found = short_repr(ckpt.get("format")) if isinstance(ckpt, dict) else type(ckpt).__name__
         raise CheckpointError(
             f"{where} {p}: not an avoidance checkpoint (format {found}); "
             f"expected one written by `uavxai train --stage avoidance --algo {algo}`."
         )
     if ckpt.get("algo") != algo:
         raise CheckpointError(
-            f"{where} {p}: trained for {_SHORT.repr(ckpt.get('algo'))}, but the planner is "
+            f"{where} {p}: trained for {short_repr(ckpt.get('algo'))}, but the planner is "
             f"'{algo}'; use a checkpoint trained with --algo {algo}."
         )
     return ckpt
@@ -314,7 +303,7 @@ def _check_observation(ckpt: dict, n_nearest: int, n_obs: int, src: _Source) -> 
     ):
         raise CheckpointError(
             f"{src.where} {src.p}: trained on an observation that differs from this uavxai's "
-            f"(size {_SHORT.repr(ckpt.get('obs_dim'))}, {n_nearest} nearest intruders); "
+            f"(size {short_repr(ckpt.get('obs_dim'))}, {n_nearest} nearest intruders); "
             f"retrain it with {src.retrain}."
         )
 
@@ -342,7 +331,7 @@ def _checked_state_dicts(ckpt: dict, n_obs: int, hidden: list[int], src: _Source
             wrong = sorted(set(shapes.items()) ^ set(expected.items()), key=str)[:4]
             raise CheckpointError(
                 f"{where} {p}: network '{name}' has the wrong shape for hidden {hidden} and "
-                f"{n_obs} inputs (differs at {_SHORT.repr(wrong)}); retrain with {retrain}."
+                f"{n_obs} inputs (differs at {short_repr(wrong)}); retrain with {retrain}."
             )
         for k, v in sd.items():
             if not v.is_floating_point() or not bool(torch.isfinite(v).all()):
@@ -416,7 +405,7 @@ def _check_archive(p: Path, where: str, algo: str) -> None:
         ) from None
     if damaged is not None:
         raise CheckpointError(
-            f"{where} {p}: damaged (record '{_SHORT.repr(damaged)}' fails its CRC check): the "
+            f"{where} {p}: damaged (record '{short_repr(damaged)}' fails its CRC check): the "
             f"file changed after it was written; copy it again or retrain; {expected}."
         )
 
