@@ -8,7 +8,12 @@ import math
 import numpy as np
 import pytest
 
-from uavxai.geometry import closest_point_of_approach, wrap_angle
+from uavxai.geometry import (
+    closest_approach,
+    closest_on_pieces,
+    closest_point_of_approach,
+    wrap_angle,
+)
 
 
 @pytest.mark.parametrize(
@@ -63,3 +68,26 @@ def test_closest_point_of_approach_is_the_minimum_over_time():
     np.testing.assert_allclose(d, dist.min(axis=0), atol=1e-3)
     assert np.all(np.abs(t - grid[dist.argmin(axis=0)]) <= 2e-3 + 1e-9)
     assert np.all(d <= dist.min(axis=0) + 1e-9)
+
+
+def test_closest_on_pieces_is_the_minimum_along_each_piece():
+    rng = np.random.default_rng(5)
+    r0, dr = rng.normal(0, 100, (6, 9, 3)), rng.normal(0, 60, (6, 9, 3))
+    dist, s = closest_on_pieces(r0, dr)
+    assert dist.shape == s.shape == (6, 9) and np.all((s >= 0) & (s <= 1))
+    grid = np.linspace(0.0, 1.0, 20001)
+    along = np.linalg.norm(r0[..., None, :] + grid[:, None] * dr[..., None, :], axis=-1)
+    np.testing.assert_allclose(dist, along.min(axis=-1), atol=1e-3)
+    np.testing.assert_allclose(dist, np.linalg.norm(r0 + s[..., None] * dr, axis=-1))
+    # no relative motion: the distance now, at the piece's start
+    still, s0 = closest_on_pieces(np.array([[3.0, 4.0, 0.0]]), np.zeros((1, 3)))
+    assert still[0] == 5.0 and s0[0] == 0.0
+
+
+def test_closest_approach_catches_a_pass_between_samples():
+    # the intruder crosses the ownship's path between the samples, 2 m above it
+    p0, p1 = np.zeros(3), np.array([0.0, 20.0, 0.0])
+    q0, q1 = np.array([[-10.0, 10.0, 2.0]]), np.array([[10.0, 10.0, 2.0]])
+    assert closest_approach(p0, p1, q0, q1) == pytest.approx(2.0)
+    ends = min(np.linalg.norm(q0[0] - p0), np.linalg.norm(q1[0] - p1))
+    assert ends > 14.0  # neither sample shows it
