@@ -9,9 +9,11 @@ import numpy as np
 import pytest
 
 from uavxai.geometry import (
+    bank_of_turn_rate,
     closest_approach,
     closest_on_pieces,
     closest_point_of_approach,
+    turn_rate_of_bank,
     wrap_angle,
 )
 
@@ -91,3 +93,17 @@ def test_closest_approach_catches_a_pass_between_samples():
     assert closest_approach(p0, p1, q0, q1) == pytest.approx(2.0)
     ends = min(np.linalg.norm(q0[0] - p0), np.linalg.norm(q1[0] - p1))
     assert ends > 14.0  # neither sample shows it
+
+
+def test_coordinated_turn_rate_and_bank_are_inverse_and_element_wise():
+    # a 30 deg bank at 20 m/s: the standard radius v^2 / (g tan phi) = 70.7 m, rate v / r
+    radius = 20.0**2 / (9.80665 * math.tan(math.radians(30.0)))
+    assert turn_rate_of_bank(math.radians(30.0), 20.0) == pytest.approx(20.0 / radius)
+    assert turn_rate_of_bank(-0.4, 15.0) == -turn_rate_of_bank(0.4, 15.0)  # left: negative
+    banks, speeds = np.linspace(-1.0, 1.0, 9), np.linspace(12.0, 40.0, 9)
+    rates = turn_rate_of_bank(banks, speeds)
+    assert isinstance(rates, np.ndarray)
+    np.testing.assert_array_equal(rates, [turn_rate_of_bank(float(b), float(v))
+                                          for b, v in zip(banks, speeds, strict=True)])
+    back = [bank_of_turn_rate(float(w), float(v)) for w, v in zip(rates, speeds, strict=True)]
+    np.testing.assert_allclose(back, banks, atol=1e-12)

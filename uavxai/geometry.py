@@ -8,6 +8,8 @@ from typing import overload
 
 import numpy as np
 
+from uavxai.units import G
+
 
 @overload
 def wrap_angle(angle: float) -> float: ...
@@ -19,6 +21,25 @@ def wrap_angle(angle: float | np.ndarray) -> float | np.ndarray:
     if isinstance(angle, np.ndarray):
         return np.arctan2(np.sin(angle), np.cos(angle))
     return math.atan2(math.sin(angle), math.cos(angle))
+
+
+@overload
+def turn_rate_of_bank(bank: float, speed: float) -> float: ...
+@overload
+def turn_rate_of_bank(bank: float | np.ndarray, speed: np.ndarray) -> np.ndarray: ...
+@overload
+def turn_rate_of_bank(bank: np.ndarray, speed: float | np.ndarray) -> np.ndarray: ...
+def turn_rate_of_bank(bank: float | np.ndarray, speed: float | np.ndarray) -> float | np.ndarray:
+    """Turn rate (rad/s, + clockwise: a right bank) of a coordinated turn at ``bank`` (rad)
+    and ``speed`` (m/s): g tan(bank) / V. Element-wise for arrays."""
+    tan = np.tan(bank) if isinstance(bank, np.ndarray) else math.tan(bank)
+    return G * tan / speed
+
+
+def bank_of_turn_rate(rate: float, speed: float) -> float:
+    """The bank (rad) of a coordinated turn at ``rate`` (rad/s) and ``speed`` (m/s):
+    atan(V rate / g), the inverse of :func:`turn_rate_of_bank`."""
+    return math.atan(speed * rate / G)
 
 
 def bearing(dx: float, dy: float) -> float:

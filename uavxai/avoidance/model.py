@@ -55,8 +55,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from uavxai.avoidance.types import Ownship, PlannerConfig
-from uavxai.geometry import turn_positions
-from uavxai.units import G
+from uavxai.geometry import turn_positions, turn_rate_of_bank
 from uavxai.vocabulary import ACTIONS, Outcome
 
 # Columns of a state row. VCMD: the vertical command of the vertical action set (+1 climb,
@@ -262,7 +261,7 @@ def manoeuvre_spread(
     distances from the nominal one, kept non-decreasing in time. The set of positions
     reachable by then lies within this distance of the nominal position."""
     speed = np.maximum(np.hypot(vel[:, 0], vel[:, 1]), 1.0)
-    w_max = G * math.tan(bank_limit_rad) / speed
+    w_max = turn_rate_of_bank(bank_limit_rad, speed)
     w = np.clip(np.asarray(turn_rate, dtype=float), -w_max, w_max)
     nominal = turn_positions(np.zeros_like(vel), vel, t, w)
     spread = np.zeros((t.size, vel.shape[0]))
@@ -754,7 +753,7 @@ class EncounterModel:
         v_m = np.clip(v0[:, None] + accel[:, None] * tm, vmin[:, None], vmax[:, None])
         # Coordinated turn: on each sub-step the rate is taken at its midpoint and the
         # displacement is the exact chord of that constant-rate arc.
-        dpsi = G * np.tan(phi_m) / v_m * dt
+        dpsi = turn_rate_of_bank(phi_m, v_m) * dt
         psi = np.cumsum(dpsi, axis=1)
         chord = v_m * dt * np.sinc(dpsi / (2.0 * np.pi))
         rel_heading = psi - 0.5 * dpsi  # mid-sub-step heading relative to the start

@@ -28,7 +28,7 @@ import math
 from collections.abc import Sequence
 
 from uavxai.errors import UserError
-from uavxai.geometry import wrap_angle
+from uavxai.geometry import bank_of_turn_rate, wrap_angle
 from uavxai.units import G
 
 # Fraction of the bank limit the steady orbit may use, so that the correction loop keeps
@@ -164,5 +164,5 @@ class OrbitGuidance:
         beta_dot = vg * math.sin(chi - beta) / d
         chi_d_dot = beta_dot + self._lam * (self.k / r) / (1.0 + e * e) * d_dot
         turn_rate = chi_d_dot + wrap_angle(chi_d - chi) / self.tau
-        bank = math.atan(vg * turn_rate / G)
+        bank = bank_of_turn_rate(turn_rate, vg)
         return min(max(bank, -lim), lim)

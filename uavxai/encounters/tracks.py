@@ -10,14 +10,14 @@ h up (m); heading clockwise from north.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from uavxai.encounters.model import EncounterModel, InitialSample, Transitions
 from uavxai.errors import UserError
-from uavxai.units import FT, KT, G
+from uavxai.geometry import turn_rate_of_bank
+from uavxai.units import FT, KT
 
 FOOT_PER_MINUTE = FT / 60.0  # m/s
 # UncorEncounterModel/getDynamicLimits: a fixed-wing track never slower than 30 ft/s.
@@ -119,7 +119,7 @@ def limit_track(track: Trajectory, max_speed: float = float("inf"),
     speed = np.minimum(track.speed, max_speed)
     psi = np.unwrap(np.arctan2(track.vx, track.vy))
     rate = np.diff(psi) / dt
-    top = G * math.tan(min(max_bank, 1.5)) / np.maximum(speed[:-1], 1e-6)
+    top = turn_rate_of_bank(min(max_bank, 1.5), np.maximum(speed[:-1], 1e-6))
     over = (np.abs(track.vh) > max_vertical_rate).any() or (track.speed > max_speed).any()
     if not (over or (np.abs(rate) > top).any()):
         return track

@@ -40,8 +40,8 @@ import numpy as np
 from uavxai.avoidance.types import Intruder
 from uavxai.dynamics.state import TrafficState
 from uavxai.errors import UserError
+from uavxai.geometry import turn_rate_of_bank
 from uavxai.surveillance.adsb import Report
-from uavxai.units import G
 
 X, Y, VX, VY, W, H, VH = range(7)
 DIM = 7
@@ -287,7 +287,7 @@ def truth_beliefs(state: TrafficState) -> list[Intruder]:
                 vx=float(state.vel[i, 0]),
                 vy=float(state.vel[i, 1]),
                 vh=float(state.vel[i, 2]),
-                turn_rate=G * math.tan(float(state.att[i, 0])) / v,
+                turn_rate=turn_rate_of_bank(float(state.att[i, 0]), v),
             )
         )
     return out
