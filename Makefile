@@ -1,4 +1,4 @@
-# Two commands on a fresh machine: `make demo` and `make test` (SPEC §1).
+# Two commands on a fresh machine: `make demo` and `make test` (README, "Quick start").
 PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV   := .venv
 BIN    := $(VENV)/bin

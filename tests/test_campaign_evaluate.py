@@ -76,7 +76,7 @@ def test_evaluate_writes_results_episodes_and_plots(tmp_path: Path) -> None:
         "mean_steps",
         "mean_min_separation_m",
         "decision_ms_p50",
-    ]  # SPEC §4, in order
+    ]  # README "What a run produces", in order
     assert [(r["method"], int(r["intruders"])) for r in results] == [
         (m, n) for m in METHODS for n in COUNTS
     ]

@@ -119,3 +119,34 @@ def test_resume_needs_an_interrupted_campaign_folder(tmp_path, capsys) -> None:
     assert list(plain.iterdir()) == []
     assert main([*COMMAND, "--episodes", "1", "--out", str(plain), "--resume", "--force"]) == 2
     assert "give one of them" in capsys.readouterr().err
+
+
+def test_the_journal_names_the_code_that_flew_it(tmp_path, capsys) -> None:
+    """Rows flown by other code (another commit of the same version) are not taken over:
+    the journal's header carries a digest of uavxai's files, and a resume compares it."""
+    import shutil
+
+    from uavxai.paths import source_digest
+
+    copy = tmp_path / "pkg"
+    shutil.copytree(Path(source_digest.__code__.co_filename).parent, copy,
+                    ignore=shutil.ignore_patterns("__pycache__"))  # fmt: skip
+    before = source_digest(copy)
+    assert source_digest(copy) == before  # the same files, the same digest
+    (copy / "__pycache__").mkdir()
+    (copy / "__pycache__" / "x.pyc").write_bytes(b"compiled")
+    assert source_digest(copy) == before  # bytecode is not code
+    mcts = copy / "avoidance" / "mcts.py"
+    mcts.write_text(mcts.read_text() + "#")
+    assert source_digest(copy) != before  # one character of one file
+
+    out = tmp_path / "c"
+    assert main([*COMMAND, "--episodes", "1", "--out", str(out)]) == 0
+    lines = (out / JOURNAL).read_text().splitlines()
+    header = json.loads(lines[0])
+    assert header["versions"]["uavxai_sources"] == source_digest()
+    header["versions"]["uavxai_sources"] = "0" * 16  # as if flown by other code
+    (out / JOURNAL).write_text("\n".join([json.dumps(header), *lines[1:]]) + "\n")
+    assert main([*COMMAND, "--episodes", "2", "--out", str(out), "--resume"]) == 2
+    err = capsys.readouterr().err
+    assert "journals another campaign" in err and "versions" in err, err

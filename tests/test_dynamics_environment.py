@@ -293,7 +293,7 @@ def _drift_sigma_8s(dynamics: str, turbulence: str) -> float:
     return float(np.sqrt(np.mean(drift**2) / 2))
 
 
-# docs/scenario.md's measured value of avoidance.mcts.own_error_10s_m in moderate turbulence
+# docs/results's measured value of avoidance.mcts.own_error_10s_m in moderate turbulence
 # (benchmarks/bench_own_model.py, seeds 1000-1003)
 MODERATE_OWN_ERROR_10S_M = 20.2
 

@@ -1,7 +1,10 @@
-"""The wheel carries the aircraft, scenarios and checkpoints, and claims only `uavxai`."""
+"""The wheel carries the aircraft, scenarios and checkpoints, claims only `uavxai`, and every
+module in it imports once installed."""
 
 from __future__ import annotations
 
+import json
+import os
 import shutil
 import subprocess
 import sys
@@ -66,7 +69,7 @@ def test_entry_point_declared(wheel: zipfile.ZipFile) -> None:
 
 
 def test_every_module_travels_with_the_wheel(wheel: zipfile.ZipFile) -> None:
-    """Every module of the source tree is in the wheel (the package list is written by hand:
+    """Every module of the source tree is in the wheel (the package list was written by hand:
     uavxai.learning was missing, so `uavxai train --stage avoidance` failed after
     `pip install .`), and the encounter model's parameter file with its licence."""
     names = set(wheel.namelist())
@@ -77,3 +80,46 @@ def test_every_module_travels_with_the_wheel(wheel: zipfile.ZipFile) -> None:
     assert all(f"uavxai/bridges/{b}" in names for b in bridges)
     for data in ("uncor_1200only_fwse_v1p2.txt", "LICENSE", "README.md"):
         assert f"uavxai/encounters/data/{data}" in names
+
+
+IMPORT_ALL = """
+import importlib, json, sys
+site = sys.argv[1]
+sys.path.insert(0, site)
+where = {}
+for name in sys.argv[2:]:
+    where[name] = importlib.import_module(name).__file__
+print(json.dumps(where))
+"""
+
+
+def test_installed_wheel_imports_every_module(wheel: zipfile.ZipFile, tmp_path: Path) -> None:
+    """pip installs the wheel (into a folder of its own: no second venv) and a fresh
+    interpreter, outside the repository and without PYTHONPATH, imports every module the wheel
+    holds from there. Only ``__main__`` is left out: importing it runs the command line."""
+    site = tmp_path / "site"
+    subprocess.run(
+        [sys.executable, "-m", "pip", "install", "--no-deps", "--no-compile", "-q",
+         "--target", str(site), wheel.filename],
+        check=True,
+        capture_output=True,
+    )  # fmt: skip
+    modules = sorted(
+        n.removesuffix(".py").removesuffix("/__init__").replace("/", ".")
+        for n in wheel.namelist()
+        if n.endswith(".py") and not n.endswith("__main__.py")
+    )
+    assert "uavxai.learning.train" in modules and "uavxai.bridges.link" in modules
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    proc = subprocess.run(
+        [sys.executable, "-c", IMPORT_ALL, str(site), *modules],
+        cwd=tmp_path,
+        env=env,
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    where = json.loads(proc.stdout.splitlines()[-1])
+    elsewhere = {m: f for m, f in where.items() if not Path(f).is_relative_to(site)}
+    assert sorted(where) == modules and not elsewhere, elsewhere

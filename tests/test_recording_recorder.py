@@ -1,4 +1,4 @@
-"""RunRecorder writes a real .rrd; we read it back with rerun's own reader (SPEC §5)."""
+"""RunRecorder writes a real .rrd; we read it back with rerun's own reader (docs/recording)."""
 
 from __future__ import annotations
 

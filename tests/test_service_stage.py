@@ -17,7 +17,9 @@ from uavxai.service import d3qn
 from uavxai.service.stage import plan_service, run_service_stage
 from uavxai.service.train import CURVE_COLUMNS, train_command
 
-SPEC_FIELDS = ("service_point", "power_w", "sinr_db", "rate_bps", "sum_rate_bps", "qos_satisfied")
+SERVICE_FIELDS = (
+    "service_point", "power_w", "sinr_db", "rate_bps", "sum_rate_bps", "qos_satisfied"
+)
 
 
 def small(seed: int = 0, **service):
@@ -31,7 +33,7 @@ def small(seed: int = 0, **service):
 def test_random_planner_summary_is_plain_json_and_consistent():
     s = run_service_stage(small(), "random")
     assert json.loads(json.dumps(s)) == s
-    for key in SPEC_FIELDS:
+    for key in SERVICE_FIELDS:
         assert key in s
     assert len(s["power_w"]) == len(s["rate_bps"]) == len(s["sinr_db"]) == 3
     assert sum(s["power_w"]) <= 1.0 + 1e-12
@@ -135,7 +137,7 @@ def test_cli_service_writes_the_summary(tmp_path, capsys):
     out = tmp_path / "out"
     assert cli_main(["service", str(sc_file), "--planner", "random", "--out", str(out)]) == 0
     summary = json.loads((out / "summary.json").read_text())
-    assert all(key in summary for key in SPEC_FIELDS)
+    assert all(key in summary for key in SERVICE_FIELDS)
     capsys.readouterr()
     bad = tmp_path / "bad.yaml"
     bad.write_text(f"name: tiny\nservice: {{checkpoint: {tmp_path / 'nothing.pt'}}}\n")

@@ -235,3 +235,21 @@ def test_the_command_line_called_from_python_gives_the_callers_handlers_back(tmp
     finally:
         for s, h in before.items():
             signal.signal(s, h)
+
+
+def test_a_campaign_flown_in_process_leaves_nothing_that_turns_a_child_deaf() -> None:
+    """A worker pool started in this process (as a test runner or a user's script does) must
+    not leave its forkserver's marker in the environment: a `uavxai` started afterwards
+    inherited it, took itself for a forkserver and ignored SIGTERM (issue 30)."""
+    from uavxai import forkserver_preload
+    from uavxai.campaign import run_campaign
+    from uavxai.scenario import default_scenario
+
+    run_campaign(default_scenario(), ["none"], [2], 2, workers=2)
+    assert forkserver_preload.STARTED_BY not in os.environ
+    child = subprocess.run(
+        [sys.executable, "-c", "import signal, uavxai.forkserver_preload; "
+         "print(signal.getsignal(signal.SIGTERM) == signal.SIG_DFL)"],
+        env=ENV, capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert child.stdout.strip() == "True", child.stderr

@@ -79,11 +79,6 @@ def test_a_signal_leaves_whole_files_and_an_interrupted_summary(
     assert any(c.entity_path == "/xai/tree" for c in chunks)
 
 
-@pytest.mark.xfail(strict=False, reason=(
-    "open (issue 30): in a full `make test` run (never alone, nor with its neighbouring test "
-    "files) uavxai evaluate --workers 2 is still running 60 s after SIGTERM, its forkserver and "
-    "resource tracker alive, its workers gone; seen 3 times in 3 full runs since the signals "
-    "work, not found yet"))
 def test_sigterm_on_evaluate_keeps_finished_episodes_and_stops_the_workers(tmp_path: Path):
     scenario = tmp_path / "quick.yaml"
     scenario.write_text(
@@ -118,8 +113,10 @@ def test_sigterm_on_evaluate_keeps_finished_episodes_and_stops_the_workers(tmp_p
         if proc.poll() is None:  # say what is left before failing
             tree = subprocess.run(["ps", "-o", "pid,ppid,stat,args", "--ppid", str(proc.pid)],
                                   capture_output=True, text=True).stdout  # fmt: skip
+            state = _signal_state(proc.pid)
             proc.kill()
-            pytest.fail(f"uavxai still running 60 s after SIGTERM; its children:\n{tree}")
+            pytest.fail(f"uavxai still running 60 s after SIGTERM; its children:\n{tree}"
+                        f"its state:\n{state}")  # fmt: skip
     reader.join(timeout=30)
     assert not reader.is_alive(), "a process uavxai started still holds its stderr"
     err = said[0]
@@ -131,3 +128,19 @@ def test_sigterm_on_evaluate_keeps_finished_episodes_and_stops_the_workers(tmp_p
     alive = [c for c in children if Path(f"/proc/{c}").exists()
              and "zombie" not in Path(f"/proc/{c}/status").read_text().lower()]  # fmt: skip
     assert not alive, f"worker processes still running: {alive}"
+
+
+def _signal_state(pid: int) -> str:
+    """What a stuck process is doing: its signal masks and each thread's kernel wait."""
+    lines = []
+    with contextlib.suppress(OSError):
+        status = Path(f"/proc/{pid}/status").read_text().splitlines()
+        lines += [x for x in status if x.startswith(("State", "Sig", "Shd", "Threads"))]
+        for task in sorted(Path(f"/proc/{pid}/task").iterdir()):
+            with contextlib.suppress(OSError):
+                name = (task / "comm").read_text().strip()
+                wchan = (task / "wchan").read_text().strip()
+                blk = next(x for x in (task / "status").read_text().splitlines()
+                           if x.startswith("SigBlk"))  # fmt: skip
+                lines.append(f"thread {task.name} {name}: {wchan} {blk}")
+    return "\n".join(lines)

@@ -19,7 +19,7 @@ autopilot (no MAVLink, no recording); the goal is the scenario's (``ownship.goal
 service point of the campaign's scenario at the seed its file names, whatever ``--seed``
 says), the same for every episode and as ``uavxai run``.
 
-A scenario with an ``encounters`` section (SPEC "Encounter campaigns") flies episode ``i`` as
+A scenario with an ``encounters`` section (docs/scenario.md "encounters") flies episode ``i`` as
 encounter ``i`` (:func:`uavxai.sim.encounter.fly_encounter`, seed ``scenario.seed + i``, one
 intruder: intruder counts are refused); its rows gain ``ENCOUNTER_COLUMNS`` and its results the
 weighted ``DAA_COLUMNS`` against ``none`` on the same seeds (docs/daa-metrics.md).
@@ -99,7 +99,7 @@ EPISODE_COLUMNS = (
     "goal_h",
 )
 GOAL_COLUMNS = EPISODE_COLUMNS[-3:]
-# Encounter campaigns (a scenario with `encounters`, SPEC "Encounter campaigns") add these:
+# Encounter campaigns (a scenario with `encounters`; docs/daa-metrics.md) add these:
 # per episode (uavxai.sim.encounter), and per method the weighted DAA estimates of
 # uavxai.daa_metrics.daa_summary against `none` on the same encounters.
 ENCOUNTER_COLUMNS = (
@@ -308,10 +308,7 @@ def _run_pool(scenario, tasks, order, common, workers, on_done) -> dict[int, dic
     method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
     context = multiprocessing.get_context(method)
     if method == "forkserver":
-        # The forkserver (started with the first worker, once per process) dies with this
-        # process, and so its workers too: a killed campaign leaves no process behind.
-        os.environ[forkserver_preload.STARTED_BY] = str(os.getpid())
-        context.set_forkserver_preload(["__main__", forkserver_preload.__name__])
+        forkserver_preload.start(context)
     rows: dict[int, dict] = {}
     pool = ProcessPoolExecutor(
         workers, mp_context=context, initializer=_init_pool_worker,
@@ -413,8 +410,10 @@ def _versions() -> dict[str, str]:
     import torch
 
     from uavxai import __version__
+    from uavxai.paths import source_digest
 
-    return {"uavxai": __version__, "jsbsim": jsbsim.__version__, "torch": torch.__version__}
+    return {"uavxai": __version__, "uavxai_sources": source_digest(),
+            "jsbsim": jsbsim.__version__, "torch": torch.__version__}  # fmt: skip
 
 
 def _remote_versions() -> dict[str, str]:
@@ -440,8 +439,9 @@ def _check_workers(ray) -> None:
         what = (f"lack the module {theirs['missing']}" if "missing" in theirs
                 else f"have {theirs}, this driver {mine}")  # fmt: skip
         raise UserError(
-            f"the Ray cluster's workers {what}. Install the same uavxai, jsbsim and torch on "
-            "every node (pip install uavxai[ray]==VERSION); see docs/cluster.md."
+            f"the Ray cluster's workers {what}. Install the same uavxai (the same code: "
+            "uavxai_sources is a digest of its files), jsbsim and torch on every node (pip "
+            "install uavxai[ray]==VERSION); see docs/cluster.md."
         )
 
 

@@ -1,4 +1,4 @@
-"""The `uavxai` command line (SPEC §2).
+"""The `uavxai` command line (README "Commands").
 
 Each sub-command parses its flags, loads and validates the scenario, prepares the output folder
 and hands over to the module that does the work. Bad input exits 2 with a message and no

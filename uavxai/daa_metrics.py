@@ -368,7 +368,7 @@ def ci_check(ratio: float, lo: float, hi: float, threshold: float = CI_CHECK_THR
     checkLowcRatio, CICheckThresh 0.5). An undefined ratio or bound (nan, inf) is "wide"; so
     is a ratio of 0 with a positive upper bound. DEGAS bounds each side separately
     (ratio - lo and hi - ratio each <= 0.5 ratio), a stricter rule for a skewed interval;
-    this is the half-width rule of SPEC "Encounter campaigns"."""
+    this is the half-width rule of docs/daa-metrics.md."""
     if not all(math.isfinite(x) for x in (ratio, lo, hi)):
         return "wide"
     return "ok" if (hi - lo) / 2.0 <= threshold * ratio else "wide"
@@ -388,7 +388,7 @@ def daa_summary(
     n_boot: int = N_BOOT,
     seed: int = 0,
 ) -> dict[str, dict[str, float | str]]:
-    """Per method, the weighted DAA columns of SPEC "Encounter campaigns".
+    """Per method, the weighted DAA columns of docs/daa-metrics.md "In campaigns".
 
     ``per_encounter[method]`` maps ``nmac``, ``lowc``, ``alert``, ``manoeuvre`` (bools) and
     optionally ``reversals``, ``path_excess`` (numbers) to one value per encounter, the same

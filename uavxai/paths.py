@@ -1,11 +1,13 @@
 """Where the data that travels with the package lives (aircraft XML, scenarios, checkpoints).
 
 In the repository these are the top-level folders `aircraft/` and `scenarios/`; installed, they
-are the sub-packages `uavxai.aircraft` and `uavxai.scenarios` (see pyproject.toml).
+are the sub-packages `uavxai.aircraft` and `uavxai.scenarios` (see setup.py).
 """
 
 from __future__ import annotations
 
+import functools
+import hashlib
 import os
 from importlib.resources import files
 from pathlib import Path
@@ -101,3 +103,27 @@ def scenario_catalogue() -> list[tuple[str, str, Path]]:
         first = text.split(". ")[0].rstrip(".") + "." if text else "(no description)"
         rows.append((name, first if len(first) <= 100 else first[:97] + "...", path))
     return rows
+
+
+def source_digest(root: Path | None = None) -> str:
+    """A digest of the code and data uavxai flies with: every file of the package ``root``
+    (None: this installed uavxai, and its aircraft, which a source checkout keeps beside it)
+    but compiled bytecode, by relative path and content. Two processes with the same digest
+    fly the same episodes; a version number does not say that between two commits (a
+    resumed campaign, a Ray cluster)."""
+    return _digest(Path(root)) if root is not None else _installed_digest()
+
+
+@functools.cache  # read once: the files of a running process's package do not change
+def _installed_digest() -> str:
+    return _digest(Path(__file__).resolve().parent) + _digest(aircraft_dir().resolve())[:8]
+
+
+def _digest(root: Path) -> str:
+    h = hashlib.sha256()
+    for path in sorted(p for p in root.rglob("*") if p.is_file()):
+        if "__pycache__" in path.parts or path.suffix == ".pyc":
+            continue
+        h.update(path.relative_to(root).as_posix().encode() + b"\0")
+        h.update(hashlib.sha256(path.read_bytes()).digest())
+    return h.hexdigest()[:16]

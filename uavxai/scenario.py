@@ -578,13 +578,13 @@ class Mission(_Model):
 
 
 # ------------------------------------------------------------------------------------- scenario
-# The SPEC's names for encounter intruder aircraft -> this repository's aircraft folders.
+# JSBSim's names for its Cessna 172 models -> this repository's aircraft folders.
 ENCOUNTER_AIRCRAFT = {"c172x": "ga_c172", "c172p": "ga_c172"}
 
 
 class Encounters(_Model):
-    """Pairwise encounters drawn from a statistical encounter model (SPEC "Encounter
-    campaigns"): episode i of `uavxai evaluate` flies encounter i."""
+    """Pairwise encounters drawn from a statistical encounter model (docs/scenario.md,
+    "encounters"): episode i of `uavxai evaluate` flies encounter i."""
 
     model: Literal["mitll_uncor"] = "mitll_uncor"
     parameters: Annotated[str, Field(min_length=1, max_length=4096)] | None = None
@@ -622,7 +622,7 @@ class Encounters(_Model):
 
     @property
     def aircraft(self) -> str:
-        """The aircraft folder that flies the intruders (the SPEC's c172x is ga_c172)."""
+        """The aircraft folder that flies the intruders (JSBSim's c172x is ga_c172)."""
         return ENCOUNTER_AIRCRAFT.get(self.intruder_aircraft, self.intruder_aircraft)
 
 

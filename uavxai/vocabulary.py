@@ -119,7 +119,8 @@ DYNAMICS_MODELS = ("jsbsim", "kinematic")
 
 
 class Outcome(StrEnum):
-    """How an episode ends (SPEC §4). The values are what files and tables say."""
+    """How an episode ends (README, "What a run produces"). The
+    values are what files and tables say."""
 
     GOAL = "goal"  # a transit-only episode reached its goal
     COMPLETED = "completed"  # a mission flown to its end

@@ -1,6 +1,7 @@
 """Collision avoidance: the encounter model, MCTS and its baselines (the planner API).
 
-The planner API (SPEC §7) works without JSBSim, MAVLink or rerun::
+The planner API (README, "Using the planner in another simulator") works without JSBSim,
+MAVLink or rerun::
 
     from uavxai.avoidance import MCTSPlanner, PlannerConfig, Ownship, Intruder
     decision = MCTSPlanner(PlannerConfig()).plan(own, intruders, goal)

@@ -68,7 +68,7 @@ def exhaustive_search(
 
 
 class ExhaustivePlanner(TreePlanner):
-    """Exhaustive search over the planner API (SPEC §7); deterministic."""
+    """Exhaustive search over the planner API (README, planner API); deterministic."""
 
     sampled = False
 

@@ -412,7 +412,7 @@ def _check_archive(p: Path, where: str, algo: str) -> None:
 
 # ------------------------------------------------------------------------------------ planners
 class LearnedPlanner:
-    """A greedy policy over trained Q-networks, in the planner API (SPEC §7).
+    """A greedy policy over trained Q-networks, in the planner API (README, planner API).
 
     Deterministic: the same inputs give the same decision, whatever the seed.
     """

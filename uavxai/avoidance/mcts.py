@@ -2,9 +2,9 @@
 
 :func:`search` is the algorithm: it takes the encounter model as an argument and returns the
 whole tree as data (:class:`SearchTree`), so that explanation, drawing and testing read the
-same arrays the search decided from. :class:`MCTSPlanner` wraps it in the planner API of
-SPEC §7: it predicts the intruders once per decision, searches, takes the most visited root
-action and explains it.
+same arrays the search decided from. :class:`MCTSPlanner` wraps it in the planner API (README,
+"Using the planner in another simulator"): it predicts the intruders once per decision,
+searches, takes the most visited root action and explains it.
 
 One simulation walks from the root down to the search depth (or to a terminal state): at
 every node it takes the child with the best UCT score ``Q + 2C sqrt(2 ln n / n_j)``, children
@@ -149,7 +149,7 @@ def chosen_action(tree: SearchTree) -> int:
 
 
 class TreePlanner:
-    """What the tree planners share (SPEC §7): predict the intruders once per decision,
+    """What the tree planners share (the planner API): predict the intruders once per decision,
     search, take the chosen root action and explain it. Subclasses give the search."""
 
     sampled = True  # visits count simulations (MCTS), not one per node (exhaustive)

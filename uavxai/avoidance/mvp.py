@@ -1,5 +1,5 @@
 """The `mvp` planner: the Modified Voltage Potential resolution of BlueSky's conflict
-resolution (TU Delft; Hoekstra et al.), behind the planner API (SPEC §7).
+resolution (TU Delft; Hoekstra et al.), behind the planner API (README, planner API).
 
 Each decision:
 

@@ -1,4 +1,5 @@
-"""Planner API types (SPEC §7): what goes into a planner and what comes out.
+"""Planner API types (README, "Using the planner in another simulator"): what goes into a
+planner and what comes out.
 
 These are plain data so that a planner works without JSBSim, MAVLink or rerun. Headings are
 radians clockwise from north (aviation convention); positions ENU metres.
@@ -437,7 +438,7 @@ class SearchTree:
 
 @dataclass
 class Decision:
-    """One decision of a planner (SPEC §7), with what it is based on.
+    """One decision of a planner (README, planner API), with what it is based on.
 
     ``predicted_min_separation_m`` is the smallest 3-D separation the planner predicts over
     the *next decision period* only (the chosen action held for ``decision_period_s``, every
@@ -476,7 +477,7 @@ class Decision:
 
     @property
     def explanation(self) -> str:
-        """The decision in one sentence (SPEC §7)."""
+        """The decision in one sentence (README, planner API)."""
         return self._narrated()[0]
 
     @property

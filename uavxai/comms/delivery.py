@@ -215,7 +215,7 @@ class Delivery:
         return self._bits.copy()
 
     def summary(self) -> dict[str, Any]:
-        """The mission's service fields (SPEC §4 ``mission``), JSON-ready."""
+        """The mission's service fields (README's ``mission``), JSON-ready."""
         bits = self._bits
         total = float(bits.sum())
         square = float((bits**2).sum())

@@ -1,4 +1,5 @@
-"""Entity paths and timelines of the recording (SPEC §5), shared by the recorder and blueprint."""
+"""Entity paths and timelines of the recording (docs/recording), shared by the recorder and
+blueprint."""
 
 from __future__ import annotations
 

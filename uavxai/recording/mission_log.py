@@ -1,5 +1,5 @@
 """The mission in the recording: users and their service, links, rate bars, the orbit, service
-points, the phase, the planner's tracks, and a map (SPEC §5).
+points, the phase, the planner's tracks, and a map (docs/recording/README.md).
 
 The engine calls at the sample rate (10 Hz); like :mod:`uavxai.recording.traffic_log`, a call
 only copies its arrays into a buffer and :meth:`MissionLog.flush` sends each entity's rows in
@@ -480,7 +480,7 @@ class MissionLog:
         self._stream.send_columns(
             ent.SERVICE_POINTS, indexes=index, columns=columns.partition(rows.items)
         )
-        # the current one at the SPEC path too
+        # the current one at the path docs/recording/README.md names too
         current = np.stack([self._service_points[n - 1][1] for n in rows.items])
         self._stream.send_columns(
             ent.SERVICE_POINT, indexes=index, columns=rr.Points3D.columns(positions=current)

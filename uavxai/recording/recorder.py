@@ -1,4 +1,4 @@
-"""RunRecorder: everything a run shows in rerun (SPEC §5), written cheaply.
+"""RunRecorder: everything a run shows in rerun (docs/recording/README.md), written cheaply.
 
 Per-frame traffic and metric series are buffered and sent as columns; writing to a file, they
 go out every ``FILE_FLUSH_S`` of simulated time (bounded memory, and a crash still leaves a
@@ -107,7 +107,7 @@ class RunRecorder:
         log = self._stream.log
         log(ent.WORLD, rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         log(ent.OWNSHIP, _mesh(OWNSHIP_COLOR), static=True)
-        # The ownship trail sits below the ownship's transform in the entity tree (SPEC path)
+        # The ownship trail sits below the ownship's transform in the entity tree (docs/recording)
         # but is drawn in world coordinates, so it opts out of that transform.
         log(ent.OWNSHIP_TRAIL, rr.CoordinateFrame(f"tf#/{ent.WORLD}"), static=True)
         trail_radius = rr.Radius.ui_points(1.5)
@@ -294,7 +294,7 @@ class RunRecorder:
 
     def log_sample(self, state: TrafficState, decision_ms: float = math.nan) -> None:
         """One sample of a run in one call: the traffic (:meth:`log_traffic`) and the metrics
-        it gives (SPEC §5: the sum rate at the ownship's position with the ``link`` of
+        it gives (docs/recording: the sum rate at the ownship's position with the ``link`` of
         :meth:`log_setup`, NaN without one; the separation, capped at 10 km; the ownship's
         bank and airspeed) with the last decision's planning time."""
         if not self.enabled:

@@ -75,7 +75,7 @@ class ServiceResult:
     extras: dict[str, Any] = field(default_factory=dict)
 
     def to_summary(self) -> dict[str, Any]:
-        """Plain JSON-serialisable fields (SPEC §4 service fields plus extras)."""
+        """Plain JSON-serialisable fields (README's service fields, plus extras)."""
         return {
             "planner": self.planner,
             "service_point": [float(v) for v in self.service_point],

@@ -1,4 +1,4 @@
-"""Flying statistical encounters (SPEC "Encounter campaigns"; docs/scenario.md "encounters").
+"""Flying statistical encounters (docs/scenario.md "encounters"; docs/daa-metrics.md).
 
 Episode i of an encounter scenario is encounter i: :func:`draw_encounter` samples it with seed
 (campaign seed + i) from the scenario's encounter model against the ownship's planned straight

@@ -27,7 +27,7 @@ _ROW = ("{},{}" + ",{:.3f}" * 6 + ",{:.5f}" * 3 + ",{:.3f}\n").format
 
 
 class TrajectoryCSV(Observer):
-    """``trajectory.csv``: one row per aircraft per sample (SPEC §4), written in blocks."""
+    """``trajectory.csv``: one row per aircraft per sample (README), written in blocks."""
 
     def __init__(self, path: Path) -> None:
         self._f = path.open("w", newline="")
@@ -64,7 +64,7 @@ def _xyzv(pos: np.ndarray, vel: np.ndarray) -> dict[str, float]:
 
 
 class DecisionsJSONL(Observer):
-    """``decisions.jsonl``: one line per decision, what the planner saw and chose (SPEC §4)."""
+    """``decisions.jsonl``: one line per decision, what the planner saw and chose (README)."""
 
     def __init__(self, path: Path) -> None:
         self._f = path.open("w")
@@ -174,7 +174,7 @@ class Throughput(Observer):
 
 class Rerun(Observer):
     """The rerun recording: traffic every sample, tree/plan/explanation every decision,
-    scalar metrics (SPEC §5)."""
+    scalar metrics (docs/recording/README.md)."""
 
     def __init__(self, recorder, setup: dict) -> None:
         self.recorder = recorder
@@ -376,7 +376,7 @@ class Service(Observer):
     the mission serves (on station or avoiding) the rates delivered from the flown position
     are accounted with fading drawn per sample, and while avoiding, what the planned orbit
     would have delivered under the same fading (the service lost to avoidance). Writes
-    ``users.csv`` and ``service.csv`` (SPEC §4); re-plans the service point every
+    ``users.csv`` and ``service.csv`` (README); re-plans the service point every
     ``service.replan_s`` and when a user drops below the QoS rate, moving the orbit.
 
     ``predicted_orbit_sum_rate_bps`` is what the placements in use promised: the orbit-mean

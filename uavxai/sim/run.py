@@ -104,7 +104,7 @@ def run_episode(
     progress=None,
 ) -> dict:
     """Fly one seeded episode through MAVLink in JSBSim; write trajectory.csv,
-    decisions.jsonl and run.rrd into ``out``; return its summary (SPEC §4)."""
+    decisions.jsonl and run.rrd into ``out``; return its summary (README "What a run produces")."""
     from uavxai.avoidance.types import PlannerConfig
     from uavxai.comms.channel import Channel
     from uavxai.sim.companion import Companion

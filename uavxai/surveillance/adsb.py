@@ -91,7 +91,7 @@ def nacv_sigmas(nacv: int) -> tuple[float, float]:
 
 @dataclass(frozen=True)
 class SurveillanceConfig:
-    """As the scenario's ``surveillance`` section (SPEC §3). ``sensor`` None: no onboard
+    """As the scenario's ``surveillance`` section (docs/scenario.md). ``sensor`` None: no onboard
     sensor, non-cooperative intruders are not seen at all."""
 
     model: str = "adsb"

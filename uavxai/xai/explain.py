@@ -336,7 +336,8 @@ def _name(intruder_id: Any) -> str:
 def decision_record(
     t: float, own: Ownship, intruders: Iterable[Intruder], decision: Decision
 ) -> dict[str, Any]:
-    """One line of decisions.jsonl (SPEC §4): time, what the planner saw, what it decided."""
+    """One line of decisions.jsonl (README, "What a run produces"): time, what the planner
+    saw, what it decided."""
     state = {
         "ownship": {
             "x": own.x,
@@ -350,7 +351,7 @@ def decision_record(
             # or the orbit's caps it, and a speed change beyond it changes nothing
             "speed_band": None if own.speed_band is None else list(own.speed_band),
         },
-        # What the planner believed (SPEC §4): the track and how sure it was of it.
+        # What the planner believed (README, decisions.jsonl): the track and how sure it was.
         "intruders": [
             {
                 "id": i.id,
