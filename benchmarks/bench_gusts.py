@@ -23,9 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
-from uavxai.avoidance.model import turn_positions
-from uavxai.dynamics.aircraft import FT
-from uavxai.dynamics.orbit import G
+from uavxai.geometry import turn_positions
+from uavxai.units import FT, G
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # test fixtures
 from test_dynamics_environment import FRAME, flown  # noqa: E402

@@ -14,8 +14,8 @@ import time
 import numpy as np
 
 from uavxai.dynamics.state import TrafficState
-from uavxai.surveillance.adsb import SurveillanceConfig
-from uavxai.surveillance.tracker import SurveillancePicture
+from uavxai.surveillance.adsb import Surveillance, SurveillanceConfig
+from uavxai.surveillance.tracker import Tracker
 
 SAMPLE_S = 0.1
 
@@ -32,7 +32,7 @@ def main() -> None:
     speed = rng.uniform(15, 30, n)
     omega = rng.uniform(-0.3, 0.3, n)
     ids = ("ownship", *(f"intruder-{k}" for k in range(1, n + 1)))
-    picture = SurveillancePicture(SurveillanceConfig(noncooperative=0.1), seed=0)
+    surveillance, tracker = Surveillance(SurveillanceConfig(noncooperative=0.1), 0), Tracker()
     steps = round(args.sim_seconds / SAMPLE_S)
     t0 = time.perf_counter()
     beliefs = 0
@@ -49,10 +49,9 @@ def main() -> None:
             att=np.zeros((n + 1, 3)),
             airspeed=np.full(n + 1, 20.0),
         )
+        tracker.update(surveillance.observe(state))
         if k % round(1 / SAMPLE_S) == 0:
-            beliefs += len(picture(state))
-        else:
-            picture.observe(state)
+            beliefs += len(tracker.beliefs(t))
     wall = time.perf_counter() - t0
     print(
         f"{n} intruders, {args.sim_seconds:g} s simulated: {wall:.2f} s wall, "

@@ -6,7 +6,7 @@ SI and ENU come in, MAVLink units go out, and only here:
 * GLOBAL_POSITION_INT: lat/lon degE7, alt = MSL (mm), relative_alt = h above the local origin
   (mm; the default home is on the ground below the start, so this is "above home"),
   vx/vy/vz NED (cm/s), hdg = psi (cdeg).
-* ATTITUDE: roll = phi, pitch = theta, yaw = psi wrapped to [-pi, pi) (rad; NED yaw is
+* ATTITUDE: roll = phi, pitch = theta, yaw = psi wrapped to (-pi, pi] (rad; NED yaw is
   clockwise from north, the same convention as psi); body rates from the attitude change
   between two published states.
 * VFR_HUD: airspeed = true airspeed, groundspeed (m/s), heading (deg), alt MSL (m), climb (m/s).
@@ -24,6 +24,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from uavxai.dynamics.geodesy import LocalFrame
 from uavxai.dynamics.state import TrafficState
+from uavxai.geometry import wrap_angle
 
 from .operator import ARDUPLANE_MODES, FAILSAFE_MODE
 from .protocol import boot_ms
@@ -158,7 +159,8 @@ def global_position_int(
 def attitude(state: TrafficState, rates: np.ndarray) -> mavlink.MAVLink_attitude_message:
     phi, theta, psi = state.att[0]
     p, q, r = rates
-    return mavlink.MAVLink_attitude_message(boot_ms(state.t), phi, theta, _wrap_pi(psi), p, q, r)
+    yaw = wrap_angle(float(psi))
+    return mavlink.MAVLink_attitude_message(boot_ms(state.t), phi, theta, yaw, p, q, r)
 
 
 def vfr_hud(
@@ -251,7 +253,7 @@ def body_rates(att_before: np.ndarray, att_now: np.ndarray, dt: float) -> np.nda
     if dt <= 0:
         return np.zeros(3)
     d = np.asarray(att_now, dtype=float) - np.asarray(att_before, dtype=float)
-    phi_dot, theta_dot, psi_dot = (_wrap_pi(a) / dt for a in d)
+    phi_dot, theta_dot, psi_dot = wrap_angle(d) / dt
     phi, theta, _ = att_now
     sp, cp, ct = math.sin(phi), math.cos(phi), math.cos(theta)
     return np.array(
@@ -273,7 +275,3 @@ def _cdeg(angle_rad) -> int:
 
 def _int16(value) -> int:
     return max(-32768, min(32767, round(float(value))))
-
-
-def _wrap_pi(angle) -> float:
-    return (float(angle) + math.pi) % (2.0 * math.pi) - math.pi

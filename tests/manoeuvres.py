@@ -14,8 +14,7 @@ import numpy as np
 from uavxai.avoidance.types import PlannerConfig
 from uavxai.dynamics.world import JSBSimWorld
 from uavxai.scenario import Scenario, default_scenario
-
-G = 9.80665
+from uavxai.units import G
 
 
 @dataclass

@@ -15,9 +15,9 @@ import numpy as np
 
 from uavxai.avoidance.types import ChildStats, Decision, SearchTree
 from uavxai.dynamics.state import OWNSHIP_ID, TrafficState, intruder_id
+from uavxai.units import G
 from uavxai.vocabulary import ACCEL_SIGNS, BANK_SIGNS, N_ACTIONS, action_name
 
-G = 9.80665
 BOUNDS = {"x": (0.0, 2000.0), "y": (0.0, 2000.0), "h": (50.0, 300.0)}
 GOAL = np.array([1000.0, 1000.0, 120.0])
 

@@ -13,7 +13,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from uavxai.dynamics.aircraft import FT, Aircraft
+from uavxai.dynamics.aircraft import Aircraft
 from uavxai.dynamics.geodesy import LocalFrame
 from uavxai.dynamics.track_pilot import TrackPilot
 from uavxai.dynamics.world import JSBSimWorld
@@ -21,11 +21,11 @@ from uavxai.errors import ScenarioError
 from uavxai.paths import aircraft_dir
 from uavxai.scenario import aircraft_speed_range, default_scenario
 from uavxai.sim.kinematic import KinematicWorld
+from uavxai.units import FT, G
 
 NAME = "ga_c172"
 FRAME = LocalFrame(34.123, 108.837, 400.0)
 DT = 1.0 / 120.0
-G = 9.80665
 CLIMB_LIMIT = 2.5  # ap/climb-rate-limit-mps of the package
 
 

@@ -59,7 +59,7 @@ def test_exhaustive_finds_the_best_sequence():
     q = np.array([c.q for c in d.children])
     np.testing.assert_allclose(q, values.max(axis=1), atol=1e-6)
     assert d.action == int(np.argmax(values.max(axis=1)))
-    open_first = int(np.sum(d.tree.terminal[d.tree.children_of(0)] == 0))
+    open_first = int(np.sum(d.tree.terminal[d.tree.children_of(0)] == NONE))
     assert (d.tree.depth == 2).sum() == 9 * open_first  # all 9 x 9 sequences, bar collisions
     assert d.confidence == 1.0
 
@@ -68,7 +68,7 @@ def test_exhaustive_tree_holds_every_sequence():
     cfg = PlannerConfig(depth=3)
     d = ExhaustivePlanner(cfg).plan(OWN, INTRUDERS, GOAL)
     tree = d.tree
-    open_inner = (tree.depth < 3) & (tree.terminal == 0)
+    open_inner = (tree.depth < 3) & (tree.terminal == NONE)
     # every open node below the limit has its 9 children: nothing was sampled away
     for node in np.flatnonzero(open_inner):
         assert len(tree.children_of(node)) == 9

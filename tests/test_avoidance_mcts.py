@@ -10,7 +10,7 @@ import pytest
 
 from uavxai.avoidance import Intruder, MCTSPlanner, Ownship, PlannerConfig
 from uavxai.avoidance.direct import DirectPlanner
-from uavxai.avoidance.model import TIMEOUT
+from uavxai.avoidance.model import COLLISION, NONE, TIMEOUT
 from uavxai.learning.env import EncounterEnv
 from uavxai.scenario import IntruderSpec, default_scenario
 from uavxai.sim.kinematic import KinematicWorld
@@ -138,7 +138,7 @@ def test_leaf_values_are_eq13_and_time_out_is_0_1():
     planner = MCTSPlanner(cfg)
     goal = np.array([1000.0, 1000.0, 100.0])
     tree = planner.plan(own, intruders, tuple(goal)).tree
-    leaves = np.flatnonzero((tree.depth == 2) & (tree.visits > 0) & (tree.terminal == 0))
+    leaves = np.flatnonzero((tree.depth == 2) & (tree.visits > 0) & (tree.terminal == NONE))
     expected = 1.0 - np.linalg.norm(tree.pos[leaves] - goal, axis=1) / cfg.d_max
     np.testing.assert_allclose(tree.q[leaves], expected)
     # One decision period left: every root action ends in a time-out.
@@ -173,7 +173,7 @@ def test_collision_share_and_pruned_tree_agree_with_the_raw_tree():
     d = MCTSPlanner(PlannerConfig(seed=3)).plan(own, seen(specs), GOAL)
     tree = d.tree
     collided = np.zeros(9)
-    for node in np.flatnonzero((tree.terminal == 2) & (tree.visits > 0)):
+    for node in np.flatnonzero((tree.terminal == COLLISION) & (tree.visits > 0)):
         top = int(node)
         while tree.depth[top] > 1:
             top = int(tree.parent[top])

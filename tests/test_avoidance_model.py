@@ -13,13 +13,13 @@ from uavxai.avoidance.model import (
     NONE,
     OUT_OF_BOUNDS,
     EncounterModel,
-    G,
     Track,
     ownship_air,
     ownship_state,
     place_children,
 )
 from uavxai.avoidance.types import Ownship, PlannerConfig
+from uavxai.units import G
 
 RIGHT_HOLD = 7  # bank right, hold speed
 HOLD = 4
@@ -309,3 +309,16 @@ def test_fly_levels_equals_flying_each_level():
         )
         for name in ("end", "min_sep", "closest", "t_closest", "event"):
             np.testing.assert_allclose(getattr(both, name)[b], getattr(one, name)[0], atol=1e-9)
+
+
+def test_the_search_terminal_codes_are_read_back_as_the_outcome_enum():
+    from uavxai.avoidance.model import OUTCOME_NAMES, TIMEOUT, terminal_value
+    from uavxai.vocabulary import Outcome
+
+    assert NONE == 0 and OUTCOME_NAMES[NONE] == ""
+    for code, outcome in ((GOAL, Outcome.GOAL), (COLLISION, Outcome.COLLISION),
+                          (OUT_OF_BOUNDS, Outcome.OUT_OF_BOUNDS), (TIMEOUT, Outcome.TIMEOUT)):
+        assert OUTCOME_NAMES[code] == outcome.value  # fmt: skip
+    # eq 14's values by outcome: goal 1, collision and leaving the map 0, time-out 0.1
+    assert [terminal_value(o) for o in ("goal", "collision", "out_of_bounds", "timeout")] == [
+        1.0, 0.0, 0.0, 0.1]  # fmt: skip

@@ -17,15 +17,15 @@ from uavxai.avoidance.model import (
     NONE,
     STATE_DIM,
     EncounterModel,
-    G,
     Track,
     intruder_margin,
     manoeuvre_spread,
     ownship_state,
-    turn_positions,
 )
 from uavxai.errors import UserError
+from uavxai.geometry import turn_positions
 from uavxai.scenario import default_scenario
+from uavxai.units import G
 
 HOLD = 4  # hold bank, hold speed
 

@@ -10,13 +10,14 @@ import jsbsim
 import numpy as np
 import pytest
 
-from uavxai.dynamics.aircraft import FT, Aircraft
+from uavxai.dynamics.aircraft import Aircraft
 from uavxai.dynamics.energy import J_PER_WH, Battery, BatterySpec
 from uavxai.dynamics.fdm import load_fdm
 from uavxai.dynamics.geodesy import LocalFrame
 from uavxai.dynamics.orbit import OrbitGuidance, radius_for
 from uavxai.errors import UserError
 from uavxai.scenario import default_scenario
+from uavxai.units import FT
 
 DT = 1.0 / 120.0
 SAMPLE_TICKS = 12  # the episode's 10 Hz sample rate

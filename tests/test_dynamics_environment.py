@@ -9,8 +9,6 @@ import numpy as np
 import pytest
 
 from uavxai.dynamics.aircraft import (
-    FT,
-    KT,
     TURB_SEED,
     TURB_SEVERITY,
     TURB_TYPE,
@@ -23,6 +21,7 @@ from uavxai.dynamics.aircraft import (
 from uavxai.dynamics.environment import EnvironmentConfig
 from uavxai.dynamics.geodesy import LocalFrame
 from uavxai.errors import UserError
+from uavxai.units import FT, KT
 
 FRAME = LocalFrame(34.1230, 108.8370, 400.0)
 DT = 1.0 / 120.0

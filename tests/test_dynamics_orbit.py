@@ -13,11 +13,12 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from uavxai.dynamics.aircraft import FT, Aircraft, wind_ne_from
+from uavxai.dynamics.aircraft import Aircraft, wind_ne_from
 from uavxai.dynamics.geodesy import LocalFrame
-from uavxai.dynamics.orbit import G, OrbitGuidance, radius_for
+from uavxai.dynamics.orbit import OrbitGuidance, radius_for
 from uavxai.errors import UserError
 from uavxai.scenario import default_scenario
+from uavxai.units import FT, G
 
 DT = 1.0 / 120.0  # JSBSim's rate in the scenarios
 GUIDANCE_TICKS = 12  # 10 Hz

@@ -26,8 +26,8 @@ from uavxai.encounters import (
     straight_ownship,
 )
 from uavxai.encounters.model import default_model_path
-from uavxai.encounters.tracks import KNOT
 from uavxai.errors import UserError
+from uavxai.units import KT
 
 P_MIN = 1e-3  # a correct sampler fails a test with this probability at most (fixed seeds)
 
@@ -129,7 +129,7 @@ def test_track_units_are_si(model) -> None:
     assert track.h[0] == pytest.approx(91.44) and track.vh[0] == pytest.approx(3.048)  # ft/min
     assert track.h[10] - track.h[0] == pytest.approx(30.48)
     accel = sample2track(model, *_hand_made(model, 100, 300, 1.0, 0, 0, 10))
-    assert accel.speed[10] - accel.speed[0] == pytest.approx(10 * KNOT)  # 1 kt/s
+    assert accel.speed[10] - accel.speed[0] == pytest.approx(10 * KT)  # 1 kt/s
 
 
 def test_a_constant_turn_turns_at_its_rate(model) -> None:
@@ -138,7 +138,7 @@ def test_a_constant_turn_turns_at_its_rate(model) -> None:
     heading = np.unwrap(track.heading)
     assert np.allclose(np.diff(heading[::10]), math.radians(3.0))
     # on a circle of radius v / omega about a centre right of the start
-    radius = 90 * KNOT / math.radians(3.0)
+    radius = 90 * KT / math.radians(3.0)
     dist = np.hypot(track.x - radius, track.y)
     assert np.abs(dist - radius).max() < 0.02 * radius
 

@@ -22,6 +22,7 @@ from pymavlink import mavutil
 from uavxai.cli import main
 from uavxai.dynamics.geodesy import LocalFrame
 from uavxai.scenario import load_scenario
+from uavxai.sim.observers import TRAJECTORY_FIELDS
 
 SMALL = {
     "name": "small",
@@ -94,20 +95,7 @@ def read_trajectory(out: Path) -> dict[str, np.ndarray]:
     rows: dict[str, list] = defaultdict(list)
     with (out / "trajectory.csv").open() as f:
         reader = csv.DictReader(f)
-        assert reader.fieldnames == [
-            "t",
-            "id",
-            "x",
-            "y",
-            "h",
-            "vx",
-            "vy",
-            "vh",
-            "phi",
-            "theta",
-            "psi",
-            "airspeed",
-        ]
+        assert tuple(reader.fieldnames or ()) == TRAJECTORY_FIELDS  # README: test_csv_columns.py
         for r in reader:
             rows[r["id"]].append([float(r[k]) for k in ("t", "x", "y", "h", "phi", "psi")])
     return {k: np.asarray(v) for k, v in rows.items()}

@@ -21,6 +21,8 @@ from uavxai.avoidance.learned import (
     safe_action,
     save_checkpoint,
 )
+from uavxai.avoidance.mcts import intruder_arrays
+from uavxai.avoidance.model import ownship_state
 from uavxai.avoidance.planners import make_planner
 from uavxai.avoidance.types import N_ACTIONS, Decision, Intruder, Ownship, PlannerConfig
 from uavxai.cli import main
@@ -120,7 +122,10 @@ def test_dqn_chooses_its_highest_q_and_safe_dqn_its_filtered_best() -> None:
 
     safe = SafeDQNPlanner(CONFIG)
     d = safe.plan(OWN, intruders, GOAL)
-    q = safe.q_values(learned.observe_api(OWN, intruders, GOAL, CONFIG, safe.n_nearest))
+    pos, vel = intruder_arrays(intruders)
+    goal = np.asarray(GOAL, float)
+    obs = learned.observe(ownship_state(OWN), pos, vel, goal, CONFIG, safe.n_nearest)
+    q = safe.q_values(obs)
     passed = q["safety"] >= np.sort(q["safety"])[4]
     assert passed[d.action]
     total = np.where(passed, q["goal"] + q["safety"], -np.inf)

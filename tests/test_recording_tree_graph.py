@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 
+from uavxai.avoidance.model import COLLISION
 from uavxai.avoidance.types import ChildStats, Decision, SearchTree
 from uavxai.recording.tree_graph import (
     CHOSEN_COLOR,
@@ -42,7 +43,7 @@ def hand_made_tree() -> tuple[SearchTree, list[int]]:
     visits = np.array(visits)
     terminal = np.zeros(m, dtype=np.int8)
     collision_node = 10 + 9 + 2  # under action 4, action 2
-    terminal[collision_node] = 2
+    terminal[collision_node] = COLLISION
     tree = SearchTree(
         parent=np.array(parent),
         action=np.array(action),
@@ -155,12 +156,12 @@ def test_the_green_node_below_the_choice_is_the_plan_on_a_visit_tie():
 
 def test_the_chosen_action_is_green_even_when_its_line_collides():
     tree, _ = hand_made_tree()
-    tree.terminal[5] = 2  # root action 4, the chosen one, ends in a collision
+    tree.terminal[5] = COLLISION  # root action 4, the chosen one, ends in a collision
     graph = tree_graph(decision_with(tree, 4))
     index = graph.node_ids.index("n5")
     assert graph.colors[index] == CHOSEN_COLOR
     assert graph.labels[index].endswith("\ncollision")
     other = graph.node_ids.index("n1")  # root action 0, not chosen
-    tree.terminal[1] = 2
+    tree.terminal[1] = COLLISION
     graph = tree_graph(decision_with(tree, 4))
     assert graph.colors[other] == COLLISION_COLOR

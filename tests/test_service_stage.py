@@ -15,7 +15,7 @@ from uavxai.paths import scenarios_dir
 from uavxai.scenario import default_scenario, load_scenario
 from uavxai.service import d3qn
 from uavxai.service.stage import plan_service, run_service_stage
-from uavxai.service.train import train_command
+from uavxai.service.train import CURVE_COLUMNS, train_command
 
 SERVICE_FIELDS = (
     "service_point", "power_w", "sinr_db", "rate_bps", "sum_rate_bps", "qos_satisfied"
@@ -157,6 +157,7 @@ def test_train_command_writes_the_model_and_the_curves(tmp_path):
     with (tmp_path / "learning_curve.csv").open() as f:
         rows = list(csv.DictReader(f))
     assert len(rows) == 3 * 30 and {r["algo"] for r in rows} == {"d3qn", "dqn", "random"}
+    assert tuple(rows[0]) == CURVE_COLUMNS
     assert (tmp_path / "learning_curve.png").stat().st_size > 10_000
     assert json.loads(json.dumps(report)) == report
     assert 1 <= report["episodes_to_converge"] <= 30

@@ -147,3 +147,32 @@ def test_on_station_the_search_is_valued_against_the_missions_time_left() -> Non
         assert valued == pytest.approx(left), (step, phase, valued, left)
         if "timeout" in words:
             assert left <= horizon + 1e-9, (step, phase, words)
+
+
+def test_clearance_predicts_each_intruder_on_its_believed_constant_turn() -> None:
+    """The mission's clearance flies the one constant-turn prediction of uavxai: checked here
+    against the turn written as a circle about its centre, on a grid, with the track error
+    taken off and the first of two equally close intruders named."""
+    from uavxai.avoidance.types import Intruder
+    from uavxai.sim.mission import clearance
+
+    t = np.arange(0.0, 30.0 + 1e-9, 0.5)
+    path = np.column_stack([np.zeros_like(t), 20.0 * t, np.full_like(t, 100.0)])  # north
+    speed, w, psi0 = 18.0, 0.12, math.radians(250.0)
+    turning = Intruder("intruder-7", 400.0, 300.0, 110.0, speed * math.sin(psi0),
+                       speed * math.cos(psi0), vh=-0.5, turn_rate=w, sigma_m=12.0)  # fmt: skip
+    # clockwise turn: the centre lies to the right of the velocity, radius speed / w
+    r = speed / w
+    cx, cy = 400.0 + r * math.cos(psi0), 300.0 - r * math.sin(psi0)
+    ang = psi0 + w * t
+    xs, ys = cx - r * np.cos(ang), cy + r * np.sin(ang)
+    d = np.sqrt((xs - path[:, 0]) ** 2 + (ys - path[:, 1]) ** 2 + (110.0 - 0.5 * t - 100.0) ** 2)
+    k = int(np.argmin(d))
+    sep, who, when = clearance(t, path, [turning], sigmas=2.0)
+    assert sep == pytest.approx(d[k] - 2 * 12.0, abs=1e-6)
+    assert (who, when) == ("intruder 7", t[k])
+    straight = Intruder("intruder-8", 1.0, 0.0, 100.0, 0.0, 20.0)  # 1 m beside, abreast
+    twin = dataclasses.replace(straight, id="intruder-9")
+    abreast = clearance(t, path, [straight, twin], sigmas=0.0)
+    assert abreast == (pytest.approx(1.0), "intruder 8", 0.0)
+    assert clearance(t, path, [], sigmas=0.0) == (math.inf, None, 0.0)

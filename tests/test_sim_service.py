@@ -13,6 +13,7 @@ import yaml
 
 from uavxai.cli import main
 from uavxai.comms.channel import ENVIRONMENTS
+from uavxai.comms.delivery import SERVICE_COLUMNS, USERS_COLUMNS
 
 C = 299_792_458.0
 MISSION = {
@@ -62,11 +63,15 @@ def test_delivered_bits_recomputed_from_users_trajectory_and_service_files(
                 own[f"{float(r['t']):.3f}"] = np.array([float(r[k]) for k in "xyh"])
     users = defaultdict(dict)
     with (out / "users.csv").open() as f:
-        for r in csv.DictReader(f):
+        reader = csv.DictReader(f)
+        assert tuple(reader.fieldnames or ()) == USERS_COLUMNS
+        for r in reader:
             users[r["t"]][int(r["user"])] = (float(r["x"]), float(r["y"]), 0.0)
     power = defaultdict(dict)
     with (out / "service.csv").open() as f:
-        for r in csv.DictReader(f):
+        reader = csv.DictReader(f)
+        assert tuple(reader.fieldnames or ()) == SERVICE_COLUMNS
+        for r in reader:
             power[r["t"]][int(r["user"])] = float(r["power_w"])
     assert len(power) == 400  # 40 s on station at 10 Hz
     moved = {t for t in users if users[t] != users["0.100"]}

@@ -13,7 +13,6 @@ from uavxai.dynamics.state import TrafficState
 from uavxai.surveillance.adsb import Report, Surveillance, SurveillanceConfig
 from uavxai.surveillance.sensor import SensorConfig
 from uavxai.surveillance.tracker import (
-    SurveillancePicture,
     Tracker,
     TrackerConfig,
     ct_predict_state,
@@ -168,24 +167,19 @@ def test_truth_beliefs_are_exact_with_the_coordinated_turn_rate():
     assert b.sigma_m == 0 and b.age_s == 0
 
 
-def test_picture_end_to_end_and_deterministic():
+def test_surveillance_into_the_tracker_end_to_end_and_deterministic():
     def run(seed):
-        picture = SurveillancePicture(SurveillanceConfig(), seed=seed)
+        surveillance, tracker = Surveillance(SurveillanceConfig(), seed), Tracker()
         out = []
         for t, x in turning_target(15.0):
-            s = as_traffic(t, x)
+            tracker.update(surveillance.observe(as_traffic(t, x)))
             if abs(t - round(t)) < 1e-9:
-                out.append(picture(s))  # once a second, as a planner asks
-            else:
-                picture.observe(s)
+                out.append(tracker.beliefs(t))  # once a second, as a planner asks
         return out
 
     a, b, c = run(4), run(4), run(5)
     assert a == b and a != c
     assert a[-1][0].id == "intruder-1" and a[-1][0].sigma_m > 0
-    truth = SurveillancePicture(SurveillanceConfig(model="truth"))
-    s = as_traffic(0.0, next(turning_target(0.0))[1])
-    assert truth(s) == truth_beliefs(s)
 
 
 def test_reports_through_adsb_vehicle_bytes_give_the_same_picture():
@@ -198,15 +192,15 @@ def test_reports_through_adsb_vehicle_bytes_give_the_same_picture():
 
     frame = LocalFrame(34.1230, 108.8370, 400.0)
     cfg = SurveillanceConfig()
-    direct = SurveillancePicture(cfg, seed=3)
-    bridged = SurveillancePicture(cfg, seed=3)
+    seen, heard = Surveillance(cfg, 3), Surveillance(cfg, 3)
+    direct, bridged = Tracker(), Tracker()
     sender, receiver = mavlink.MAVLink(None, 1, 1), mavlink.MAVLink(None)
     for t, x in turning_target(20.0):
         s = as_traffic(t, x)
-        direct.observe(s)
-        for r in bridged.sample(s):
+        direct.update(seen.observe(s))
+        for r in heard.observe(s):
             (msg,) = receiver.parse_buffer(adsb_message(r, frame).pack(sender))
-            bridged.ingest([report_from_adsb(msg, frame, t_received=t, config=cfg)])
+            bridged.update([report_from_adsb(msg, frame, t_received=t, config=cfg)])
     (a,), (b,) = direct.beliefs(20.0), bridged.beliefs(20.0)
     assert a.age_s == pytest.approx(b.age_s, abs=1e-9)
     assert math.hypot(a.x - b.x, a.y - b.y) < 0.05 and abs(a.h - b.h) < 0.01
@@ -221,7 +215,7 @@ def _track_in_wind(seed: int, wind_known: bool) -> tuple[float, float]:
     """A target turning at OMEGA through an air mass that a 10 m/s wind carries (a trochoid
     over the ground), seen through default ADS-B for 25 s: (turn-rate estimate, distance
     from where it really is 10 s later to where the planner's model puts it)."""
-    from uavxai.avoidance.model import turn_positions
+    from uavxai.geometry import turn_positions
 
     wind = tuple(WIND[:2]) if wind_known else (0.0, 0.0)
     surv, tracker = Surveillance(SurveillanceConfig(), seed), Tracker(wind_mps=wind)

@@ -146,6 +146,12 @@ def _add_force(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _add_seed(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--seed", type=_seed, help="override the scenario's seed (default: its own)"
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(
         prog="uavxai",
@@ -177,7 +183,7 @@ def _add_run(sub: argparse._SubParsersAction) -> None:
     )
     _add_scenario(r)
     r.add_argument("--out", type=Path, help="output folder (default runs/<scenario name>)")
-    r.add_argument("--seed", type=_seed, help="override the scenario's seed (default: its own)")
+    _add_seed(r)
     r.add_argument(
         "--episodes", type=_positive_int, default=1, help="seeded runs (seed, seed+1, ...)"
     )
@@ -233,7 +239,7 @@ def _add_train(sub: argparse._SubParsersAction) -> None:
         help="service: fine-tune the universal model on this layout instead of training one "
         "from scratch",
     )
-    t.add_argument("--seed", type=_seed, help="override the scenario's seed (default: its own)")
+    _add_seed(t)
     t.add_argument("--out", type=Path, help="output folder (default runs/train-<stage>-<algo>)")
     _add_force(t)
 
@@ -316,7 +322,7 @@ def _add_service(sub: argparse._SubParsersAction) -> None:
         help="the service-point planner (default: the scenario's service.planner); grid is "
         "the exhaustive reference optimum, slow",
     )
-    s.add_argument("--seed", type=_seed, help="override the scenario's seed (default: its own)")
+    _add_seed(s)
     s.add_argument("--out", type=Path, help="output folder (default runs/<scenario name>-service)")
     _add_force(s)
 

@@ -45,7 +45,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from uavxai.errors import UserError
-from uavxai.metrics import FT, nmac
+from uavxai.metrics import nmac
+from uavxai.units import FT
 
 WELL_CLEAR_HORIZONTAL_M = 2000 * FT  # 609.6 m, small-UAS well clear (FAA draft AC 90-WLCLR)
 WELL_CLEAR_VERTICAL_M = 250 * FT  # 76.2 m

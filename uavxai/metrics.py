@@ -26,8 +26,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from uavxai.errors import UserError
+from uavxai.units import FT
 
-FT = 0.3048
 NMAC_HORIZONTAL_M = 500 * FT  # 152.4 m
 NMAC_VERTICAL_M = 100 * FT  # 30.48 m
 Z95 = 1.959963984540054  # two-sided 95 % normal quantile

@@ -16,7 +16,6 @@ import difflib
 import math
 import os
 import re
-import reprlib
 import stat
 import typing
 import xml.etree.ElementTree as ET
@@ -35,7 +34,7 @@ from pydantic import (
     model_validator,
 )
 
-from uavxai.errors import ScenarioError, UserError
+from uavxai.errors import ScenarioError, UserError, short_repr
 from uavxai.paths import aircraft_dir, resolve_scenario
 from uavxai.vocabulary import (
     ACTION_SETS,
@@ -964,17 +963,11 @@ def _first_model(ann: Any) -> type[BaseModel] | None:
     return None
 
 
-_REPR = reprlib.Repr()  # Python 3.11: no keyword arguments yet
-_REPR.maxlevel, _REPR.maxtuple, _REPR.maxlist, _REPR.maxdict = 2, 4, 4, 3
-_REPR.maxstring, _REPR.maxlong, _REPR.maxother = 60, 40, 60
-
-
 def _short(value: Any) -> str:
-    """A bounded repr: reprlib stops after a few items and levels, so a value built from a
-    billion aliases costs as little to show as a small one."""
+    """A bounded repr (:func:`uavxai.errors.short_repr`); a mapping is named, not shown."""
     if isinstance(value, dict):
         return "a mapping"
-    shown = _REPR.repr(value)
+    shown = short_repr(value)
     return shown if len(shown) <= 80 else shown[:77] + "..."
 
 

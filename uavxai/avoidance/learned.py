@@ -23,7 +23,6 @@ explanations can be checked against the same physics as the tree search's.
 from __future__ import annotations
 
 import math
-import reprlib
 import time
 import zipfile
 from collections.abc import Sequence
@@ -55,7 +54,8 @@ from uavxai.avoidance.types import (
     action_name,
     check_plan_inputs,
 )
-from uavxai.errors import CheckpointError
+from uavxai.errors import CheckpointError, short_repr
+from uavxai.geometry import closest_point_of_approach
 from uavxai.outputs import write_torch
 from uavxai.paths import avoidance_checkpoints_dir
 
@@ -97,9 +97,7 @@ def observe(
         v, psi = float(state[3]), float(state[4])
         rel = rel[nearest]
         rv = np.asarray(vel, dtype=float)[nearest] - (v * math.sin(psi), v * math.cos(psi), 0.0)
-        closing = np.sum(rv * rv, axis=1)
-        tcpa = np.clip(-np.sum(rel * rv, axis=1) / np.maximum(closing, 1e-9), 0.0, TCPA_MAX_S)
-        dcpa = np.sqrt(np.sum((rel + rv * tcpa[:, None]) ** 2, axis=1))
+        tcpa, dcpa = closest_point_of_approach(rel, rv, TCPA_MAX_S)
         cpa[: len(nearest), 0] = dcpa / SCALE_M
         cpa[: len(nearest), 1] = tcpa / TCPA_SCALE_S
     return np.concatenate([base, cpa.ravel()])
@@ -113,18 +111,6 @@ def _probe_observation(n_nearest: int) -> np.ndarray:
     pos = np.array([[700.0, 900.0, 110.0], [380.0, 450.0, 135.0], [1500.0, 200.0, 100.0]])
     vel = np.array([[-15.0, -10.0, 0.0], [3.0, 22.0, 0.5], [0.0, 25.0, 0.0]])
     return observe(state, pos, vel, np.array([1000.0, 1000.0, 100.0]), config, n_nearest)
-
-
-def observe_api(
-    own: Ownship,
-    intruders: Sequence[Intruder],
-    goal: Goal,
-    config: PlannerConfig,
-    n_nearest: int = N_NEAREST,
-) -> np.ndarray:
-    """:func:`observe` from the planner-API types (README, planner API)."""
-    pos, vel = intruder_arrays(intruders)
-    return observe(ownship_state(own), pos, vel, np.asarray(goal, float), config, n_nearest)
 
 
 # ------------------------------------------------------------------------------------ networks
@@ -199,16 +185,6 @@ MAX_HIDDEN_WIDTH = 4096
 MAX_N_NEAREST = 64
 
 
-def _short_repr() -> reprlib.Repr:
-    """repr that stays short whatever a hostile file holds (keyword arguments need 3.12)."""
-    r = reprlib.Repr()
-    r.maxstring = r.maxother = 40
-    r.maxlist = r.maxtuple = r.maxdict = 4
-    r.maxlevel = 2
-    return r
-
-
-_SHORT = _short_repr()
 
 
 class _Source:
@@ -223,7 +199,7 @@ class _Source:
     def bad(self, field: str, value: object, allowed: str) -> CheckpointError:
         """The error for a declared field outside what this uavxai can load."""
         return CheckpointError(
-            f"{self.where} {self.p}: {field} = {_SHORT.repr(value)}; allowed: {allowed}. Use a "
+            f"{self.where} {self.p}: {field} = {short_repr(value)}; allowed: {allowed}. Use a "
             f"model.pt written by {self.retrain}."
         )
 
@@ -270,14 +246,14 @@ def _read_checkpoint(src: _Source) -> dict:
             f"expected a model.pt written by `uavxai train --stage avoidance --algo {algo}`."
         ) from None
     if not isinstance(ckpt, dict) or ckpt.get("format") != CHECKPOINT_FORMAT:
-        found = _SHORT.repr(ckpt.get("format")) if isinstance(ckpt, dict) else type(ckpt).__name__
+        found = short_repr(ckpt.get("format")) if isinstance(ckpt, dict) else type(ckpt).__name__
         raise CheckpointError(
             f"{where} {p}: not an avoidance checkpoint (format {found}); "
             f"expected one written by `uavxai train --stage avoidance --algo {algo}`."
         )
     if ckpt.get("algo") != algo:
         raise CheckpointError(
-            f"{where} {p}: trained for {_SHORT.repr(ckpt.get('algo'))}, but the planner is "
+            f"{where} {p}: trained for {short_repr(ckpt.get('algo'))}, but the planner is "
             f"'{algo}'; use a checkpoint trained with --algo {algo}."
         )
     return ckpt
@@ -327,7 +303,7 @@ def _check_observation(ckpt: dict, n_nearest: int, n_obs: int, src: _Source) -> 
     ):
         raise CheckpointError(
             f"{src.where} {src.p}: trained on an observation that differs from this uavxai's "
-            f"(size {_SHORT.repr(ckpt.get('obs_dim'))}, {n_nearest} nearest intruders); "
+            f"(size {short_repr(ckpt.get('obs_dim'))}, {n_nearest} nearest intruders); "
             f"retrain it with {src.retrain}."
         )
 
@@ -355,7 +331,7 @@ def _checked_state_dicts(ckpt: dict, n_obs: int, hidden: list[int], src: _Source
             wrong = sorted(set(shapes.items()) ^ set(expected.items()), key=str)[:4]
             raise CheckpointError(
                 f"{where} {p}: network '{name}' has the wrong shape for hidden {hidden} and "
-                f"{n_obs} inputs (differs at {_SHORT.repr(wrong)}); retrain with {retrain}."
+                f"{n_obs} inputs (differs at {short_repr(wrong)}); retrain with {retrain}."
             )
         for k, v in sd.items():
             if not v.is_floating_point() or not bool(torch.isfinite(v).all()):
@@ -429,7 +405,7 @@ def _check_archive(p: Path, where: str, algo: str) -> None:
         ) from None
     if damaged is not None:
         raise CheckpointError(
-            f"{where} {p}: damaged (record '{_SHORT.repr(damaged)}' fails its CRC check): the "
+            f"{where} {p}: damaged (record '{short_repr(damaged)}' fails its CRC check): the "
             f"file changed after it was written; copy it again or retrain; {expected}."
         )
 

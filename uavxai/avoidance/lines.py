@@ -29,6 +29,7 @@ from uavxai.avoidance.model import (
     vertical_command,
 )
 from uavxai.avoidance.types import ChildStats, Meeting, Ownship, PlannerConfig, SearchTree
+from uavxai.geometry import closest_on_pieces
 from uavxai.vocabulary import ACTIONS
 
 # A speed change smaller than this share of what the action commands over one tree level
@@ -115,12 +116,7 @@ def _chord_distances(own: np.ndarray, intruders: np.ndarray) -> tuple[np.ndarray
     """(n, N) closest distance on every sub-step to every intruder, and its fraction along
     the sub-step; ``own`` (n+1, 3), ``intruders`` (n+1, N, 3)."""
     rel = own[:, None, :] - intruders
-    step = np.diff(rel, axis=0)
-    a = np.einsum("ijk,ijk->ij", step, step)
-    b = np.einsum("ijk,ijk->ij", rel[:-1], step)
-    s = np.clip(-b / np.maximum(a, 1e-12), 0.0, 1.0)
-    closest = rel[:-1] + s[..., None] * step
-    return np.sqrt(np.einsum("ijk,ijk->ij", closest, closest)), s
+    return closest_on_pieces(rel[:-1], np.diff(rel, axis=0))
 
 
 def _first_conflict(

@@ -42,7 +42,6 @@ from uavxai.avoidance.model import (
     TIMEOUT,
     Children,
     EncounterModel,
-    G,
     Track,
     accel_command,
     bank_command,
@@ -62,6 +61,7 @@ from uavxai.avoidance.types import (
     SearchTree,
     check_plan_inputs,
 )
+from uavxai.geometry import turn_rate_of_bank
 
 _VALUE_OF = np.array(TERMINAL_VALUE)
 
@@ -237,7 +237,7 @@ def intruder_turn_rates(intruders: Sequence[Intruder], config: PlannerConfig) ->
     rate = np.array([i.turn_rate for i in intruders], dtype=float)
     speed = np.maximum(np.hypot([i.vx for i in intruders], [i.vy for i in intruders]), 1.0)
     # a noisy estimate must not predict a turn tighter than a coordinated turn can be
-    limit = G * math.tan(math.radians(config.intruder_bank_limit_deg)) / speed
+    limit = turn_rate_of_bank(math.radians(config.intruder_bank_limit_deg), speed)
     return np.clip(rate, -limit, limit)
 
 

@@ -18,8 +18,8 @@ the ground, where the intruders' tracks and the goal are.
 
 Intruders come as a :class:`Track`: their positions at the segment's sub-step instants,
 predicted at constant velocity or, with their estimated turn rate, on a constant-rate turn
-(:func:`turn_positions`), and optionally a *margin* per intruder and instant that the
-separation must clear on top of ``d_min``: ``uncertainty_k`` sigmas of the track's position
+(:func:`uavxai.geometry.turn_positions`), and optionally a *margin* per intruder and instant
+that the separation must clear on top of ``d_min``: ``uncertainty_k`` sigmas of the track's position
 error, plus how far the intruder could stray from its prediction by banking anywhere within
 its limit (:func:`manoeuvre_spread`, covered ``reach_horizon_s`` ahead), see
 :func:`intruder_margin`. A line that enters that grown zone counts as a collision, and its
@@ -55,18 +55,20 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from uavxai.avoidance.types import Ownship, PlannerConfig
-from uavxai.vocabulary import ACTIONS
-
-G = 9.80665  # m/s^2
+from uavxai.geometry import turn_positions, turn_rate_of_bank
+from uavxai.vocabulary import ACTIONS, Outcome
 
 # Columns of a state row. VCMD: the vertical command of the vertical action set (+1 climb,
 # 0 the leg's height, -1 descend), which persists like the bank command (0 with the paper's).
 X, Y, H, V, PSI, PHI, PHI_CMD, VCMD = range(8)
 STATE_DIM = 8
 
-# Terminal codes (SearchTree.terminal uses the same numbers).
-NONE, GOAL, COLLISION, OUT_OF_BOUNDS, TIMEOUT = 0, 1, 2, 3, 4
-OUTCOME_NAMES = ("", "goal", "collision", "out_of_bounds", "timeout")
+# The search's terminal codes: how a line of the tree ends, as the small integers its numpy
+# arrays hold (SearchTree.terminal, Segment.event); no file holds them. Each is the Outcome at
+# its index in TERMINALS, 0 an open line; OUTCOME_NAMES reads a code back as the Outcome value.
+TERMINALS = (None, Outcome.GOAL, Outcome.COLLISION, Outcome.OUT_OF_BOUNDS, Outcome.TIMEOUT)
+NONE, GOAL, COLLISION, OUT_OF_BOUNDS, TIMEOUT = range(len(TERMINALS))
+OUTCOME_NAMES = tuple("" if o is None else o.value for o in TERMINALS)
 # Paper eqs 13/14: goal 1, collision 0, time-out 0.1; leaving the map counts as a failure (0).
 TERMINAL_VALUE = (math.nan, 1.0, 0.0, 0.0, 0.1)
 
@@ -250,38 +252,6 @@ _NO_INTRUDERS = np.zeros(0, dtype=int)
 _NO_INTRUDERS.flags.writeable = False
 
 
-def turn_positions(
-    pos: np.ndarray,
-    vel: np.ndarray,
-    t: np.ndarray,
-    turn_rate: np.ndarray | None = None,
-    wind: tuple[float, float] = (0.0, 0.0),
-) -> np.ndarray:
-    """(T, N, 3) positions at times ``t`` (T,) of aircraft now at ``pos`` (N, 3) with
-    ground velocity ``vel`` (N, 3), turning at ``turn_rate`` (N,) rad/s clockwise (None:
-    straight) at constant speed and climb rate. The turn is through the air mass, which the
-    steady ``wind`` (east, north, m/s) carries: the air-relative velocity rotates, the wind
-    drifts the circle over the ground (the tracker's frame, :mod:`uavxai.surveillance.tracker`)."""
-    pos, vel = np.asarray(pos, dtype=float), np.asarray(vel, dtype=float)
-    t = np.asarray(t, dtype=float)
-    if turn_rate is None or not np.any(turn_rate):
-        return pos[None, :, :] + t[:, None, None] * vel[None, :, :]
-    w = np.asarray(turn_rate, dtype=float)[None, :]
-    # v(s) = v0 e^{-i w s} (clockwise in the x + iy plane); its integral to t is
-    # v0 t e^{-i w t / 2} sinc(w t / 2 pi), exact and smooth through w = 0.
-    wt = w * t[:, None]
-    drift = complex(*wind)
-    v0 = vel[:, 0] + 1j * vel[:, 1] - drift  # through the air
-    dxy = v0[None, :] * t[:, None] * np.exp(-0.5j * wt) * np.sinc(wt / (2.0 * np.pi))
-    if drift:
-        dxy = dxy + drift * t[:, None]
-    out = np.empty((t.size, pos.shape[0], 3))
-    out[:, :, 0] = pos[None, :, 0] + dxy.real
-    out[:, :, 1] = pos[None, :, 1] + dxy.imag
-    out[:, :, 2] = pos[None, :, 2] + t[:, None] * vel[None, :, 2]
-    return out
-
-
 def manoeuvre_spread(
     vel: np.ndarray, turn_rate: np.ndarray, t: np.ndarray, bank_limit_rad: float
 ) -> np.ndarray:
@@ -291,7 +261,7 @@ def manoeuvre_spread(
     distances from the nominal one, kept non-decreasing in time. The set of positions
     reachable by then lies within this distance of the nominal position."""
     speed = np.maximum(np.hypot(vel[:, 0], vel[:, 1]), 1.0)
-    w_max = G * math.tan(bank_limit_rad) / speed
+    w_max = turn_rate_of_bank(bank_limit_rad, speed)
     w = np.clip(np.asarray(turn_rate, dtype=float), -w_max, w_max)
     nominal = turn_positions(np.zeros_like(vel), vel, t, w)
     spread = np.zeros((t.size, vel.shape[0]))
@@ -783,7 +753,7 @@ class EncounterModel:
         v_m = np.clip(v0[:, None] + accel[:, None] * tm, vmin[:, None], vmax[:, None])
         # Coordinated turn: on each sub-step the rate is taken at its midpoint and the
         # displacement is the exact chord of that constant-rate arc.
-        dpsi = G * np.tan(phi_m) / v_m * dt
+        dpsi = turn_rate_of_bank(phi_m, v_m) * dt
         psi = np.cumsum(dpsi, axis=1)
         chord = v_m * dt * np.sinc(dpsi / (2.0 * np.pi))
         rel_heading = psi - 0.5 * dpsi  # mid-sub-step heading relative to the start

@@ -43,7 +43,6 @@ from uavxai.avoidance.model import (
     PHI,
     PSI,
     EncounterModel,
-    G,
     Segment,
     V,
     accel_command,
@@ -60,7 +59,7 @@ from uavxai.avoidance.types import (
     PlannerConfig,
     check_plan_inputs,
 )
-from uavxai.geometry import bearing
+from uavxai.geometry import bearing, turn_rate_of_bank
 
 LOOKAHEAD_S = 20.0  # BlueSky's default is 300 s for 5 NM zones; 50 m zones need far less
 RESO_FACTOR_H = 1.01  # BlueSky's asas_marh: horizontal resolution margin
@@ -309,7 +308,7 @@ class MVPPlanner:
         ).end  # fmt: skip
         v_end, phi = after[:, V], after[:, PHI]
         roll_out_s = np.abs(phi) / math.radians(self.config.roll_rate_limit_deg_s)
-        settled = after[:, PSI] + 0.5 * roll_out_s * G * np.tan(phi) / v_end
+        settled = after[:, PSI] + 0.5 * roll_out_s * turn_rate_of_bank(phi, v_end)
         v_settled = v_end[:, None] * np.stack([np.sin(settled), np.cos(settled)], axis=1)
         target_v = speed * np.array([math.sin(track), math.cos(track)])
         miss = np.linalg.norm(v_settled - target_v, axis=1)

@@ -15,14 +15,10 @@ from typing import TYPE_CHECKING, Protocol, runtime_checkable
 import numpy as np
 
 from uavxai.errors import UserError
-from uavxai.vocabulary import ACCEL_SIGNS, ACTION_SETS, BANK_SIGNS, N_ACTIONS, action_name
+from uavxai.vocabulary import ACTION_SETS, N_ACTIONS, action_name
 
 if TYPE_CHECKING:
     from uavxai.scenario import Scenario
-
-# The actions and their names live in uavxai.vocabulary (one table for every layer).
-BANK_CHOICES = BANK_SIGNS  # left, hold, right: one bank_step_deg change of the bank command
-ACCEL_CHOICES = ACCEL_SIGNS  # speed up, hold, slow down: times accel_mps2
 
 
 @dataclass(frozen=True)
@@ -365,7 +361,7 @@ class SearchTree:
     value_sum: np.ndarray  # (M,) float
     min_sep: np.ndarray  # (M,) float, predicted min separation along the edge into this node
     closest: np.ndarray  # (M,) int, index (0-based, into the intruder list) of the closest one
-    terminal: np.ndarray  # (M,) int8: 0 none, 1 goal, 2 collision, 3 out of bounds, 4 time-out
+    terminal: np.ndarray  # (M,) int8: uavxai.avoidance.model.TERMINALS' codes, 0 none
     pos: np.ndarray  # (M, 3) ownship position at the node, for drawing the tree in 3-D
     t_closest: np.ndarray | None = None  # (M,) s from the decision to that closest approach
     state: np.ndarray | None = None  # (M, 7) encounter-model state (x, y, h, V, psi, phi, cmd)

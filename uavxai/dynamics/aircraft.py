@@ -16,10 +16,9 @@ from uavxai.dynamics.energy import SHAFT_POWER_HP, THROTTLE, WATTS_PER_HP, Batte
 from uavxai.dynamics.fdm import load_fdm
 from uavxai.dynamics.geodesy import LocalFrame
 from uavxai.errors import UserError
+from uavxai.units import FT, KT
 
 log = logging.getLogger(__name__)
-
-FT = 0.3048  # JSBSim speaks feet
 
 # Autopilot inputs (SI)
 ENGAGED = "ap/engaged"
@@ -28,7 +27,6 @@ ACCEL_CMD = "ap/accel-cmd-mps2"
 SPEED_TARGET = "ap/speed-target-mps"
 ALT_TARGET = "ap/alt-target-m"  # height above ground: the local frame's h
 BANK_LIMIT = "ap/bank-limit-rad"
-ROLL_RATE_LIMIT = "ap/roll-rate-limit-rad_sec"
 CLIMB_RATE_LIMIT = "ap/climb-rate-limit-mps"
 SPEED_MIN = "ap/speed-min-mps"
 SPEED_MAX = "ap/speed-max-mps"
@@ -42,7 +40,6 @@ TURB_SEVERITY = "atmosphere/turbulence/milspec/severity"  # probability-of-excee
 TURB_W20 = "atmosphere/turbulence/milspec/windspeed_at_20ft_AGL-fps"
 TURB_SEED = "atmosphere/randomseed"
 TURB_MILSPEC = 3
-KT = 1852.0 / 3600.0  # m/s per knot
 
 # MIL-F-8785C: below 1000 ft the intensity scales with the wind speed at 20 ft (light 15 kt,
 # moderate 30 kt, severe 45 kt); above 2000 ft it follows the probability of exceedance

@@ -11,8 +11,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from uavxai.dynamics.aircraft import FT, KT, TURBULENCE, wind_ne_from
+from uavxai.dynamics.aircraft import TURBULENCE, wind_ne_from
 from uavxai.errors import UserError
+from uavxai.geometry import wrap_angle
+from uavxai.units import FT, KT
 
 
 @dataclass(frozen=True)
@@ -73,4 +75,4 @@ class EnvironmentConfig:
             airspeed_mps * math.sin(heading_rad) + east,
             airspeed_mps * math.cos(heading_rad) + north,
         )
-        return (track - heading_rad + math.pi) % (2 * math.pi) - math.pi
+        return wrap_angle(track - heading_rad)

@@ -28,8 +28,8 @@ import math
 from collections.abc import Sequence
 
 from uavxai.errors import UserError
-
-G = 9.80665
+from uavxai.geometry import bank_of_turn_rate, wrap_angle
+from uavxai.units import G
 
 # Fraction of the bank limit the steady orbit may use, so that the correction loop keeps
 # roll authority (and the wind's varying ground speed is absorbed) without hitting the limit.
@@ -83,11 +83,6 @@ def scenario_orbit_radius(scenario: object) -> float:
     start, av = scenario.ownship.start, scenario.avoidance  # type: ignore[attr-defined]
     wind = EnvironmentConfig.from_scenario(scenario).wind_speed_mps
     return radius_for(start.speed_mps, math.radians(av.bank_limit_deg), wind_mps=wind)
-
-
-def _wrap(angle: float) -> float:
-    """Angle in [-pi, pi)."""
-    return (angle + math.pi) % (2 * math.pi) - math.pi
 
 
 class OrbitGuidance:
@@ -168,6 +163,6 @@ class OrbitGuidance:
         d_dot = vg * math.cos(chi - beta)
         beta_dot = vg * math.sin(chi - beta) / d
         chi_d_dot = beta_dot + self._lam * (self.k / r) / (1.0 + e * e) * d_dot
-        turn_rate = chi_d_dot + _wrap(chi_d - chi) / self.tau
-        bank = math.atan(vg * turn_rate / G)
+        turn_rate = chi_d_dot + wrap_angle(chi_d - chi) / self.tau
+        bank = bank_of_turn_rate(turn_rate, vg)
         return min(max(bank, -lim), lim)

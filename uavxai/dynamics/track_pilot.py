@@ -36,9 +36,8 @@ from typing import Protocol
 
 import numpy as np
 
-from uavxai.geometry import wrap_angle
+from uavxai.geometry import bank_of_turn_rate, wrap_angle
 
-G = 9.80665
 LOOKAHEAD_S = 8.0  # cross-track error turned into a course error over V x this
 COURSE_TIME_S = 4.0  # a course error is corrected with this time constant
 ALONG_GAIN = 0.05  # speed target per metre of along-track error, 1/s
@@ -146,9 +145,9 @@ class TrackPilot:
         along = -(dx * s + dy * c)  # > 0: the track point is ahead of the aircraft
         cross = dx * c - dy * s  # > 0: the aircraft is right of the track
         omega = self.turn_rate(t)
-        bank_ff = math.atan(speed * omega / G)
+        bank_ff = bank_of_turn_rate(omega, speed)
         chi_d = psi_p - math.atan(cross / (speed * LOOKAHEAD_S))
-        bank_fb = math.atan(speed * wrap_angle(chi_d - chi) / (COURSE_TIME_S * G))
+        bank_fb = bank_of_turn_rate(wrap_angle(chi_d - chi) / COURSE_TIME_S, speed)
         lim = self.bank_limit_rad
         bank = min(max(bank_ff + bank_fb, -lim), lim)
         track_speed = math.hypot(v[0], v[1])

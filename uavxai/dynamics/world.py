@@ -17,7 +17,7 @@ from collections.abc import Callable, Mapping
 import jsbsim
 import numpy as np
 
-from uavxai.dynamics.aircraft import FT, Aircraft, heading_from_deg
+from uavxai.dynamics.aircraft import Aircraft, heading_from_deg
 from uavxai.dynamics.behaviours import make_pilots, newcomer_pilot
 from uavxai.dynamics.environment import EnvironmentConfig
 from uavxai.dynamics.flow import Entry
@@ -28,6 +28,7 @@ from uavxai.dynamics.track_pilot import TrackLike
 from uavxai.dynamics.traffic import draw_intruders
 from uavxai.errors import UserError
 from uavxai.scenario import IntruderSpec, Scenario, aircraft_speed_range
+from uavxai.units import FT
 
 log = logging.getLogger(__name__)
 

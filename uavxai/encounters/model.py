@@ -15,7 +15,6 @@ k - 1 here).
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -109,9 +108,6 @@ class EncounterModel:
         except ValueError:
             raise UserError(f"{self.name}: no variable {label!r}; "
                             f"it has {', '.join(self.initial.labels)}") from None
-
-    def with_prior(self, prior: float | str) -> EncounterModel:
-        return dataclasses.replace(self, prior=prior)
 
     # -- sampling -------------------------------------------------------------------------
 

@@ -10,19 +10,18 @@ h up (m); heading clockwise from north.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from uavxai.encounters.model import EncounterModel, InitialSample, Transitions
 from uavxai.errors import UserError
+from uavxai.geometry import turn_rate_of_bank
+from uavxai.units import FT, KT
 
-KNOT = 1852.0 / 3600.0  # m/s
-FOOT = 0.3048  # m
-FOOT_PER_MINUTE = FOOT / 60.0  # m/s
+FOOT_PER_MINUTE = FT / 60.0  # m/s
 # UncorEncounterModel/getDynamicLimits: a fixed-wing track never slower than 30 ft/s.
-MIN_FIXED_WING_SPEED = 30 * FOOT  # 9.144 m/s
+MIN_FIXED_WING_SPEED = 30 * FT  # 9.144 m/s
 LABELS = {"altitude": "L", "speed": "v", "acceleration": "\\dot v",
           "vertical_rate": "\\dot h", "turn_rate": "\\dot \\psi"}
 
@@ -56,12 +55,12 @@ def sample2track(model: EncounterModel, initial: InitialSample, transitions: Tra
     vertical rate and turn rate second by second (kt, kt/s, ft/min, deg/s -> m, m/s)."""
     if not 1 <= steps_per_second <= 100:
         raise UserError("steps_per_second must be in 1..100")
-    h0 = initial.values[k, model.index(LABELS["altitude"])] * FOOT
-    v0 = initial.values[k, model.index(LABELS["speed"])] * KNOT
+    h0 = initial.values[k, model.index(LABELS["altitude"])] * FT
+    v0 = initial.values[k, model.index(LABELS["speed"])] * KT
     col = {lab: transitions.labels.index(LABELS[lab])
            for lab in ("acceleration", "vertical_rate", "turn_rate")}
     controls = np.repeat(transitions.values[k], steps_per_second, axis=0)
-    dv = controls[:, col["acceleration"]] * KNOT
+    dv = controls[:, col["acceleration"]] * KT
     dh = controls[:, col["vertical_rate"]] * FOOT_PER_MINUTE
     dpsi = np.radians(controls[:, col["turn_rate"]])
     dt = 1.0 / steps_per_second
@@ -85,7 +84,7 @@ def is_flyable(model: EncounterModel, track: Trajectory,
     ``min_speed`` (sample2track.m, getDynamicLimits: drops tracks that decelerate to near zero),
     no point below the ground (sample2track.m's CFIT test), and a vertical rate below the
     airspeed (UncorEncounterModel/sample)."""
-    edges = model.boundaries[model.index(LABELS["speed"])] * KNOT
+    edges = model.boundaries[model.index(LABELS["speed"])] * KT
     speed = track.speed
     return bool(np.all(speed > max(edges[0], min_speed)) and np.all(speed < edges[-1])
                 and np.all(track.h >= 0) and np.all(np.abs(track.vh) < speed))
@@ -116,12 +115,11 @@ def limit_track(track: Trajectory, max_speed: float = float("inf"),
     (rad) at the speed flown, g tan(max_bank) / V; heading and positions integrated again as
     :func:`sample2track` does (the rates at the start of each step). Unchanged when nothing
     exceeds the limits."""
-    g = 9.80665
     dt = np.diff(track.t)
     speed = np.minimum(track.speed, max_speed)
     psi = np.unwrap(np.arctan2(track.vx, track.vy))
     rate = np.diff(psi) / dt
-    top = g * math.tan(min(max_bank, 1.5)) / np.maximum(speed[:-1], 1e-6)
+    top = turn_rate_of_bank(min(max_bank, 1.5), np.maximum(speed[:-1], 1e-6))
     over = (np.abs(track.vh) > max_vertical_rate).any() or (track.speed > max_speed).any()
     if not (over or (np.abs(rate) > top).any()):
         return track

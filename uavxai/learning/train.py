@@ -60,7 +60,7 @@ from uavxai.avoidance.learned import (
 )
 from uavxai.avoidance.types import N_ACTIONS, PlannerConfig
 from uavxai.errors import UserError
-from uavxai.geometry import bearing, wrap_angle
+from uavxai.geometry import bearing, closest_point_of_approach, wrap_angle
 from uavxai.learning.env import EncounterEnv, default_goal, episode_intruders
 from uavxai.outputs import write_figure, write_output
 from uavxai.scenario import Scenario, Start
@@ -138,12 +138,7 @@ def situation(
     if len(pos):
         rel = pos - own[:3]
         rv = vel - (v * math.sin(psi), v * math.cos(psi), 0.0)
-        tcpa = np.clip(
-            -np.sum(rel * rv, axis=1) / np.maximum(np.sum(rv * rv, axis=1), 1e-9),
-            0.0,
-            hp.conflict_horizon_s,
-        )
-        dcpa = np.sqrt(np.sum((rel + rv * tcpa[:, None]) ** 2, axis=1))
+        tcpa, dcpa = closest_point_of_approach(rel, rv, hp.conflict_horizon_s)
         worst = (1.0 - dcpa / hp.warn_separation_m) * (1.0 - tcpa / hp.conflict_horizon_s)
         conflict = float(np.clip(worst.max(), 0.0, 1.0))
     return Situation(math.dist((x, y, h), goal), error, conflict)

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from uavxai.avoidance.model import COLLISION
 from uavxai.avoidance.types import Decision
 from uavxai.vocabulary import ACTIONS
 
@@ -20,7 +21,6 @@ CHOSEN_COLOR = (46, 204, 113)
 OTHER_COLOR = (120, 144, 156)
 COLLISION_COLOR = (231, 76, 60)
 ROOT_COLOR = (52, 152, 219)
-_COLLISION = 2  # SearchTree.terminal code
 
 LEAF_SPACING = 42.0  # graph-view units between stacked leaves; fits a two-line label
 LEVEL_SPACING = 150.0  # between depths; fits the widest label
@@ -112,9 +112,9 @@ def _from_tree(decision: Decision, max_depth: int, expand: int, branch: int) -> 
             if c == chosen_kid:
                 color = CHOSEN_COLOR
             else:
-                color = COLLISION_COLOR if tree.terminal[c] == _COLLISION else OTHER_COLOR
+                color = COLLISION_COLOR if tree.terminal[c] == COLLISION else OTHER_COLOR
             label = f"{short_action(int(tree.action[c]))}\nn={int(tree.visits[c])} Q={q[c]:.2f}"
-            if tree.terminal[c] == _COLLISION:
+            if tree.terminal[c] == COLLISION:
                 label += "\ncollision"
             index = graph.add(f"n{c}", label, color, int(tree.visits[c]), root_visits, g_index)
             if c in opened:

@@ -10,7 +10,6 @@ of planning with objective 0. The same bounds as the avoidance checkpoints
 
 from __future__ import annotations
 
-import reprlib
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -18,7 +17,7 @@ from typing import Any
 import torch
 from torch import nn
 
-from uavxai.errors import CheckpointError
+from uavxai.errors import CheckpointError, short_repr
 
 MAX_CHECKPOINT_BYTES = 256 * 2**20
 MAX_HIDDEN_WIDTH = 4096
@@ -27,9 +26,6 @@ MAX_OBS_DIM = 4096
 MAX_USERS = 64
 MAX_POWER_LEVELS = 64
 
-_SHORT = reprlib.Repr()
-_SHORT.maxstring = _SHORT.maxother = 40
-_SHORT.maxlist = _SHORT.maxtuple = _SHORT.maxdict = 4
 
 
 def read_checkpoint(p: Path, where: str, remedy: str) -> Any:
@@ -56,7 +52,7 @@ def declared_int(data: dict, field: str, lo: int, hi: int, p: Path, where: str, 
     value = data.get(field)
     if not (isinstance(value, int) and not isinstance(value, bool) and lo <= value <= hi):
         raise CheckpointError(
-            f"{where} {p}: {field} = {_SHORT.repr(value)}; allowed: an integer from {lo} to "
+            f"{where} {p}: {field} = {short_repr(value)}; allowed: an integer from {lo} to "
             f"{hi}. {remedy}"
         )
     return value
@@ -66,7 +62,7 @@ def declared_bool(data: dict, field: str, p: Path, where: str, remedy: str) -> b
     value = data.get(field)
     if not isinstance(value, bool):
         raise CheckpointError(
-            f"{where} {p}: {field} = {_SHORT.repr(value)}; allowed: true or false. {remedy}"
+            f"{where} {p}: {field} = {short_repr(value)}; allowed: true or false. {remedy}"
         )
     return value
 
@@ -90,7 +86,7 @@ def build_checked(
         wrong = sorted(set(found.items()) ^ set(expected.items()), key=str)[:4]
         raise CheckpointError(
             f"{where} {p}: the stored weights do not have the declared sizes (differs at "
-            f"{_SHORT.repr(wrong)}); the file is damaged or forged. {remedy}"
+            f"{short_repr(wrong)}); the file is damaged or forged. {remedy}"
         )
     for k, v in state_dict.items():
         if not v.is_floating_point() or not bool(torch.isfinite(v).all()):

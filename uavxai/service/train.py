@@ -252,11 +252,14 @@ def _random_curve(env: ServiceEnv, episodes: int, seed: int, progress, task) -> 
     return {"curve": curve, "wall_s": time.perf_counter() - t0}
 
 
+# learning_curve.csv of the service stage, one row per algorithm and episode
+CURVE_COLUMNS = ("algo", "episode", "epsilon", "return_bps", "train_objective", "greedy_objective")
+
+
 def _write_csv(path: Path, runs: dict[str, dict[str, Any]]) -> None:
-    fields = ["algo", "episode", "epsilon", "return_bps", "train_objective", "greedy_objective"]
     buf = io.StringIO()
     writer = csv.writer(buf)
-    writer.writerow(fields)
+    writer.writerow(CURVE_COLUMNS)
     for name, run in runs.items():
         for row in run["curve"]:
             writer.writerow(

@@ -32,6 +32,7 @@ import numpy as np
 from uavxai.avoidance.types import Decision, Intruder, Ownship
 from uavxai.dynamics.orbit import scenario_orbit_radius
 from uavxai.dynamics.state import TrafficState
+from uavxai.geometry import turn_positions
 from uavxai.scenario import Scenario
 from uavxai.sim.episode import Episode, Observer
 from uavxai.vocabulary import HOLD, Outcome
@@ -295,22 +296,18 @@ def clearance(
     """(smallest predicted separation, who, when) between the ownship at ``path`` (T, 3)
     at times ``t`` and every intruder on its believed constant turn, less ``sigmas`` times
     each track's position error."""
-    best, who, when = math.inf, None, 0.0
-    for i in intruders:
-        speed, w = math.hypot(i.vx, i.vy), i.turn_rate
-        psi0 = math.atan2(i.vx, i.vy)
-        if abs(w) < 1e-6:
-            xs, ys = i.x + i.vx * t, i.y + i.vy * t
-        else:  # constant turn, clockwise positive
-            xs = i.x + speed / w * (np.cos(psi0) - np.cos(psi0 + w * t))
-            ys = i.y + speed / w * (np.sin(psi0 + w * t) - np.sin(psi0))
-        hs = i.h + i.vh * t
-        d = np.sqrt((path[:, 0] - xs) ** 2 + (path[:, 1] - ys) ** 2 + (path[:, 2] - hs) ** 2)
-        d = d - sigmas * i.sigma_m  # the track's uncertainty shrinks the room believed
-        k = int(np.argmin(d))
-        if d[k] < best:
-            best, who, when = float(d[k]), f"intruder {str(i.id).removeprefix('intruder-')}", t[k]
-    return best, who, float(when)
+    if not intruders:
+        return math.inf, None, 0.0
+    pos = np.array([(i.x, i.y, i.h) for i in intruders], dtype=float)
+    vel = np.array([(i.vx, i.vy, i.vh) for i in intruders], dtype=float)
+    ahead = turn_positions(pos, vel, t, np.array([i.turn_rate for i in intruders]))  # (T, N, 3)
+    d = np.sqrt(np.sum((path[:, None, :] - ahead) ** 2, axis=2))
+    # the track's uncertainty shrinks the room believed
+    d = d - sigmas * np.array([i.sigma_m for i in intruders])[None, :]
+    k = np.argmin(d, axis=0)  # each intruder's closest instant (the first on a tie)
+    j = int(np.argmin(d[k, np.arange(len(intruders))]))  # the closest intruder (the first)
+    who = f"intruder {str(intruders[j].id).removeprefix('intruder-')}"
+    return float(d[k[j], j]), who, float(t[k[j]])
 
 
 @dataclass(frozen=True)

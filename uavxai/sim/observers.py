@@ -386,7 +386,7 @@ class Service(Observer):
     so that a re-planned point counts for the time it was flown."""
 
     def __init__(self, scenario, channel, power_w, out: Path | None, replan=None) -> None:
-        from uavxai.comms.delivery import Delivery
+        from uavxai.comms.delivery import SERVICE_COLUMNS, USERS_COLUMNS, Delivery
         from uavxai.comms.mobility import UserMobility
 
         self.scenario = scenario
@@ -402,9 +402,9 @@ class Service(Observer):
         self._files = []
         if out is not None:
             self._users = (out / "users.csv").open("w")
-            self._users.write("t,user,x,y\n")
+            self._users.write(",".join(USERS_COLUMNS) + "\n")
             self._service = (out / "service.csv").open("w")
-            self._service.write("t,user,power_w,sinr_db,rate_bps\n")
+            self._service.write(",".join(SERVICE_COLUMNS) + "\n")
             self._files = [self._users, self._service]
 
     def on_sample(self, ep: Episode, state: TrafficState) -> None:

@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import math
 import zlib
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -433,12 +432,3 @@ def report_from_adsb(
         sigma_vel=cfg.sigma_vel if vel is not None else (math.inf, math.inf),
         source="adsb",
     )
-
-
-def reports_to_arrays(reports: Sequence[Report]) -> tuple[np.ndarray, np.ndarray]:
-    """(K, 3) positions and (K, 3) velocities (NaN where a report has none)."""
-    pos = np.array([r.pos for r in reports], dtype=float).reshape(len(reports), 3)
-    vel = np.array(
-        [r.vel if r.vel is not None else np.full(3, np.nan) for r in reports], dtype=float
-    ).reshape(len(reports), 3)
-    return pos, vel

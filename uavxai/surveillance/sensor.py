@@ -15,6 +15,7 @@ import numpy as np
 
 from uavxai.dynamics.state import TrafficState
 from uavxai.errors import UserError
+from uavxai.geometry import wrap_angle
 
 
 @dataclass(frozen=True)
@@ -43,6 +44,6 @@ def sensor_sees(state: TrafficState, rows: np.ndarray, sensor: SensorConfig) -> 
     d = state.pos[rows] - state.pos[0]
     in_range = np.linalg.norm(d, axis=1) <= sensor.range_m
     bearing = np.arctan2(d[:, 0], d[:, 1])  # clockwise from north
-    off = np.abs((bearing - state.att[0, 2] + math.pi) % (2 * math.pi) - math.pi)
+    off = np.abs(wrap_angle(bearing - state.att[0, 2]))
     in_fov = off <= math.radians(sensor.fov_deg) / 2 + 1e-12
     return in_range & in_fov

@@ -23,7 +23,7 @@ constant-turn model over the ground fits. Reports are moved into the air mass (p
 the wind's drift since t = 0, velocity less the wind) and beliefs back (the drift and the wind
 added), so beliefs are over the ground as before, with ``turn_rate`` the air-relative one
 (the aircraft's heading rate, g tan(bank) / airspeed); the planner's model predicts the same
-way (:func:`uavxai.avoidance.model.turn_positions` with its wind).
+way (:func:`uavxai.geometry.turn_positions` with its wind).
 
 Why not filterpy: its EKF class would only hold the same matrices, its IMM works on linear
 filters, and the whole filter is a few numpy lines here.
@@ -40,11 +40,11 @@ import numpy as np
 from uavxai.avoidance.types import Intruder
 from uavxai.dynamics.state import TrafficState
 from uavxai.errors import UserError
-from uavxai.surveillance.adsb import Report, Surveillance, SurveillanceConfig
+from uavxai.geometry import turn_rate_of_bank
+from uavxai.surveillance.adsb import Report
 
 X, Y, VX, VY, W, H, VH = range(7)
 DIM = 7
-G = 9.80665
 
 
 @dataclass(frozen=True)
@@ -287,61 +287,7 @@ def truth_beliefs(state: TrafficState) -> list[Intruder]:
                 vx=float(state.vel[i, 0]),
                 vy=float(state.vel[i, 1]),
                 vh=float(state.vel[i, 2]),
-                turn_rate=G * math.tan(float(state.att[i, 0])) / v,
+                turn_rate=turn_rate_of_bank(float(state.att[i, 0]), v),
             )
         )
     return out
-
-
-class SurveillancePicture:
-    """Surveillance and tracking together: what the planner believes of the traffic.
-
-    Call :meth:`observe` with every state the dynamics produce (the reports are sampled and
-    delivered there), and call the object (``picture(state)``) for the beliefs at that
-    state's time; that call observes the state too, so a caller with one state per decision
-    works as well (with reports then delivered at the decision instants only). With
-    ``model: truth`` the beliefs are :func:`truth_beliefs`.
-    """
-
-    def __init__(
-        self,
-        config: SurveillanceConfig | None = None,
-        seed: int = 0,
-        tracker: TrackerConfig | None = None,
-        wind_mps: tuple[float, float] = (0.0, 0.0),
-    ) -> None:
-        self.config = config or SurveillanceConfig()
-        self.surveillance = Surveillance(self.config, seed)
-        self.tracker = Tracker(tracker, wind_mps)
-        self._t_observed: float | None = None
-
-    def sample(self, state: TrafficState) -> list[Report]:
-        """The reports delivered at ``state.t``, without feeding the tracker (for a caller
-        that sends the ADS-B ones over MAVLink and :meth:`ingest` s what comes back, plus
-        the onboard sensor's, which are not transmitted). Each instant is sampled once."""
-        if self._t_observed is not None and state.t <= self._t_observed:
-            return []
-        self._t_observed = state.t
-        if self.config.model == "truth":
-            return []
-        return self.surveillance.observe(state)
-
-    def ingest(self, reports: Iterable[Report]) -> None:
-        """Feed reports to the tracker (e.g. decoded from ADSB_VEHICLE by the bridge)."""
-        self.tracker.update(reports)
-
-    def observe(self, state: TrafficState) -> list[Report]:
-        """:meth:`sample` and :meth:`ingest` in one: the direct path without MAVLink."""
-        reports = self.sample(state)
-        self.ingest(reports)
-        return reports
-
-    def beliefs(self, t: float) -> list[Intruder]:
-        """The tracker's beliefs at ``t`` (without observing anything)."""
-        return self.tracker.beliefs(t)
-
-    def __call__(self, state: TrafficState) -> list[Intruder]:
-        if self.config.model == "truth":
-            return truth_beliefs(state)
-        self.observe(state)
-        return self.tracker.beliefs(state.t)
