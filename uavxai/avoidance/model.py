@@ -468,6 +468,17 @@ def _frozen(a: np.ndarray) -> np.ndarray:
     return a
 
 
+# A body motion's memo key: speed, bank, bank command (rounded) and the segment's duration.
+_MotionKey = tuple[float, float, float, float]
+
+
+def motion_key(v: float, phi: float, cmd: float, duration: float) -> _MotionKey:
+    """Keys are rounded far below any physical effect so that states reached along different
+    float paths (20 + 4 - 4) share an entry; the motion is computed from the key itself, so
+    the answer never depends on what the memo already holds."""
+    return (round(float(v), 6), round(float(phi), 9), round(float(cmd), 9), float(duration))
+
+
 class EncounterModel:
     """Closed-loop ownship kinematics and intruder tracks (see the module docstring)."""
 
@@ -642,16 +653,8 @@ class EncounterModel:
         cfg = self.config
         n = self._check(duration, track)
         x, y, h, v, psi, phi, cmd = state[:7]
-        # Keys are rounded far below any physical effect so that states reached along
-        # different float paths (20 + 4 - 4) share an entry; the motion is computed from the
-        # key itself, so the answer never depends on what the memo already holds.
-        key = (round(v, 6), round(phi, 9), round(cmd, 9), float(duration))
-        body = self._memo.get(key)
-        if body is None:
-            if len(self._memo) > 50_000:
-                self._memo.clear()
-            v_, phi_, cmd_ = (np.full(self.actions.size, k) for k in key[:3])
-            body = self._memo[key] = self._body(v_, phi_, cmd_, self.actions, duration, n)
+        key = motion_key(v, phi, cmd, duration)
+        body = self._memo.get(key) or self._remember([key], n)[0]
         origin = complex(x, y)
         rot = complex(math.cos(psi), -math.sin(psi))
         sink = cfg.climb_rate_mps * duration
@@ -684,6 +687,54 @@ class EncounterModel:
         own_step = self._own_step(body, duration / n)
         seen = _Intruders.of(track, near)
         return placed, self._events(None, xy, hs, goal, seen, box, duration / n, own_step, False)
+
+    def _remember(self, keys: Sequence[_MotionKey], n: int) -> list[_BodyMotion]:
+        """Compute and memoise the body motions of ``keys`` (not yet memoised), one batch."""
+        if len(self._memo) > 50_000:
+            self._memo.clear()
+        k = self.actions.size
+        v_, phi_, cmd_ = (np.repeat(np.array([key[i] for key in keys]), k) for i in range(3))
+        actions = np.tile(self.actions, len(keys))
+        bodies = self._bodies(v_, phi_, cmd_, actions, keys[0][3], n, len(keys))
+        self._memo.update(zip(keys, bodies, strict=True))
+        return bodies
+
+    def motions(
+        self, state: Sequence[float], duration: float, levels: int
+    ) -> tuple[list[_MotionKey], np.ndarray]:
+        """Every body-motion key a tree search from ``state`` can expand within ``levels``
+        tree levels (the root's first), memoised level by level in one batch each, and the
+        (M, K) table of the keys' indices that each key's children have (-1 on the last
+        level, whose children are never expanded). A search needs a few dozen; one at a time
+        they cost more than the rest of the search."""
+        n = self.substeps(duration)
+        keys = [motion_key(state[V], state[PHI], state[PHI_CMD], duration)]
+        index = {keys[0]: 0}
+        child = np.full((1, self.actions.size), -1, dtype=np.int64)
+        frontier = keys[:]
+        for level in range(levels):
+            missing = [key for key in frontier if key not in self._memo]
+            if missing:
+                self._remember(missing, n)
+            if level == levels - 1:
+                break
+            nxt = []
+            for key in frontier:
+                row = child[index[key]]
+                for a, (_, _, v_end, phi_end, phi_cmd) in enumerate(self._memo[key].rows):
+                    kid = motion_key(v_end, phi_end, phi_cmd, duration)
+                    if kid not in index:
+                        index[kid] = len(keys)
+                        keys.append(kid)
+                        nxt.append(kid)
+                    row[a] = index[kid]
+            child = np.concatenate([child, np.full((len(nxt), child.shape[1]), -1)])
+            frontier = nxt
+        return keys, child
+
+    def motion(self, key: _MotionKey) -> _BodyMotion:
+        """The memoised body motion of ``key`` (see :meth:`motions`)."""
+        return self._memo[key]
 
     def fly_commanded(
         self, states: np.ndarray, bank_cmd: np.ndarray, duration: float
@@ -768,6 +819,15 @@ class EncounterModel:
         )
 
     def _body(self, v0, phi0, cmd0, actions, duration: float, n: int) -> _BodyMotion:
+        """The body motion of a batch of rows (one circle bounds them all)."""
+        return self._bodies(v0, phi0, cmd0, actions, duration, n, 1)[0]
+
+    def _bodies(
+        self, v0, phi0, cmd0, actions, duration: float, n: int, groups: int
+    ) -> list[_BodyMotion]:
+        """The body motions of ``groups`` equal consecutive groups of rows, computed in one
+        batch: every number is computed per row, so a group's motion is the same as if it
+        had been computed alone (the memo's answer never depends on its batch)."""
         cfg = self.config
         dt = duration / n
         tm = dt * (np.arange(n) + 0.5)  # sub-step midpoints
@@ -799,35 +859,37 @@ class EncounterModel:
         v_end = np.clip(v0 + accel * duration, vmin, vmax)
         rise = np.zeros((len(v0), n + 1))  # the climb at each sub-step's midpoint speed
         np.cumsum(climb_rate(v_m, cfg) * dt, axis=1, out=rise[:, 1:])
-        lo = complex(z.real.min(), z.imag.min())
-        hi = complex(z.real.max(), z.imag.max())
-        ball = 0.5 * (lo + hi)
         template = np.zeros((len(v0), STATE_DIM))
         template[:, V], template[:, PHI], template[:, PHI_CMD] = v_end, phi_end, phi_cmd
-        return _BodyMotion(
-            z=z,
-            dpsi=psi[:, -1],
-            v_end=v_end,
-            phi_end=phi_end,
-            phi_cmd=phi_cmd,
-            ball=ball,
-            ball_r=float(np.abs(z - ball).max()),
-            step_max=float(chord.max()),
-            template=template,
-            z_end=z[:, -1].copy(),
-            rows=tuple(
-                zip(
-                    z[:, -1].tolist(),
-                    psi[:, -1].tolist(),
-                    v_end.tolist(),
-                    phi_end.tolist(),
-                    phi_cmd.tolist(),
-                    strict=True,
+        rows = list(zip(z[:, -1].tolist(), psi[:, -1].tolist(), v_end.tolist(),
+                        phi_end.tolist(), phi_cmd.tolist(), strict=True))  # fmt: skip
+        rise_end = rise[:, -1].tolist()
+        out = []
+        size = len(v0) // groups
+        for g in range(groups):
+            part = slice(g * size, (g + 1) * size)
+            zg = z[part]
+            lo = complex(zg.real.min(), zg.imag.min())
+            hi = complex(zg.real.max(), zg.imag.max())
+            ball = 0.5 * (lo + hi)
+            out.append(
+                _BodyMotion(
+                    z=zg,
+                    dpsi=psi[part, -1],
+                    v_end=v_end[part],
+                    phi_end=phi_end[part],
+                    phi_cmd=phi_cmd[part],
+                    ball=ball,
+                    ball_r=float(np.abs(zg - ball).max()),
+                    step_max=float(chord[part].max()),
+                    template=template[part],
+                    z_end=zg[:, -1].copy(),
+                    rows=tuple(rows[part]),
+                    rise=rise[part],
+                    rise_end=tuple(rise_end[part]),
                 )
-            ),
-            rise=rise,
-            rise_end=tuple(rise[:, -1].tolist()),
-        )
+            )
+        return out
 
     def _end(self, xy_end, h_end, psi, body: _BodyMotion) -> np.ndarray:
         end = body.template.copy()
