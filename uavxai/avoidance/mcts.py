@@ -33,6 +33,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from uavxai.avoidance import kernel
 from uavxai.avoidance.lines import cornered_choice, measured_children
 from uavxai.avoidance.model import (
     COLLISION,
@@ -199,9 +200,14 @@ class TreePlanner:
 class MCTSPlanner(TreePlanner):
     """The MCTS avoidance planner. Same seed, same inputs: same decision."""
 
-    def __init__(self, config: PlannerConfig | None = None, *, name: str = "mcts") -> None:
+    def __init__(
+        self, config: PlannerConfig | None = None, *, name: str = "mcts", compiled: bool = True
+    ) -> None:
         super().__init__(config, name=name)
         self._rng = np.random.default_rng(self.config.seed)
+        # compiled: the numba kernel (uavxai.avoidance.kernel), the same tree as the Python
+        # search below, which stays as the reference it is tested against
+        self.compiled = compiled
 
     def reset(self, seed: int) -> None:
         self._rng = np.random.default_rng(seed)
@@ -210,7 +216,7 @@ class MCTSPlanner(TreePlanner):
         self, root: np.ndarray, goal: np.ndarray, tracks: list[Track], time_left_s: float
     ) -> SearchTree:
         cfg = self.config
-        return search(
+        return (kernel.search if self.compiled else search)(
             self.model,
             root,
             goal,

@@ -495,6 +495,7 @@ class EncounterModel:
         k = config.n_actions
         self.actions = np.arange(k)  # the action set: the first k of the table
         self._climbs = _CLIMB_SIGN[:k].tolist()
+        self.climbs = _frozen(_CLIMB_SIGN[:k].astype(np.int64))  # per action: +1 climb, -1 descend
         self.vertical = any(self._climbs)
         self._level = (0,) * k  # the vertical commands of the paper's children
         # What a segment with nothing in reach reports, shared and read-only.
