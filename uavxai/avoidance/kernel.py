@@ -16,6 +16,7 @@ builds its tree with it, and it is what the kernel is tested against.
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -382,18 +383,12 @@ def search(
 ) -> SearchTree:
     """:func:`uavxai.avoidance.mcts.search`, compiled: the same tree from the same inputs."""
     depth_limit = len(tracks)
-    explore = np.array(
-        [2.0 * c * math.sqrt(2.0 * math.log(n)) if n else 0.0 for n in range(simulations)]
-    )
-    inv_sqrt = np.array([1.0 / math.sqrt(n) if n else math.inf for n in range(simulations)])
+    explore, inv_sqrt = _uct_tables(simulations, c)
     draws = rng.random(simulations * depth_limit)  # tie-breaks, one per step, as in Python
     keys, child = model.motions(np.asarray(root, dtype=float).tolist(), hold_s, depth_limit)
     bodies = [model.motion(key) for key in keys]
     n = model.substeps(hold_s)
-    bend = np.stack(
-        [np.stack([b.z_end.real, b.z_end.imag, b.dpsi, b.v_end, b.phi_end, b.phi_cmd,
-                   np.array(b.rise_end)], axis=1) for b in bodies]  # fmt: skip
-    )
+    bend = np.stack([b.table for b in bodies])
     bscal = np.array(
         [(b.ball.real, b.ball.imag, b.ball_r, model._own_step(b, hold_s / n)) for b in bodies]
     )
@@ -404,6 +399,18 @@ def search(
                model.drift(hold_s, n), _params(model, goal, hold_s, time_left_s), explore,
                inv_sqrt, draws, simulations)  # fmt: skip
     return _as_search_tree(tree, int(size), model.actions.size, hold_s, time_left_s)
+
+
+@functools.lru_cache(maxsize=8)
+def _uct_tables(simulations: int, c: float) -> tuple[np.ndarray, np.ndarray]:
+    """UCT's ``2C sqrt(2 ln n)`` and ``1 / sqrt(n_j)`` by visit count, as mcts.search has
+    them."""
+    explore = np.array(
+        [2.0 * c * math.sqrt(2.0 * math.log(n)) if n else 0.0 for n in range(simulations)]
+    )
+    inv_sqrt = np.array([1.0 / math.sqrt(n) if n else math.inf for n in range(simulations)])
+    explore.flags.writeable = inv_sqrt.flags.writeable = False
+    return explore, inv_sqrt
 
 
 def _pack(tracks: list[Track], n: int) -> tuple:

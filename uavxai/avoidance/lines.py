@@ -58,6 +58,7 @@ def measure_line(
     tracks: Sequence[Track],
     hold_s: float,
     d_min_m: float,
+    chords: Sequence[tuple[np.ndarray, np.ndarray]] | None = None,
 ) -> LineMeasure:
     """Measure a line of edges: ``samples[e]`` (n+1, 3) ownship positions at the sub-step
     instants of edge ``e``, flown at tree level ``levels[e]`` against ``tracks[level]``;
@@ -67,6 +68,7 @@ def measure_line(
     is solved exactly. A line that reaches the goal or leaves the area counts up to the end of
     that event's sub-step (it stops there); one that collides is measured to the end of the
     edge, so that its miss is the closest approach, not where it first came too close.
+    ``chords[e]``: edge ``e``'s :func:`chord_distances`, if computed already (in a batch).
     """
     n_int = tracks[0].count if tracks else 0
     best = np.full(n_int, math.inf)
@@ -74,7 +76,7 @@ def measure_line(
     best_margin = np.zeros(n_int)  # each track's margin at its closest approach
     meets = None
     horizon = 0.0
-    for own, level, (code, t_event) in zip(samples, levels, ends, strict=True):
+    for e, (own, level, (code, t_event)) in enumerate(zip(samples, levels, ends, strict=True)):
         track = tracks[level]
         n = own.shape[0] - 1
         dt = hold_s / n
@@ -84,7 +86,7 @@ def measure_line(
             keep = min(n, int(round(t_event / dt)) + 1)
         horizon = t0 + keep * dt
         if n_int:
-            dist, frac = _chord_distances(own, track.pos)
+            dist, frac = chord_distances(own, track.pos) if chords is None else chords[e]
             t = t0 + (np.arange(n)[:, None] + frac) * dt
             kept = dist[:keep]
             k = np.argmin(kept, axis=0)
@@ -111,16 +113,17 @@ def measure_line(
     return LineMeasure(float(best[j]), j, float(best_t[j]), met, horizon, unsure)
 
 
-def _chord_distances(own: np.ndarray, intruders: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(n, N) closest distance on every sub-step to every intruder, and its fraction along
-    the sub-step; ``own`` (n+1, 3), ``intruders`` (n+1, N, 3)."""
-    rel = own[:, None, :] - intruders
-    step = np.diff(rel, axis=0)
-    a = np.einsum("ijk,ijk->ij", step, step)
-    b = np.einsum("ijk,ijk->ij", rel[:-1], step)
+def chord_distances(own: np.ndarray, intruders: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(..., n, N) closest distance on every sub-step to every intruder, and its fraction
+    along the sub-step; ``own`` (..., n+1, 3), ``intruders`` (..., n+1, N, 3): one edge, or
+    a batch of them."""
+    rel = own[..., :, None, :] - intruders
+    step = np.diff(rel, axis=-3)
+    a = np.einsum("...ijk,...ijk->...ij", step, step)
+    b = np.einsum("...ijk,...ijk->...ij", rel[..., :-1, :, :], step)
     s = np.clip(-b / np.maximum(a, 1e-12), 0.0, 1.0)
-    closest = rel[:-1] + s[..., None] * step
-    return np.sqrt(np.einsum("ijk,ijk->ij", closest, closest)), s
+    closest = rel[..., :-1, :, :] + s[..., None] * step
+    return np.sqrt(np.einsum("...ijk,...ijk->...ij", closest, closest)), s
 
 
 def _first_conflict(
@@ -155,6 +158,7 @@ def measured_children(
     """A tree planner's root options quoting what their lines predict (:func:`measure_line`)
     and which manoeuvre each flies (:func:`flies`); and how far ahead each line reaches."""
     out, horizons = [], {}
+    chords = _edge_chords(lines, tree, samples, tracks)
     for c in children:
         line = lines[c.action]
         m = measure_line(
@@ -164,10 +168,29 @@ def measured_children(
             tracks,
             config.action_hold_s,
             config.d_min_m,
+            None if chords is None else [chords[node] for node in line],
         )
         out.append(replace(with_measure(c, m, ids), effect=flies(c.action, own, config)))
         horizons[c.action] = m.horizon_s
     return out, horizons
+
+
+def _edge_chords(
+    lines: dict[int, list[int]],
+    tree: SearchTree,
+    samples: dict[int, np.ndarray],
+    tracks: Sequence[Track],
+) -> dict[int, tuple[np.ndarray, np.ndarray]] | None:
+    """:func:`chord_distances` of every edge of ``lines``, by node, in one batch (one call
+    per edge costs more than the rest of the explanation); None without intruders."""
+    nodes = [node for line in lines.values() for node in line]
+    if not nodes or not tracks or not tracks[0].count:
+        return None
+    levels = tree.depth[nodes] - 1
+    dist, frac = chord_distances(
+        np.stack([samples[node] for node in nodes]), np.stack([t.pos for t in tracks])[levels]
+    )
+    return {node: (dist[e], frac[e]) for e, node in enumerate(nodes)}
 
 
 def with_measure(child: ChildStats, m: LineMeasure, ids: Sequence) -> ChildStats:

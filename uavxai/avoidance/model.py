@@ -151,8 +151,8 @@ class Track:
 
     Between two instants an intruder moves in a straight line, so the ball around its samples
     holds its whole path. ``Track.of(pos, index_distance=d)`` also files every intruder in a
-    grid of the horizontal plane, so that :meth:`near` queries up to ``d`` cost a dictionary
-    look-up when nothing is near (the usual case in a tree search).
+    grid of the horizontal plane (when :meth:`near` is first asked), so that queries up to
+    ``d`` cost a dictionary look-up when nothing is near (the usual case in a tree search).
     """
 
     pos: np.ndarray  # (n+1, N, 3)
@@ -196,9 +196,7 @@ class Track:
             index_distance=index_distance if pos.shape[1] >= _INDEX_MIN else 0.0,
             margin=margin,
         )
-        if track.index_distance > 0:
-            track._file(index_distance)
-        return track
+        return track  # filed in its grid when first asked (the compiled search never asks)
 
     def _file(self, distance: float) -> None:
         """Each intruder goes into every cell that its ball grown by ``distance`` touches, so
@@ -231,6 +229,8 @@ class Track:
     def near(self, centre: Sequence[float], distance: float) -> np.ndarray:
         """Indices of intruders whose path may come within ``distance`` of ``centre``."""
         if distance <= self.index_distance:
+            if not self.cells:
+                self._file(self.index_distance)
             x, y, h = centre
             size = self.cell_m
             found = [
@@ -393,6 +393,10 @@ class _BodyMotion:
     rows: tuple = ()  # per row (z_end, dpsi, v_end, phi_end, phi_cmd) as Python numbers
     rise: np.ndarray | None = None  # (B, n+1) the most it can have climbed by each instant
     rise_end: tuple[float, ...] = ()  # per row, the last column of rise
+    # per row (z_end.real, z_end.imag, dpsi, v_end, phi_end, phi_cmd, rise_end): the compiled
+    # search's table (uavxai.avoidance.kernel)
+    table: np.ndarray | None = None
+    children: tuple = ()  # per row, the memo key of the child's motion (see motion_key)
 
 
 @dataclass(slots=True)
@@ -722,8 +726,7 @@ class EncounterModel:
             nxt = []
             for key in frontier:
                 row = child[index[key]]
-                for a, (_, _, v_end, phi_end, phi_cmd) in enumerate(self._memo[key].rows):
-                    kid = motion_key(v_end, phi_end, phi_cmd, duration)
+                for a, kid in enumerate(self._memo[key].children):
                     if kid not in index:
                         index[kid] = len(keys)
                         keys.append(kid)
@@ -865,29 +868,39 @@ class EncounterModel:
         rows = list(zip(z[:, -1].tolist(), psi[:, -1].tolist(), v_end.tolist(),
                         phi_end.tolist(), phi_cmd.tolist(), strict=True))  # fmt: skip
         rise_end = rise[:, -1].tolist()
-        out = []
+        table = np.stack([z[:, -1].real, z[:, -1].imag, psi[:, -1], v_end, phi_end, phi_cmd,
+                          rise[:, -1]], axis=1)  # fmt: skip
+        ends = zip(v_end.tolist(), phi_end.tolist(), phi_cmd.tolist(), strict=True)
+        kids = [motion_key(v, p, c, duration) for v, p, c in ends]
+        # Per group: the circle holding its paths, the longest chord.
         size = len(v0) // groups
+        zg = z.reshape(groups, -1)
+        lo = zg.real.min(axis=1) + 1j * zg.imag.min(axis=1)
+        hi = zg.real.max(axis=1) + 1j * zg.imag.max(axis=1)
+        ball = 0.5 * (lo + hi)
+        ball_r = np.abs(zg - ball[:, None]).max(axis=1).tolist()
+        step_max = chord.reshape(groups, -1).max(axis=1).tolist()
+        ball, z_end = ball.tolist(), z[:, -1].copy()
+        out = []
         for g in range(groups):
             part = slice(g * size, (g + 1) * size)
-            zg = z[part]
-            lo = complex(zg.real.min(), zg.imag.min())
-            hi = complex(zg.real.max(), zg.imag.max())
-            ball = 0.5 * (lo + hi)
             out.append(
                 _BodyMotion(
-                    z=zg,
+                    z=z[part],
                     dpsi=psi[part, -1],
                     v_end=v_end[part],
                     phi_end=phi_end[part],
                     phi_cmd=phi_cmd[part],
-                    ball=ball,
-                    ball_r=float(np.abs(zg - ball).max()),
-                    step_max=float(chord[part].max()),
+                    ball=ball[g],
+                    ball_r=ball_r[g],
+                    step_max=step_max[g],
                     template=template[part],
-                    z_end=zg[:, -1].copy(),
+                    z_end=z_end[part],
                     rows=tuple(rows[part]),
                     rise=rise[part],
                     rise_end=tuple(rise_end[part]),
+                    table=table[part],
+                    children=tuple(kids[part]),
                 )
             )
         return out
