@@ -71,35 +71,35 @@ def measure_line(
     ``chords[e]``: edge ``e``'s :func:`chord_distances`, if computed already (in a batch).
     """
     n_int = tracks[0].count if tracks else 0
+    used = next((e + 1 for e, (code, _) in enumerate(ends) if code != NONE), len(ends))
+    n = samples[0].shape[0] - 1
+    dt = hold_s / n
+    keep = np.full(used, n)
+    code, t_event = ends[used - 1]
+    if code in (GOAL, OUT_OF_BOUNDS) and math.isfinite(t_event):
+        keep[-1] = min(n, int(round(t_event / dt)) + 1)
+    t0 = np.asarray(levels[:used], dtype=float) * hold_s
+    horizon = float(t0[-1] + keep[-1] * dt)
     best = np.full(n_int, math.inf)
-    best_t = np.full(n_int, math.nan)
-    best_margin = np.zeros(n_int)  # each track's margin at its closest approach
     meets = None
-    horizon = 0.0
-    for e, (own, level, (code, t_event)) in enumerate(zip(samples, levels, ends, strict=True)):
-        track = tracks[level]
-        n = own.shape[0] - 1
-        dt = hold_s / n
-        t0 = level * hold_s
-        keep = n
-        if code in (GOAL, OUT_OF_BOUNDS) and math.isfinite(t_event):
-            keep = min(n, int(round(t_event / dt)) + 1)
-        horizon = t0 + keep * dt
-        if n_int:
-            dist, frac = chord_distances(own, track.pos) if chords is None else chords[e]
-            t = t0 + (np.arange(n)[:, None] + frac) * dt
-            kept = dist[:keep]
-            k = np.argmin(kept, axis=0)
-            cols = np.arange(n_int)
-            closer = kept[k, cols] < best
-            best = np.where(closer, kept[k, cols], best)
-            best_t = np.where(closer, t[k, cols], best_t)
-            if track.margin is not None:  # the sub-step's end margin, as the search holds it
-                best_margin = np.where(closer, track.margin[k + 1, cols], best_margin)
-            if code == COLLISION and meets is None:
-                meets = _first_conflict(dist, track, d_min_m, t0, dt)
-        if code != NONE:
-            break
+    if n_int:
+        if chords is None:
+            chords = [chord_distances(samples[e], tracks[levels[e]].pos) for e in range(used)]
+        dist = np.stack([chords[e][0] for e in range(used)])  # (E, n, N)
+        frac = np.stack([chords[e][1] for e in range(used)])
+        # the closest approach to each intruder over the kept sub-steps, the first if tied
+        kept = np.where(np.arange(n)[None, :, None] < keep[:, None, None], dist, np.inf)
+        first = kept.reshape(used * n, n_int).argmin(axis=0)
+        e, k = np.divmod(first, n)
+        cols = np.arange(n_int)
+        best = kept[e, k, cols]
+        best_t = t0[e] + (k + frac[e, k, cols]) * dt
+        margins = np.stack([np.zeros((n + 1, n_int)) if tracks[lv].margin is None
+                            else tracks[lv].margin for lv in levels[:used]])  # fmt: skip
+        best_margin = margins[e, k + 1, cols]  # the sub-step's end margin, as the search holds it
+        if code == COLLISION:
+            last = used - 1
+            meets = _first_conflict(dist[last], tracks[levels[last]], d_min_m, float(t0[last]), dt)
     if not n_int or not np.isfinite(best).any():
         return LineMeasure(math.inf, -1, None, None, horizon)
     j = int(np.argmin(best))

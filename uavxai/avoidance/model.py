@@ -824,14 +824,15 @@ class EncounterModel:
 
     def _body(self, v0, phi0, cmd0, actions, duration: float, n: int) -> _BodyMotion:
         """The body motion of a batch of rows (one circle bounds them all)."""
-        return self._bodies(v0, phi0, cmd0, actions, duration, n, 1)[0]
+        return self._bodies(v0, phi0, cmd0, actions, duration, n, 1, memo=False)[0]
 
     def _bodies(
-        self, v0, phi0, cmd0, actions, duration: float, n: int, groups: int
+        self, v0, phi0, cmd0, actions, duration: float, n: int, groups: int, memo: bool = True
     ) -> list[_BodyMotion]:
         """The body motions of ``groups`` equal consecutive groups of rows, computed in one
         batch: every number is computed per row, so a group's motion is the same as if it
-        had been computed alone (the memo's answer never depends on its batch)."""
+        had been computed alone (the memo's answer never depends on its batch). ``memo``:
+        with what a search needs of a memoised motion (``table``, ``children``)."""
         cfg = self.config
         dt = duration / n
         tm = dt * (np.arange(n) + 0.5)  # sub-step midpoints
@@ -868,10 +869,12 @@ class EncounterModel:
         rows = list(zip(z[:, -1].tolist(), psi[:, -1].tolist(), v_end.tolist(),
                         phi_end.tolist(), phi_cmd.tolist(), strict=True))  # fmt: skip
         rise_end = rise[:, -1].tolist()
-        table = np.stack([z[:, -1].real, z[:, -1].imag, psi[:, -1], v_end, phi_end, phi_cmd,
-                          rise[:, -1]], axis=1)  # fmt: skip
-        ends = zip(v_end.tolist(), phi_end.tolist(), phi_cmd.tolist(), strict=True)
-        kids = [motion_key(v, p, c, duration) for v, p, c in ends]
+        table, kids = None, [()] * len(v0)
+        if memo:
+            table = np.stack([z[:, -1].real, z[:, -1].imag, psi[:, -1], v_end, phi_end, phi_cmd,
+                              rise[:, -1]], axis=1)  # fmt: skip
+            ends = zip(v_end.tolist(), phi_end.tolist(), phi_cmd.tolist(), strict=True)
+            kids = [motion_key(v, p, c, duration) for v, p, c in ends]
         # Per group: the circle holding its paths, the longest chord.
         size = len(v0) // groups
         zg = z.reshape(groups, -1)
@@ -899,7 +902,7 @@ class EncounterModel:
                     rows=tuple(rows[part]),
                     rise=rise[part],
                     rise_end=tuple(rise_end[part]),
-                    table=table[part],
+                    table=None if table is None else table[part],
                     children=tuple(kids[part]),
                 )
             )
