@@ -265,10 +265,8 @@ def predict_levels(
         np.array([i.sigma_m for i in intruders]),
         np.array([i.sigma_v for i in intruders]),
     )
-    return [
-        model.predict(pos, vel, hold_s, t0=d * hold_s, turn_rate=turn, margin=margin)
-        for d in range(depth)
-    ]
+    starts = [d * hold_s for d in range(depth)]
+    return model.predict_levels(pos, vel, hold_s, starts, turn_rate=turn, margin=margin)
 
 
 def decision_from_tree(

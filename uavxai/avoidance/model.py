@@ -289,16 +289,18 @@ def manoeuvre_spread(
     if it changes its bank now to anything within ``bank_limit_rad`` (a coordinated turn at
     its speed: turn rates within +-g tan(limit) / V): the larger of the two extreme turns'
     distances from the nominal one, kept non-decreasing in time. The set of positions
-    reachable by then lies within this distance of the nominal position."""
+    reachable by then lies within this distance of the nominal position. ``t`` (..., T):
+    several runs of times at once, (..., T, N), each kept non-decreasing on its own."""
     speed = np.maximum(np.hypot(vel[:, 0], vel[:, 1]), 1.0)
     w_max = G * math.tan(bank_limit_rad) / speed
     w = np.clip(np.asarray(turn_rate, dtype=float), -w_max, w_max)
-    nominal = turn_positions(np.zeros_like(vel), vel, t, w)
-    spread = np.zeros((t.size, vel.shape[0]))
+    flat = np.ravel(t)
+    nominal = turn_positions(np.zeros_like(vel), vel, flat, w)
+    spread = np.zeros((flat.size, vel.shape[0]))
     for extreme in (w_max, -w_max):
-        d = turn_positions(np.zeros_like(vel), vel, t, extreme) - nominal
+        d = turn_positions(np.zeros_like(vel), vel, flat, extreme) - nominal
         spread = np.maximum(spread, np.hypot(d[..., 0], d[..., 1]))
-    return np.maximum.accumulate(spread, axis=0)
+    return np.maximum.accumulate(spread.reshape(*np.shape(t), -1), axis=-2)
 
 
 def intruder_margin(
@@ -334,10 +336,10 @@ def intruder_margin(
     vel_horizon = config.uncertainty_horizon_s
     air = np.asarray(vel, dtype=float) - np.array([*config.wind_mps, 0.0])
 
-    def margin(t: np.ndarray) -> np.ndarray:
-        out = np.zeros((t.size, n))
+    def margin(t: np.ndarray) -> np.ndarray:  # t (..., T): (..., T, N)
+        out = np.zeros((*t.shape, n))
         if uncertain:
-            tt = t[:, None]
+            tt = t[..., None]
             tv = tt if vel_horizon is None else np.minimum(tt, vel_horizon)
             out += k * np.sqrt(sm[None] ** 2 + (sv[None] * tv) ** 2 + own**2 * tt**3)
         if reach:  # turns differ through the air: the wind carries all of them alike
@@ -476,11 +478,22 @@ def _frozen(a: np.ndarray) -> np.ndarray:
 _MotionKey = tuple[float, float, float, float]
 
 
+def motion_keys(v, phi, cmd, duration: float) -> list[_MotionKey]:
+    """The memo keys of rows with speeds ``v``, banks ``phi`` and bank commands ``cmd``
+    (arrays). Keys are rounded far below any physical effect so that states reached along
+    different float paths (20 + 4 - 4) share an entry; the motion is computed from the key
+    itself, so the answer never depends on what the memo already holds. (numpy's rounding,
+    for whole batches at once.)"""
+    d = float(duration)
+    rounded = zip(np.round(v, 6).tolist(), np.round(phi, 9).tolist(), np.round(cmd, 9).tolist(),
+                  strict=True)  # fmt: skip
+    return [(a, b, c, d) for a, b, c in rounded]
+
+
 def motion_key(v: float, phi: float, cmd: float, duration: float) -> _MotionKey:
-    """Keys are rounded far below any physical effect so that states reached along different
-    float paths (20 + 4 - 4) share an entry; the motion is computed from the key itself, so
-    the answer never depends on what the memo already holds."""
-    return (round(float(v), 6), round(float(phi), 9), round(float(cmd), 9), float(duration))
+    """:func:`motion_keys` of one row."""
+    return motion_keys(np.array([v], dtype=float), np.array([phi], dtype=float),
+                       np.array([cmd], dtype=float), duration)[0]  # fmt: skip
 
 
 class EncounterModel:
@@ -556,12 +569,30 @@ class EncounterModel:
         constant-rate turn at constant speed; ``index``: filed for quick :meth:`Track.near`
         queries within an ownship's reach. ``margin(t)`` gives the (T, N) separation needed
         beyond ``d_min`` at times ``t`` (T,) from now (see :func:`intruder_margin`)."""
+        return self.predict_levels(
+            pos, vel, duration, [t0], index=index, turn_rate=turn_rate, margin=margin
+        )[0]
+
+    def predict_levels(
+        self,
+        pos: np.ndarray,
+        vel: np.ndarray,
+        duration: float,
+        starts: Sequence[float],
+        *,
+        index: bool = True,
+        turn_rate: np.ndarray | None = None,
+        margin: Callable[[np.ndarray], np.ndarray] | None = None,
+    ) -> list[Track]:
+        """:meth:`predict` over ``[t0, t0 + duration]`` for every ``t0`` of ``starts`` (a
+        tree's levels), computed in one batch; ``margin(t)`` is given ``t`` (levels, n+1)."""
         n = self.substeps(duration)
-        t = t0 + (duration / n) * np.arange(n + 1)
+        t = np.array(starts, dtype=float)[:, None] + (duration / n) * np.arange(n + 1)
         distance = self.reach(0.0, duration) + self.config.d_min_m if index else 0.0
-        extra = None if margin is None else margin(t)
+        extra = [None] * len(starts) if margin is None else margin(t)
         wind = self.config.wind_mps
-        return Track.of(turn_positions(pos, vel, t, turn_rate, wind), distance, extra)
+        pos = turn_positions(pos, vel, t.ravel(), turn_rate, wind).reshape(*t.shape, -1, 3)
+        return [Track.of(p, distance, m) for p, m in zip(pos, extra, strict=True)]
 
     def reach(self, speed: float, duration: float) -> float:
         """The farthest (3-D) an ownship at ``speed`` can get from its start in ``duration``."""
@@ -873,8 +904,7 @@ class EncounterModel:
         if memo:
             table = np.stack([z[:, -1].real, z[:, -1].imag, psi[:, -1], v_end, phi_end, phi_cmd,
                               rise[:, -1]], axis=1)  # fmt: skip
-            ends = zip(v_end.tolist(), phi_end.tolist(), phi_cmd.tolist(), strict=True)
-            kids = [motion_key(v, p, c, duration) for v, p, c in ends]
+            kids = motion_keys(v_end, phi_end, phi_cmd, duration)
         # Per group: the circle holding its paths, the longest chord.
         size = len(v0) // groups
         zg = z.reshape(groups, -1)
