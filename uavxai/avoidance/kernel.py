@@ -3,21 +3,21 @@ expansion of :class:`uavxai.avoidance.mcts.TreeBuilder` over
 :meth:`uavxai.avoidance.model.EncounterModel.expand`, in one numba kernel.
 
 Why: a decision walks 200 simulations and expands ~270 nodes; in Python and numpy each
-expansion costs ~0.1-0.3 ms of interpreter and small-array overhead (issue 31 measured 39 ms
-a decision against a goal of 10). The kernel does the same arithmetic, in the same order, per
-number: the tree it returns is the Python search's (``tests/test_avoidance_kernel.py``
-compares them node by node), so explanations read the same tree. What it needs from Python
-comes in arrays, once per decision: the body motions a search can expand
-(:meth:`EncounterModel.motions`), the intruders' tracks per tree level, the tie-break draws.
-
-The Python search (``MCTSPlanner(..., compiled=False)``) stays: the exhaustive reference
-builds its tree with it, and it is what the kernel is tested against.
+expansion cost ~0.1-0.3 ms of interpreter and small-array overhead (issue 31 measured 39 ms
+a decision against a goal of 10). The kernel does the model's arithmetic, in the same order,
+per number: every node it expands has the children that ``TreeBuilder.expand`` (the Python
+expansion the exhaustive search builds its tree with) gives that node, which
+``tests/test_avoidance_kernel.py`` checks node by node, so explanations read the same tree.
+What it needs from Python comes in arrays, once per decision: the body motions a search can
+expand (:meth:`EncounterModel.motions`), the intruders' tracks per tree level, the tie-break
+draws. The first call compiles it (seconds); numba caches the result beside this file.
 """
 
 from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Sequence
 
 import numpy as np
 from numba import njit
@@ -303,7 +303,9 @@ def _expand(node, tree, bz, brise, bend, bscal, child, tracks, climbs, drift, pa
 
 @njit(cache=True)
 def _pick(node, first, kn, visits, value_sum, explore, inv_sqrt, draw):
-    """The UCT choice at ``node`` (mcts.search's loop body): the child index in its block."""
+    """The UCT choice at ``node``: children never visited first, else the best score with
+    Q min-max normalised over the siblings; ties broken by ``draw``. The child's index in its
+    block."""
     n = visits[node]
     best = np.empty(kn, dtype=np.int64)
     cnt = 0
@@ -321,6 +323,8 @@ def _pick(node, first, kn, visits, value_sum, explore, inv_sqrt, draw):
             for j in range(kn):
                 q[j] = value_sum[first + j] / visits[first + j]
             lo, hi = q.min(), q.max()
+            # Q normalised over the siblings (as mctx does): leaf values 1 - d/d_max of
+            # neighbouring actions differ by ~1 %, which the exploration term would swamp.
             scale = 1.0 / (hi - lo) if hi - lo > 1e-12 else 0.0
             e = explore[n]
             scores = np.empty(kn)
@@ -337,8 +341,8 @@ def _pick(node, first, kn, visits, value_sum, explore, inv_sqrt, draw):
 @njit(cache=True)
 def run(tree, bz, brise, bend, bscal, child, tracks, climbs, drift, par, explore, inv_sqrt,
         draws, simulations):  # fmt: skip
-    """``simulations`` MCTS simulations from the root (node 0) of ``tree``; see
-    mcts.search for the algorithm. Returns the number of nodes."""
+    """``simulations`` MCTS simulations from the root (node 0) of ``tree`` (the algorithm:
+    the docstring of uavxai.avoidance.mcts). Returns the number of nodes."""
     (visits, value_sum, first_child, is_leaf, value, key, state, depth, parent, action, code,
      min_sep, closest, t_closest, count, depth_limit) = tree  # fmt: skip
     kn = climbs.size
@@ -373,7 +377,7 @@ def search(
     model: EncounterModel,
     root: np.ndarray,
     goal: np.ndarray,
-    tracks: list[Track],
+    tracks: Sequence[Track],
     *,
     simulations: int,
     c: float,
@@ -381,7 +385,16 @@ def search(
     rng: np.random.Generator,
     time_left_s: float = math.inf,
 ) -> SearchTree:
-    """:func:`uavxai.avoidance.mcts.search`, compiled: the same tree from the same inputs."""
+    """Run MCTS from ``root`` (a model state row) and return the tree (the algorithm: the
+    docstring of :mod:`uavxai.avoidance.mcts`).
+
+    ``tracks[d]`` holds the intruders during tree level ``d``, i.e. over
+    ``[d * hold_s, (d + 1) * hold_s]`` from now; the search depth is ``len(tracks)``.
+    ``time_left_s`` is when the episode times out: nodes reached later are time-outs.
+    Node 0 is the root; the children of a node are K consecutive nodes in action order (K the
+    action set's size, ``model.actions``), as :class:`uavxai.avoidance.mcts.TreeBuilder`
+    gives them.
+    """
     depth_limit = len(tracks)
     explore, inv_sqrt = _uct_tables(simulations, c)
     draws = rng.random(simulations * depth_limit)  # tie-breaks, one per step, as in Python
@@ -403,8 +416,8 @@ def search(
 
 @functools.lru_cache(maxsize=8)
 def _uct_tables(simulations: int, c: float) -> tuple[np.ndarray, np.ndarray]:
-    """UCT's ``2C sqrt(2 ln n)`` and ``1 / sqrt(n_j)`` by visit count, as mcts.search has
-    them."""
+    """UCT's ``2C sqrt(2 ln n)`` and ``1 / sqrt(n_j)`` by visit count: the score is
+    ``Q + [2C sqrt(2 ln n)] * [1 / sqrt(n_j)]``, both from tables."""
     explore = np.array(
         [2.0 * c * math.sqrt(2.0 * math.log(n)) if n else 0.0 for n in range(simulations)]
     )
@@ -413,7 +426,7 @@ def _uct_tables(simulations: int, c: float) -> tuple[np.ndarray, np.ndarray]:
     return explore, inv_sqrt
 
 
-def _pack(tracks: list[Track], n: int) -> tuple:
+def _pack(tracks: Sequence[Track], n: int) -> tuple:
     """The intruders' tracks per tree level, as arrays."""
     count = tracks[0].count
     margin = np.stack([np.zeros((n + 1, count)) if t.margin is None else t.margin

@@ -585,11 +585,15 @@ class EncounterModel:
         margin: Callable[[np.ndarray], np.ndarray] | None = None,
     ) -> list[Track]:
         """:meth:`predict` over ``[t0, t0 + duration]`` for every ``t0`` of ``starts`` (a
-        tree's levels), computed in one batch; ``margin(t)`` is given ``t`` (levels, n+1)."""
+        tree's levels), computed in one batch; ``margin(t)`` is given ``t`` (n+1,) for one
+        level, as :meth:`predict` says, and (levels, n+1) for several."""
         n = self.substeps(duration)
         t = np.array(starts, dtype=float)[:, None] + (duration / n) * np.arange(n + 1)
         distance = self.reach(0.0, duration) + self.config.d_min_m if index else 0.0
-        extra = [None] * len(starts) if margin is None else margin(t)
+        if margin is None:
+            extra = [None] * len(starts)
+        else:
+            extra = margin(t[0])[None] if len(starts) == 1 else margin(t)
         wind = self.config.wind_mps
         pos = turn_positions(pos, vel, t.ravel(), turn_rate, wind).reshape(*t.shape, -1, 3)
         return [Track.of(p, distance, m) for p, m in zip(pos, extra, strict=True)]
