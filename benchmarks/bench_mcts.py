@@ -1,28 +1,35 @@
-"""Cost and quality of MCTS against the exhaustive search it samples.
+"""Cost and quality of MCTS against the exhaustive search it samples (issue 31's "Speed").
 
-On one fixed set of seeded encounters (20 intruders, the default scenario's area, the ownship
-at a random place and heading): the decision time of MCTS at 200 simulations, depth 4 (p50,
-p95; the goal is p50 <= 10 ms on one core) and of exhaustive search to the same depth, and
-their ratio measured on the same encounters in the same process. Then whole kinematic
-episodes of both: the MCTS goal rate as a fraction of the exhaustive one.
+On one fixed set of seeded encounters per traffic density (20 and 40 intruders by default,
+the default scenario's area, the ownship at a random place and heading): the decision time
+of ``mcts`` (the paper's nine actions) and ``mcts_vertical`` (eleven, with climb and
+descend) at 200 simulations, depth 4 (p50, p95; the goal is p50 <= 10 ms CPU at 20 intruders
+and <= 25 ms at 40), and of exhaustive search over the same action set to the same depth,
+measured on the same encounters in the same process. Then whole kinematic episodes of each
+MCTS planner and of its exhaustive reference on the same seeds: outcomes, collision counts,
+mean steps and the steps ratio MCTS / exhaustive (the goal: within 10 %, with the same
+safety).
 
 Times are the process's CPU time per decision (less disturbed by other processes than wall
-time, which is printed too).
+time, which is printed too); the load average is printed beside them.
 
     .venv/bin/python benchmarks/bench_mcts.py [--quick] [--encounters 40] [--episodes 20]
-        [--intruders 20] [--simulations 200] [--depth 4] [--repeats 5]
+        [--intruders 20,40] [--simulations 200] [--depth 4] [--repeats 5] [--no-vertical]
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
+import os
 import time
 
 import numpy as np
 
 from uavxai.avoidance import PlannerConfig, make_planner
-from uavxai.avoidance.types import Ownship
+from uavxai.avoidance.exhaustive import ExhaustivePlanner
+from uavxai.avoidance.types import Ownship, Planner
 from uavxai.learning.env import default_goal, episode_intruders
 from uavxai.scenario import default_scenario
 from uavxai.sim.build import run_kinematic as run_episode
@@ -63,47 +70,30 @@ def time_decisions(planner, cases, repeats: int) -> tuple[np.ndarray, np.ndarray
     return cpu, wall
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    ap.add_argument("--quick", action="store_true", help="10 encounters, 4 episodes")
-    ap.add_argument("--encounters", type=int, default=40)
-    ap.add_argument("--episodes", type=int, default=20)
-    ap.add_argument("--intruders", type=int, default=20)
-    ap.add_argument("--simulations", type=int, default=200)
-    ap.add_argument("--depth", type=int, default=4)
-    ap.add_argument("--repeats", type=int, default=5, help="timing repeats (best is kept)")
-    args = ap.parse_args()
-    if args.quick:
-        args.encounters, args.episodes, args.repeats = 10, 4, 1
+def pairs(cfg: PlannerConfig, vertical: bool) -> list[tuple[Planner, Planner]]:
+    """(MCTS planner, its exhaustive reference over the same action set)."""
+    out = [(make_planner("mcts", cfg), make_planner("exhaustive", cfg))]
+    if vertical:
+        vcfg = dataclasses.replace(cfg, actions="vertical")
+        reference = ExhaustivePlanner(vcfg, name="exhaustive_vertical")
+        out.append((make_planner("mcts_vertical", cfg), reference))
+    return out
 
-    scenario = default_scenario(
-        "bench-mcts",
-        intruders={"count": args.intruders},
-        avoidance={"mcts": {"simulations": args.simulations, "depth": args.depth}},
-    )
-    cfg = PlannerConfig.from_scenario(scenario)
-    cases = encounters(scenario, args.encounters, args.intruders)
-    mcts, exhaustive = make_planner("mcts", cfg), make_planner("exhaustive", cfg)
-    for planner in (mcts, exhaustive):  # warm caches and imports
-        planner.plan(*cases[0])
 
+def report_times(name: str, cpu: np.ndarray, wall: np.ndarray) -> None:
+    p50, p95 = np.percentile(cpu, [50, 95])
+    w50, w95 = np.percentile(wall, [50, 95])
     print(
-        f"{len(cases)} encounters, {args.intruders} intruders, MCTS {args.simulations} "
-        f"simulations, depth {args.depth} (exhaustive: {9**args.depth} sequences)"
+        f"  {name:<20} decision ms  cpu p50 {p50:7.2f}  p95 {p95:7.2f}   "
+        f"(wall p50 {w50:7.2f}  p95 {w95:7.2f})"
     )
-    m_cpu, m_wall = time_decisions(mcts, cases, args.repeats)
-    e_cpu, e_wall = time_decisions(exhaustive, cases, args.repeats)
-    for name, cpu, wall in (("mcts", m_cpu, m_wall), ("exhaustive", e_cpu, e_wall)):
-        p50, p95 = np.percentile(cpu, [50, 95])
-        w50, w95 = np.percentile(wall, [50, 95])
-        print(
-            f"  {name:<11} decision ms  cpu p50 {p50:7.2f}  p95 {p95:7.2f}   "
-            f"(wall p50 {w50:7.2f}  p95 {w95:7.2f})"
-        )
-    print(f"  cost ratio mcts / exhaustive (cpu, same encounters): {m_cpu.sum() / e_cpu.sum():.3f}")
-    # MCTS's choice scored by exhaustive search: the best value reachable after it.
+
+
+def against_optimum(mcts: Planner, exhaustive: Planner, cases) -> None:
+    """MCTS's choice scored by exhaustive search: the best value reachable after it."""
     agree, unsafe, regret = 0, 0, []
-    for case in cases:
+    for i, case in enumerate(cases):
+        mcts.reset(i)
         chosen = mcts.plan(*case).action
         best = exhaustive.plan(*case)
         q = {c.action: c.q for c in best.children}
@@ -111,26 +101,82 @@ def main() -> None:
         unsafe += q[chosen] == 0.0 and max(q.values()) > 0.0
         regret.append(max(q.values()) - q[chosen])
     print(
-        f"  mcts against the optimum: same action {agree}/{len(cases)}, value regret mean "
-        f"{np.mean(regret):.4f} max {np.max(regret):.4f}, colliding choices with a safe one "
-        f"available {unsafe}"
+        f"  {mcts.name} against the optimum: same action {agree}/{len(cases)}, value regret "
+        f"mean {np.mean(regret):.4f} max {np.max(regret):.4f}, colliding choices with a safe "
+        f"one available {unsafe}"
     )
-    print(f"{args.episodes} kinematic episodes each (seeds 0..{args.episodes - 1}):")
-    goals = {}
-    for name in ("mcts", "exhaustive"):
-        results = [
-            run_episode(name, scenario, seed, args.intruders) for seed in range(args.episodes)
-        ]
-        outcomes = [r.outcome for r in results]
-        goals[name] = outcomes.count("goal") / len(outcomes)
+
+
+def episodes(planner: Planner, scenario, n_intruders: int, count: int) -> dict:
+    """Outcome counts and mean steps of ``count`` seeded kinematic episodes."""
+    results = [run_episode(planner, scenario, seed, n_intruders) for seed in range(count)]
+    outcomes = [r.outcome for r in results]
+    out = {k: outcomes.count(k) for k in ("goal", "collision", "out_of_bounds", "timeout")}
+    out["steps"] = float(np.mean([r.steps for r in results]))
+    print(
+        f"  {planner.name:<20} goal {out['goal']}/{count}  collision {out['collision']}  "
+        f"out of bounds {out['out_of_bounds']}  timeout {out['timeout']}  "
+        f"mean steps {out['steps']:.1f}"
+    )
+    return out
+
+
+def density(args, n_intruders: int) -> None:
+    """Everything measured at one traffic density."""
+    scenario = default_scenario(
+        "bench-mcts",
+        intruders={"count": n_intruders},
+        avoidance={"mcts": {"simulations": args.simulations, "depth": args.depth}},
+    )
+    cfg = PlannerConfig.from_scenario(scenario)
+    cases = encounters(scenario, args.encounters, n_intruders)
+    planners = pairs(cfg, not args.no_vertical)
+    for pair in planners:
+        for planner in pair:  # warm caches and imports
+            planner.plan(*cases[0])
+    print(
+        f"{n_intruders} intruders, {len(cases)} encounters, MCTS {args.simulations} simulations, "
+        f"depth {args.depth} (load average {os.getloadavg()[0]:.2f})"
+    )
+    for mcts, exhaustive in planners:
+        m_cpu, m_wall = time_decisions(mcts, cases, args.repeats)
+        e_cpu, e_wall = time_decisions(exhaustive, cases, args.repeats)
+        report_times(mcts.name, m_cpu, m_wall)
+        report_times(exhaustive.name, e_cpu, e_wall)
+        ratio = m_cpu.sum() / e_cpu.sum()
+        print(f"  cost ratio {mcts.name} / {exhaustive.name} (cpu): {ratio:.3f}")
+        against_optimum(mcts, exhaustive, cases)
+    if not args.episodes:
+        return
+    print(f"  {args.episodes} kinematic episodes each (seeds 0..{args.episodes - 1}):")
+    for mcts, exhaustive in planners:
+        m = episodes(mcts, scenario, n_intruders, args.episodes)
+        e = episodes(exhaustive, scenario, n_intruders, args.episodes)
         print(
-            f"  {name:<11} goal {goals[name]:.2f}  collision "
-            f"{outcomes.count('collision') / len(outcomes):.2f}  timeout "
-            f"{outcomes.count('timeout') / len(outcomes):.2f}  mean steps "
-            f"{np.mean([r.steps for r in results]):.1f}"
+            f"  steps ratio {mcts.name} / {exhaustive.name}: {m['steps'] / e['steps']:.3f}; "
+            f"collisions {m['collision']} vs {e['collision']}"
         )
-    if goals["exhaustive"] > 0:
-        print(f"  goal rate mcts / exhaustive: {goals['mcts'] / goals['exhaustive']:.3f}")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    ap.add_argument("--quick", action="store_true", help="10 encounters, 4 episodes, 1 repeat")
+    ap.add_argument("--encounters", type=int, default=40)
+    ap.add_argument("--episodes", type=int, default=20)
+    ap.add_argument("--intruders", default="20,40", help="comma-separated traffic densities")
+    ap.add_argument("--simulations", type=int, default=200)
+    ap.add_argument("--depth", type=int, default=4)
+    ap.add_argument("--repeats", type=int, default=5, help="timing repeats (best is kept)")
+    ap.add_argument("--no-vertical", action="store_true", help="the paper's nine actions only")
+    args = ap.parse_args()
+    if args.quick:
+        args.encounters, args.episodes, args.repeats = 10, 4, 1
+    try:
+        counts = [int(n) for n in args.intruders.split(",")]
+    except ValueError:
+        ap.error(f"--intruders: comma-separated whole numbers (20,40), got {args.intruders!r}")
+    for n in counts:
+        density(args, n)
 
 
 if __name__ == "__main__":

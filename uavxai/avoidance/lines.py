@@ -59,6 +59,7 @@ def measure_line(
     tracks: Sequence[Track],
     hold_s: float,
     d_min_m: float,
+    chords: Sequence[tuple[np.ndarray, np.ndarray]] | None = None,
 ) -> LineMeasure:
     """Measure a line of edges: ``samples[e]`` (n+1, 3) ownship positions at the sub-step
     instants of edge ``e``, flown at tree level ``levels[e]`` against ``tracks[level]``;
@@ -68,37 +69,38 @@ def measure_line(
     is solved exactly. A line that reaches the goal or leaves the area counts up to the end of
     that event's sub-step (it stops there); one that collides is measured to the end of the
     edge, so that its miss is the closest approach, not where it first came too close.
+    ``chords[e]``: edge ``e``'s :func:`chord_distances`, if computed already (in a batch).
     """
     n_int = tracks[0].count if tracks else 0
+    used = next((e + 1 for e, (code, _) in enumerate(ends) if code != NONE), len(ends))
+    n = samples[0].shape[0] - 1
+    dt = hold_s / n
+    keep = np.full(used, n)
+    code, t_event = ends[used - 1]
+    if code in (GOAL, OUT_OF_BOUNDS) and math.isfinite(t_event):
+        keep[-1] = min(n, int(round(t_event / dt)) + 1)
+    t0 = np.asarray(levels[:used], dtype=float) * hold_s
+    horizon = float(t0[-1] + keep[-1] * dt)
     best = np.full(n_int, math.inf)
-    best_t = np.full(n_int, math.nan)
-    best_margin = np.zeros(n_int)  # each track's margin at its closest approach
     meets = None
-    horizon = 0.0
-    for own, level, (code, t_event) in zip(samples, levels, ends, strict=True):
-        track = tracks[level]
-        n = own.shape[0] - 1
-        dt = hold_s / n
-        t0 = level * hold_s
-        keep = n
-        if code in (GOAL, OUT_OF_BOUNDS) and math.isfinite(t_event):
-            keep = min(n, int(round(t_event / dt)) + 1)
-        horizon = t0 + keep * dt
-        if n_int:
-            dist, frac = _chord_distances(own, track.pos)
-            t = t0 + (np.arange(n)[:, None] + frac) * dt
-            kept = dist[:keep]
-            k = np.argmin(kept, axis=0)
-            cols = np.arange(n_int)
-            closer = kept[k, cols] < best
-            best = np.where(closer, kept[k, cols], best)
-            best_t = np.where(closer, t[k, cols], best_t)
-            if track.margin is not None:  # the sub-step's end margin, as the search holds it
-                best_margin = np.where(closer, track.margin[k + 1, cols], best_margin)
-            if code == COLLISION and meets is None:
-                meets = _first_conflict(dist, track, d_min_m, t0, dt)
-        if code != NONE:
-            break
+    if n_int:
+        if chords is None:
+            chords = [chord_distances(samples[e], tracks[levels[e]].pos) for e in range(used)]
+        dist = np.stack([chords[e][0] for e in range(used)])  # (E, n, N)
+        frac = np.stack([chords[e][1] for e in range(used)])
+        # the closest approach to each intruder over the kept sub-steps, the first if tied
+        kept = np.where(np.arange(n)[None, :, None] < keep[:, None, None], dist, np.inf)
+        first = kept.reshape(used * n, n_int).argmin(axis=0)
+        e, k = np.divmod(first, n)
+        cols = np.arange(n_int)
+        best = kept[e, k, cols]
+        best_t = t0[e] + (k + frac[e, k, cols]) * dt
+        margins = np.stack([np.zeros((n + 1, n_int)) if tracks[lv].margin is None
+                            else tracks[lv].margin for lv in levels[:used]])  # fmt: skip
+        best_margin = margins[e, k + 1, cols]  # the sub-step's end margin, as the search holds it
+        if code == COLLISION:
+            last = used - 1
+            meets = _first_conflict(dist[last], tracks[levels[last]], d_min_m, float(t0[last]), dt)
     if not n_int or not np.isfinite(best).any():
         return LineMeasure(math.inf, -1, None, None, horizon)
     j = int(np.argmin(best))
@@ -112,11 +114,12 @@ def measure_line(
     return LineMeasure(float(best[j]), j, float(best_t[j]), met, horizon, unsure)
 
 
-def _chord_distances(own: np.ndarray, intruders: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(n, N) closest distance on every sub-step to every intruder, and its fraction along
-    the sub-step; ``own`` (n+1, 3), ``intruders`` (n+1, N, 3)."""
-    rel = own[:, None, :] - intruders
-    return closest_on_pieces(rel[:-1], np.diff(rel, axis=0))
+def chord_distances(own: np.ndarray, intruders: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(..., n, N) closest distance on every sub-step to every intruder, and its fraction
+    along the sub-step; ``own`` (..., n+1, 3), ``intruders`` (..., n+1, N, 3): one edge, or
+    a batch of them."""
+    rel = own[..., :, None, :] - intruders
+    return closest_on_pieces(rel[..., :-1, :, :], np.diff(rel, axis=-3))
 
 
 def _first_conflict(
@@ -151,6 +154,7 @@ def measured_children(
     """A tree planner's root options quoting what their lines predict (:func:`measure_line`)
     and which manoeuvre each flies (:func:`flies`); and how far ahead each line reaches."""
     out, horizons = [], {}
+    chords = _edge_chords(lines, tree, samples, tracks)
     for c in children:
         line = lines[c.action]
         m = measure_line(
@@ -160,10 +164,29 @@ def measured_children(
             tracks,
             config.action_hold_s,
             config.d_min_m,
+            None if chords is None else [chords[node] for node in line],
         )
         out.append(replace(with_measure(c, m, ids), effect=flies(c.action, own, config)))
         horizons[c.action] = m.horizon_s
     return out, horizons
+
+
+def _edge_chords(
+    lines: dict[int, list[int]],
+    tree: SearchTree,
+    samples: dict[int, np.ndarray],
+    tracks: Sequence[Track],
+) -> dict[int, tuple[np.ndarray, np.ndarray]] | None:
+    """:func:`chord_distances` of every edge of ``lines``, by node, in one batch (one call
+    per edge costs more than the rest of the explanation); None without intruders."""
+    nodes = [node for line in lines.values() for node in line]
+    if not nodes or not tracks or not tracks[0].count:
+        return None
+    levels = tree.depth[nodes] - 1
+    dist, frac = chord_distances(
+        np.stack([samples[node] for node in nodes]), np.stack([t.pos for t in tracks])[levels]
+    )
+    return {node: (dist[e], frac[e]) for e, node in enumerate(nodes)}
 
 
 def with_measure(child: ChildStats, m: LineMeasure, ids: Sequence) -> ChildStats:

@@ -1,10 +1,11 @@
 """Monte Carlo tree search for collision avoidance (the paper's Tree-depth, eqs 12-14).
 
-:func:`search` is the algorithm: it takes the encounter model as an argument and returns the
-whole tree as data (:class:`SearchTree`), so that explanation, drawing and testing read the
-same arrays the search decided from. :class:`MCTSPlanner` wraps it in the planner API (README,
-"Using the planner in another simulator"): it predicts the intruders once per decision,
-searches, takes the most visited root action and explains it.
+:func:`search` (compiled: :mod:`uavxai.avoidance.kernel`) is the algorithm: it takes the
+encounter model as an argument and returns the whole tree as data (:class:`SearchTree`), so
+that explanation, drawing and testing read the same arrays the search decided from.
+:class:`MCTSPlanner` wraps it in the planner API (README, "Using the planner in another
+simulator"): it predicts the intruders once per decision, searches, takes the most visited root
+action and explains it.
 
 One simulation walks from the root down to the search depth (or to a terminal state): at
 every node it takes the child with the best UCT score ``Q + 2C sqrt(2 ln n / n_j)``, children
@@ -33,6 +34,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from uavxai.avoidance.kernel import search  # the MCTS loop, compiled
 from uavxai.avoidance.lines import cornered_choice, measured_children
 from uavxai.avoidance.model import (
     COLLISION,
@@ -64,80 +66,6 @@ from uavxai.avoidance.types import (
 from uavxai.geometry import turn_rate_of_bank
 
 _VALUE_OF = np.array(TERMINAL_VALUE)
-
-
-def search(
-    model: EncounterModel,
-    root: np.ndarray,
-    goal: np.ndarray,
-    tracks: Sequence[Track],
-    *,
-    simulations: int,
-    c: float,
-    hold_s: float,
-    rng: np.random.Generator,
-    time_left_s: float = math.inf,
-) -> SearchTree:
-    """Run MCTS from ``root`` (a model state row) and return the tree.
-
-    ``tracks[d]`` holds the intruders during tree level ``d``, i.e. over
-    ``[d * hold_s, (d + 1) * hold_s]`` from now; the search depth is ``len(tracks)``.
-    ``time_left_s`` is when the episode times out: nodes reached later are time-outs.
-    Node 0 is the root; the children of a node are K consecutive nodes in action order (K the
-    action set's size, ``model.actions``).
-    """
-    depth_limit = len(tracks)
-    builder = TreeBuilder(model, root, goal, tracks, hold_s, time_left_s)
-    visits, value_sum, first_child = builder.visits, builder.value_sum, builder.first_child
-    is_leaf, value = builder.is_leaf, builder.value
-    # 2C sqrt(2 ln n / n_j) = [2C sqrt(2 ln n)] * [1 / sqrt(n_j)]: both from tables, so that the
-    # loop below makes no function calls
-    explore = [2.0 * c * math.sqrt(2.0 * math.log(n)) if n else 0.0 for n in range(simulations)]
-    inv_sqrt = [1.0 / math.sqrt(n) if n else math.inf for n in range(simulations)]
-    draws = rng.random(simulations * depth_limit).tolist()  # tie-breaks, one per step
-    draw = 0
-    path = [0] * (depth_limit + 1)
-    k_actions = builder.k
-    actions = range(k_actions)
-    all_actions = list(actions)
-    for _ in range(simulations):
-        node, length = 0, 1
-        while not is_leaf[node]:
-            first = first_child[node]
-            if first < 0:
-                first = builder.expand(node)
-            n = visits[node]
-            if n == 0:  # a fresh node: every child unvisited
-                best = all_actions
-            else:
-                kids = visits[first : first + k_actions]
-                if 0 in kids:  # children never visited come first
-                    best = [j for j in actions if kids[j] == 0]
-                else:
-                    sums = value_sum[first : first + k_actions]
-                    q = [sums[j] / kids[j] for j in actions]
-                    lo, hi = min(q), max(q)
-                    # Q normalised over the siblings (as mctx does): leaf values
-                    # 1 - d/d_max of neighbouring actions differ by ~1 %, which the paper's
-                    # exploration term would swamp, leaving visits uniform.
-                    scale = 1.0 / (hi - lo) if hi - lo > 1e-12 else 0.0
-                    e = explore[n]
-                    scores = [(q[j] - lo) * scale + e * inv_sqrt[kids[j]] for j in actions]
-                    top = max(scores)
-                    best = [j for j in actions if scores[j] == top]
-            pick = best[0] if len(best) == 1 else best[int(draws[draw] * len(best))]
-            draw += 1
-            node = first + pick
-            path[length] = node
-            length += 1
-        v = value[node]
-        if v != v:  # nan: an open leaf at the depth limit, scored when first reached
-            v = value[node] = builder.leaf_value(node)
-        for k in range(length):
-            p = path[k]
-            visits[p] += 1
-            value_sum[p] += v
-    return builder.finish()
 
 
 def chosen_action(tree: SearchTree) -> int:
@@ -178,7 +106,9 @@ class TreePlanner:
         model.hold_speed_band(own.speed_band)
         tracks = predict_levels(model, intruders, cfg.depth, cfg.action_hold_s)
         time_left_s = (cfg.max_steps - step) * cfg.decision_period_s
-        tree = self.search(ownship_state(own), goal_xyz, tracks, time_left_s)
+        root = ownship_state(own)
+        model.motions(root.tolist(), cfg.action_hold_s, cfg.depth)  # memoised in batches
+        tree = self.search(root, goal_xyz, tracks, time_left_s)
         decision = decision_from_tree(
             tree,
             chosen_action(tree),
@@ -257,10 +187,8 @@ def predict_levels(
         np.array([i.sigma_m for i in intruders]),
         np.array([i.sigma_v for i in intruders]),
     )
-    return [
-        model.predict(pos, vel, hold_s, t0=d * hold_s, turn_rate=turn, margin=margin)
-        for d in range(depth)
-    ]
+    starts = [d * hold_s for d in range(depth)]
+    return model.predict_levels(pos, vel, hold_s, starts, turn_rate=turn, margin=margin)
 
 
 def decision_from_tree(

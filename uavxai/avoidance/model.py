@@ -153,8 +153,8 @@ class Track:
 
     Between two instants an intruder moves in a straight line, so the ball around its samples
     holds its whole path. ``Track.of(pos, index_distance=d)`` also files every intruder in a
-    grid of the horizontal plane, so that :meth:`near` queries up to ``d`` cost a dictionary
-    look-up when nothing is near (the usual case in a tree search).
+    grid of the horizontal plane (when :meth:`near` is first asked), so that queries up to
+    ``d`` cost a dictionary look-up when nothing is near (the usual case in a tree search).
     """
 
     pos: np.ndarray  # (n+1, N, 3)
@@ -198,9 +198,7 @@ class Track:
             index_distance=index_distance if pos.shape[1] >= _INDEX_MIN else 0.0,
             margin=margin,
         )
-        if track.index_distance > 0:
-            track._file(index_distance)
-        return track
+        return track  # filed in its grid when first asked (the compiled search never asks)
 
     def _file(self, distance: float) -> None:
         """Each intruder goes into every cell that its ball grown by ``distance`` touches, so
@@ -233,6 +231,8 @@ class Track:
     def near(self, centre: Sequence[float], distance: float) -> np.ndarray:
         """Indices of intruders whose path may come within ``distance`` of ``centre``."""
         if distance <= self.index_distance:
+            if not self.cells:
+                self._file(self.index_distance)
             x, y, h = centre
             size = self.cell_m
             found = [
@@ -259,16 +259,18 @@ def manoeuvre_spread(
     if it changes its bank now to anything within ``bank_limit_rad`` (a coordinated turn at
     its speed: turn rates within +-g tan(limit) / V): the larger of the two extreme turns'
     distances from the nominal one, kept non-decreasing in time. The set of positions
-    reachable by then lies within this distance of the nominal position."""
+    reachable by then lies within this distance of the nominal position. ``t`` (..., T):
+    several runs of times at once, (..., T, N), each kept non-decreasing on its own."""
     speed = np.maximum(np.hypot(vel[:, 0], vel[:, 1]), 1.0)
     w_max = turn_rate_of_bank(bank_limit_rad, speed)
     w = np.clip(np.asarray(turn_rate, dtype=float), -w_max, w_max)
-    nominal = turn_positions(np.zeros_like(vel), vel, t, w)
-    spread = np.zeros((t.size, vel.shape[0]))
+    flat = np.ravel(t)
+    nominal = turn_positions(np.zeros_like(vel), vel, flat, w)
+    spread = np.zeros((flat.size, vel.shape[0]))
     for extreme in (w_max, -w_max):
-        d = turn_positions(np.zeros_like(vel), vel, t, extreme) - nominal
+        d = turn_positions(np.zeros_like(vel), vel, flat, extreme) - nominal
         spread = np.maximum(spread, np.hypot(d[..., 0], d[..., 1]))
-    return np.maximum.accumulate(spread, axis=0)
+    return np.maximum.accumulate(spread.reshape(*np.shape(t), -1), axis=-2)
 
 
 def intruder_margin(
@@ -304,10 +306,10 @@ def intruder_margin(
     vel_horizon = config.uncertainty_horizon_s
     air = np.asarray(vel, dtype=float) - np.array([*config.wind_mps, 0.0])
 
-    def margin(t: np.ndarray) -> np.ndarray:
-        out = np.zeros((t.size, n))
+    def margin(t: np.ndarray) -> np.ndarray:  # t (..., T): (..., T, N)
+        out = np.zeros((*t.shape, n))
         if uncertain:
-            tt = t[:, None]
+            tt = t[..., None]
             tv = tt if vel_horizon is None else np.minimum(tt, vel_horizon)
             out += k * np.sqrt(sm[None] ** 2 + (sv[None] * tv) ** 2 + own**2 * tt**3)
         if reach:  # turns differ through the air: the wind carries all of them alike
@@ -363,6 +365,10 @@ class _BodyMotion:
     rows: tuple = ()  # per row (z_end, dpsi, v_end, phi_end, phi_cmd) as Python numbers
     rise: np.ndarray | None = None  # (B, n+1) the most it can have climbed by each instant
     rise_end: tuple[float, ...] = ()  # per row, the last column of rise
+    # per row (z_end.real, z_end.imag, dpsi, v_end, phi_end, phi_cmd, rise_end): the compiled
+    # search's table (uavxai.avoidance.kernel)
+    table: np.ndarray | None = None
+    children: tuple = ()  # per row, the memo key of the child's motion (see motion_key)
 
 
 @dataclass(slots=True)
@@ -438,6 +444,28 @@ def _frozen(a: np.ndarray) -> np.ndarray:
     return a
 
 
+# A body motion's memo key: speed, bank, bank command (rounded) and the segment's duration.
+_MotionKey = tuple[float, float, float, float]
+
+
+def motion_keys(v, phi, cmd, duration: float) -> list[_MotionKey]:
+    """The memo keys of rows with speeds ``v``, banks ``phi`` and bank commands ``cmd``
+    (arrays). Keys are rounded far below any physical effect so that states reached along
+    different float paths (20 + 4 - 4) share an entry; the motion is computed from the key
+    itself, so the answer never depends on what the memo already holds. (numpy's rounding,
+    for whole batches at once.)"""
+    d = float(duration)
+    rounded = zip(np.round(v, 6).tolist(), np.round(phi, 9).tolist(), np.round(cmd, 9).tolist(),
+                  strict=True)  # fmt: skip
+    return [(a, b, c, d) for a, b, c in rounded]
+
+
+def motion_key(v: float, phi: float, cmd: float, duration: float) -> _MotionKey:
+    """:func:`motion_keys` of one row."""
+    return motion_keys(np.array([v], dtype=float), np.array([phi], dtype=float),
+                       np.array([cmd], dtype=float), duration)[0]  # fmt: skip
+
+
 class EncounterModel:
     """Closed-loop ownship kinematics and intruder tracks (see the module docstring)."""
 
@@ -454,6 +482,7 @@ class EncounterModel:
         k = config.n_actions
         self.actions = np.arange(k)  # the action set: the first k of the table
         self._climbs = _CLIMB_SIGN[:k].tolist()
+        self.climbs = _frozen(_CLIMB_SIGN[:k].astype(np.int64))  # per action: +1 climb, -1 descend
         self.vertical = any(self._climbs)
         self._level = (0,) * k  # the vertical commands of the paper's children
         # What a segment with nothing in reach reports, shared and read-only.
@@ -510,12 +539,34 @@ class EncounterModel:
         constant-rate turn at constant speed; ``index``: filed for quick :meth:`Track.near`
         queries within an ownship's reach. ``margin(t)`` gives the (T, N) separation needed
         beyond ``d_min`` at times ``t`` (T,) from now (see :func:`intruder_margin`)."""
+        return self.predict_levels(
+            pos, vel, duration, [t0], index=index, turn_rate=turn_rate, margin=margin
+        )[0]
+
+    def predict_levels(
+        self,
+        pos: np.ndarray,
+        vel: np.ndarray,
+        duration: float,
+        starts: Sequence[float],
+        *,
+        index: bool = True,
+        turn_rate: np.ndarray | None = None,
+        margin: Callable[[np.ndarray], np.ndarray] | None = None,
+    ) -> list[Track]:
+        """:meth:`predict` over ``[t0, t0 + duration]`` for every ``t0`` of ``starts`` (a
+        tree's levels), computed in one batch; ``margin(t)`` is given ``t`` (n+1,) for one
+        level, as :meth:`predict` says, and (levels, n+1) for several."""
         n = self.substeps(duration)
-        t = t0 + (duration / n) * np.arange(n + 1)
+        t = np.array(starts, dtype=float)[:, None] + (duration / n) * np.arange(n + 1)
         distance = self.reach(0.0, duration) + self.config.d_min_m if index else 0.0
-        extra = None if margin is None else margin(t)
+        if margin is None:
+            extra = [None] * len(starts)
+        else:
+            extra = margin(t[0])[None] if len(starts) == 1 else margin(t)
         wind = self.config.wind_mps
-        return Track.of(turn_positions(pos, vel, t, turn_rate, wind), distance, extra)
+        pos = turn_positions(pos, vel, t.ravel(), turn_rate, wind).reshape(*t.shape, -1, 3)
+        return [Track.of(p, distance, m) for p, m in zip(pos, extra, strict=True)]
 
     def reach(self, speed: float, duration: float) -> float:
         """The farthest (3-D) an ownship at ``speed`` can get from its start in ``duration``."""
@@ -612,16 +663,8 @@ class EncounterModel:
         cfg = self.config
         n = self._check(duration, track)
         x, y, h, v, psi, phi, cmd = state[:7]
-        # Keys are rounded far below any physical effect so that states reached along
-        # different float paths (20 + 4 - 4) share an entry; the motion is computed from the
-        # key itself, so the answer never depends on what the memo already holds.
-        key = (round(v, 6), round(phi, 9), round(cmd, 9), float(duration))
-        body = self._memo.get(key)
-        if body is None:
-            if len(self._memo) > 50_000:
-                self._memo.clear()
-            v_, phi_, cmd_ = (np.full(self.actions.size, k) for k in key[:3])
-            body = self._memo[key] = self._body(v_, phi_, cmd_, self.actions, duration, n)
+        key = motion_key(v, phi, cmd, duration)
+        body = self._memo.get(key) or self._remember([key], n)[0]
         origin = complex(x, y)
         rot = complex(math.cos(psi), -math.sin(psi))
         sink = cfg.climb_rate_mps * duration
@@ -654,6 +697,53 @@ class EncounterModel:
         own_step = self._own_step(body, duration / n)
         seen = _Intruders.of(track, near)
         return placed, self._events(None, xy, hs, goal, seen, box, duration / n, own_step, False)
+
+    def _remember(self, keys: Sequence[_MotionKey], n: int) -> list[_BodyMotion]:
+        """Compute and memoise the body motions of ``keys`` (not yet memoised), one batch."""
+        if len(self._memo) > 50_000:
+            self._memo.clear()
+        k = self.actions.size
+        v_, phi_, cmd_ = (np.repeat(np.array([key[i] for key in keys]), k) for i in range(3))
+        actions = np.tile(self.actions, len(keys))
+        bodies = self._bodies(v_, phi_, cmd_, actions, keys[0][3], n, len(keys))
+        self._memo.update(zip(keys, bodies, strict=True))
+        return bodies
+
+    def motions(
+        self, state: Sequence[float], duration: float, levels: int
+    ) -> tuple[list[_MotionKey], np.ndarray]:
+        """Every body-motion key a tree search from ``state`` can expand within ``levels``
+        tree levels (the root's first), memoised level by level in one batch each, and the
+        (M, K) table of the keys' indices that each key's children have (-1 on the last
+        level, whose children are never expanded). A search needs a few dozen; one at a time
+        they cost more than the rest of the search."""
+        n = self.substeps(duration)
+        keys = [motion_key(state[V], state[PHI], state[PHI_CMD], duration)]
+        index = {keys[0]: 0}
+        child = np.full((1, self.actions.size), -1, dtype=np.int64)
+        frontier = keys[:]
+        for level in range(levels):
+            missing = [key for key in frontier if key not in self._memo]
+            if missing:
+                self._remember(missing, n)
+            if level == levels - 1:
+                break
+            nxt = []
+            for key in frontier:
+                row = child[index[key]]
+                for a, kid in enumerate(self._memo[key].children):
+                    if kid not in index:
+                        index[kid] = len(keys)
+                        keys.append(kid)
+                        nxt.append(kid)
+                    row[a] = index[kid]
+            child = np.concatenate([child, np.full((len(nxt), child.shape[1]), -1)])
+            frontier = nxt
+        return keys, child
+
+    def motion(self, key: _MotionKey) -> _BodyMotion:
+        """The memoised body motion of ``key`` (see :meth:`motions`)."""
+        return self._memo[key]
 
     def fly_commanded(
         self, states: np.ndarray, bank_cmd: np.ndarray, duration: float
@@ -738,6 +828,16 @@ class EncounterModel:
         )
 
     def _body(self, v0, phi0, cmd0, actions, duration: float, n: int) -> _BodyMotion:
+        """The body motion of a batch of rows (one circle bounds them all)."""
+        return self._bodies(v0, phi0, cmd0, actions, duration, n, 1, memo=False)[0]
+
+    def _bodies(
+        self, v0, phi0, cmd0, actions, duration: float, n: int, groups: int, memo: bool = True
+    ) -> list[_BodyMotion]:
+        """The body motions of ``groups`` equal consecutive groups of rows, computed in one
+        batch: every number is computed per row, so a group's motion is the same as if it
+        had been computed alone (the memo's answer never depends on its batch). ``memo``:
+        with what a search needs of a memoised motion (``table``, ``children``)."""
         cfg = self.config
         dt = duration / n
         tm = dt * (np.arange(n) + 0.5)  # sub-step midpoints
@@ -769,35 +869,48 @@ class EncounterModel:
         v_end = np.clip(v0 + accel * duration, vmin, vmax)
         rise = np.zeros((len(v0), n + 1))  # the climb at each sub-step's midpoint speed
         np.cumsum(climb_rate(v_m, cfg) * dt, axis=1, out=rise[:, 1:])
-        lo = complex(z.real.min(), z.imag.min())
-        hi = complex(z.real.max(), z.imag.max())
-        ball = 0.5 * (lo + hi)
         template = np.zeros((len(v0), STATE_DIM))
         template[:, V], template[:, PHI], template[:, PHI_CMD] = v_end, phi_end, phi_cmd
-        return _BodyMotion(
-            z=z,
-            dpsi=psi[:, -1],
-            v_end=v_end,
-            phi_end=phi_end,
-            phi_cmd=phi_cmd,
-            ball=ball,
-            ball_r=float(np.abs(z - ball).max()),
-            step_max=float(chord.max()),
-            template=template,
-            z_end=z[:, -1].copy(),
-            rows=tuple(
-                zip(
-                    z[:, -1].tolist(),
-                    psi[:, -1].tolist(),
-                    v_end.tolist(),
-                    phi_end.tolist(),
-                    phi_cmd.tolist(),
-                    strict=True,
+        rows = list(zip(z[:, -1].tolist(), psi[:, -1].tolist(), v_end.tolist(),
+                        phi_end.tolist(), phi_cmd.tolist(), strict=True))  # fmt: skip
+        rise_end = rise[:, -1].tolist()
+        table, kids = None, [()] * len(v0)
+        if memo:
+            table = np.stack([z[:, -1].real, z[:, -1].imag, psi[:, -1], v_end, phi_end, phi_cmd,
+                              rise[:, -1]], axis=1)  # fmt: skip
+            kids = motion_keys(v_end, phi_end, phi_cmd, duration)
+        # Per group: the circle holding its paths, the longest chord.
+        size = len(v0) // groups
+        zg = z.reshape(groups, -1)
+        lo = zg.real.min(axis=1) + 1j * zg.imag.min(axis=1)
+        hi = zg.real.max(axis=1) + 1j * zg.imag.max(axis=1)
+        ball = 0.5 * (lo + hi)
+        ball_r = np.abs(zg - ball[:, None]).max(axis=1).tolist()
+        step_max = chord.reshape(groups, -1).max(axis=1).tolist()
+        ball, z_end = ball.tolist(), z[:, -1].copy()
+        out = []
+        for g in range(groups):
+            part = slice(g * size, (g + 1) * size)
+            out.append(
+                _BodyMotion(
+                    z=z[part],
+                    dpsi=psi[part, -1],
+                    v_end=v_end[part],
+                    phi_end=phi_end[part],
+                    phi_cmd=phi_cmd[part],
+                    ball=ball[g],
+                    ball_r=ball_r[g],
+                    step_max=step_max[g],
+                    template=template[part],
+                    z_end=z_end[part],
+                    rows=tuple(rows[part]),
+                    rise=rise[part],
+                    rise_end=tuple(rise_end[part]),
+                    table=None if table is None else table[part],
+                    children=tuple(kids[part]),
                 )
-            ),
-            rise=rise,
-            rise_end=tuple(rise[:, -1].tolist()),
-        )
+            )
+        return out
 
     def _end(self, xy_end, h_end, psi, body: _BodyMotion) -> np.ndarray:
         end = body.template.copy()

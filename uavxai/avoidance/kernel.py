@@ -1,0 +1,504 @@
+"""MCTS compiled: the simulation loop of :func:`uavxai.avoidance.mcts.search` and the node
+expansion of :class:`uavxai.avoidance.mcts.TreeBuilder` over
+:meth:`uavxai.avoidance.model.EncounterModel.expand`, in one numba kernel.
+
+Why: a decision walks 200 simulations and expands ~270 nodes; in Python and numpy each
+expansion cost ~0.1-0.3 ms of interpreter and small-array overhead (issue 31 measured 39 ms
+a decision against a goal of 10). The kernel does the model's arithmetic, in the same order,
+per number: every node it expands has the children that ``TreeBuilder.expand`` (the Python
+expansion the exhaustive search builds its tree with) gives that node, which
+``tests/test_avoidance_kernel.py`` checks node by node, so explanations read the same tree.
+What it needs from Python comes in arrays, once per decision: the body motions a search can
+expand (:meth:`EncounterModel.motions`), the intruders' tracks per tree level, the tie-break
+draws. The first call compiles it (seconds); numba caches the result beside this file.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from collections.abc import Sequence
+
+import numpy as np
+from numba import njit
+
+from uavxai.avoidance.model import EncounterModel, Track
+from uavxai.avoidance.types import SearchTree
+
+# Columns of the per-key table ``bend`` (per action) and ``bscal`` (per key).
+ZRE, ZIM, DPSI, VEND, PHIEND, PHICMD, RISEEND = range(7)
+BALLRE, BALLIM, BALLR, OWNSTEP = range(4)
+# Entries of ``par``.
+(DMIN, GOALR, XB0, XB1, YB0, YB1, HB0, HB1, CLIMB, DUR, TLEFT, LATE, DMAX, VERT, TDOWN, TLEVEL,
+ TUP, GX, GY, GH) = range(20)  # fmt: skip
+_TAU = 2.0 * math.pi
+_NONE, _GOAL, _COLLISION, _OUT, _TIMEOUT = 0, 1, 2, 3, 4
+
+
+@njit(cache=True)
+def _near(tc, tr, lvl, cx, cy, ch, distance, out):
+    """Track.near: intruders whose path ball may come within ``distance`` of the centre."""
+    k = 0
+    for j in range(tr.shape[1]):
+        r = tr[lvl, j]
+        if (tc[lvl, j, 0] - cx) ** 2 + (tc[lvl, j, 1] - cy) ** 2 + (tc[lvl, j, 2] - ch) ** 2 <= (
+            distance + r
+        ) ** 2:
+            out[k] = j
+            k += 1
+    return k
+
+
+@njit(cache=True)
+def _chord(r0x, r0y, r0h, r1x, r1y, r1h, d2):
+    """_closest_on_chords for one sub-step: (squared closest distance, its fraction)."""
+    dx, dy, dh = r1x - r0x, r1y - r0y, r1h - r0h
+    a = dx**2 + dy**2 + dh**2
+    b = (r0x * dx + r0y * dy) + r0h * dh
+    s = min(max(-b / max(a, 1e-12), 0.0), 1.0)
+    return max(d2 + s * (2.0 * b + s * a), 0.0), s
+
+
+@njit(cache=True)
+def _hits(xy, hs, txy, th, tm, lvl, ids, k, own_step, step_max, margined, dmin, k_hit):
+    """EncounterModel._intruder_hits and _closest_approach's inputs for K rows against the
+    ``k`` intruders ``ids``: fills ``k_hit``; returns (sep2, frac, exact)."""
+    rows, m = xy.shape[0], xy.shape[1]
+    n = m - 1
+    sep2 = np.empty((rows, m, k))
+    for a in range(rows):
+        ha = hs[min(a, hs.shape[0] - 1)]
+        for i in range(m):
+            for q in range(k):
+                rel = xy[a, i] - txy[lvl, i, ids[q]]
+                rh = ha[i] - th[lvl, i, ids[q]]
+                sep2[a, i, q] = rel.real**2 + rel.imag**2 + rh**2
+    slack = 0.5 * (own_step + step_max) + 1e-6
+    lowest = np.inf
+    for a in range(rows):
+        for i in range(m):
+            for q in range(k):
+                if margined:
+                    grow = max(tm[lvl, i, ids[q]], tm[lvl, min(i + 1, n), ids[q]])
+                    lowest = min(lowest, math.sqrt(sep2[a, i, q]) - grow)
+                else:
+                    lowest = min(lowest, sep2[a, i, q])
+    close = lowest < dmin + slack if margined else lowest < (dmin + slack) ** 2
+    frac = np.empty((rows, n, k))
+    if not close:
+        return sep2, frac, False
+    chords = np.empty((rows, n, k))
+    for a in range(rows):
+        ha = hs[min(a, hs.shape[0] - 1)]
+        for i in range(n):
+            for q in range(k):
+                j = ids[q]
+                r0 = xy[a, i] - txy[lvl, i, j]
+                r1 = xy[a, i + 1] - txy[lvl, i + 1, j]
+                d2, s = _chord(r0.real, r0.imag, ha[i] - th[lvl, i, j], r1.real, r1.imag,
+                               ha[i + 1] - th[lvl, i + 1, j], sep2[a, i, q])  # fmt: skip
+                chords[a, i, q], frac[a, i, q] = d2, s
+                need = dmin + tm[lvl, i + 1, j] if margined else dmin
+                if k_hit[a] == n and d2 < need**2:
+                    k_hit[a] = i
+    return chords, frac, True
+
+
+@njit(cache=True)
+def _closest(sep2, frac, exact, tm, lvl, ids, k, k_event, dt, margined, a, out):
+    """_closest_approach for row ``a``: (min_sep, closest id, t_closest) into ``out``."""
+    last = k_event if exact else k_event + 1
+    best, bi, bq = np.inf, 0, 0
+    for i in range(min(last + 1, sep2.shape[1])):
+        for q in range(k):
+            if margined:
+                m = tm[lvl, i + 1, ids[q]] if exact else tm[lvl, i, ids[q]]
+                g = math.sqrt(sep2[a, i, q]) - m
+            else:
+                g = sep2[a, i, q]
+            if g < best:
+                best, bi, bq = g, i, q
+    out[0] = max(best, 0.0) if margined else math.sqrt(best)
+    out[1] = ids[bq]
+    out[2] = (bi + frac[a, bi, bq]) * dt if exact else bi * dt
+
+
+@njit(cache=True)
+def _first_out(xy, hs, par):
+    """Per row, the first sub-step whose end is out of the flight area (n: none)."""
+    rows, n = xy.shape[0], xy.shape[1] - 1
+    out = np.full(rows, n)
+    for a in range(rows):
+        ha = hs[min(a, hs.shape[0] - 1)]
+        for i in range(1, n + 1):
+            x, y, h = xy[a, i].real, xy[a, i].imag, ha[i]
+            if x < par[XB0] or x > par[XB1] or y < par[YB0] or y > par[YB1] or h < par[HB0] or (
+                h > par[HB1]
+            ):
+                out[a] = i - 1
+                break
+    return out
+
+
+@njit(cache=True)
+def _first_goal(xy, hs, par):
+    """Per row, the first sub-step that passes within the goal radius (n: none)."""
+    rows, n = xy.shape[0], xy.shape[1] - 1
+    out = np.full(rows, n)
+    r2 = par[GOALR] ** 2
+    for a in range(rows):
+        ha = hs[min(a, hs.shape[0] - 1)]
+        for i in range(n):
+            x0, y0, h0 = xy[a, i].real - par[GX], xy[a, i].imag - par[GY], ha[i] - par[GH]
+            x1, y1 = xy[a, i + 1].real - par[GX], xy[a, i + 1].imag - par[GY]
+            h1 = ha[i + 1] - par[GH]
+            d2, _ = _chord(x0, y0, h0, x1, y1, h1, x0**2 + y0**2 + h0**2)
+            if d2 < r2:
+                out[a] = i
+                break
+    return out
+
+
+@njit(cache=True)
+def _place(node, first, kk, state, depth, parent, action, bend, climbs, drift, par):
+    """The K children of ``node`` (EncounterModel.expand's Children.state): states, keys,
+    links. Returns origin, rot and the children's heights."""
+    kn = climbs.size
+    x, y, h, psi = state[node, 0], state[node, 1], state[node, 2], state[node, 4]
+    origin = complex(x, y)
+    rot = complex(math.cos(psi), -math.sin(psi))
+    sink = par[CLIMB] * par[DUR]
+    heights = np.empty(kn)
+    h_ends = np.empty(kn)
+    for a in range(kn):
+        vcm = 0
+        target = par[GH]
+        if par[VERT] > 0:
+            vcm = min(max(int(state[node, 7]) + climbs[a], -1), 1)
+            target = par[TDOWN] if vcm < 0 else (par[TUP] if vcm > 0 else par[TLEVEL])
+        heights[a] = target
+        h_ends[a] = h + min(max(target - h, -sink), bend[kk, a, RISEEND])
+        c = first + a
+        p = (origin + drift[-1]) + complex(bend[kk, a, ZRE], bend[kk, a, ZIM]) * rot
+        state[c, 0], state[c, 1], state[c, 2] = p.real, p.imag, h_ends[a]
+        state[c, 3], state[c, 4] = bend[kk, a, VEND], (psi + bend[kk, a, DPSI]) % _TAU
+        state[c, 5], state[c, 6], state[c, 7] = bend[kk, a, PHIEND], bend[kk, a, PHICMD], vcm
+        depth[c], parent[c], action[c] = depth[node] + 1, node, a
+    return origin, rot, heights, h_ends
+
+
+@njit(cache=True)
+def _box(h, origin, rot, kk, h_ends, bscal, drift):
+    """The cylinder holding the children's paths: (x, y, h, horizontal radius, half-height)."""
+    half = 0.5 * drift[-1]
+    c = origin + complex(bscal[kk, BALLRE], bscal[kk, BALLIM]) * rot + half
+    h_lo, h_hi = h, h
+    for a in range(h_ends.size):
+        h_lo, h_hi = min(h_lo, h_ends[a]), max(h_hi, h_ends[a])
+    return (c.real, c.imag, 0.5 * (h_lo + h_hi), bscal[kk, BALLR] + abs(half),
+            0.5 * (h_hi - h_lo), h_lo == h_hi)  # fmt: skip
+
+
+@njit(cache=True)
+def _walls(box, par):
+    """_near_wall: could a path inside ``box`` leave the flight area?"""
+    x, y, h, r_xy, r_h = box[0], box[1], box[2], box[3], box[4]
+    inside_x = par[XB0] <= x - r_xy and x + r_xy <= par[XB1]
+    inside_y = par[YB0] <= y - r_xy and y + r_xy <= par[YB1]
+    return not (inside_x and inside_y and par[HB0] <= h - r_h and h + r_h <= par[HB1])
+
+
+@njit(cache=True)
+def _goal_near(box, par):
+    """_near_goal: could a path inside ``box`` come within the goal radius?"""
+    d = math.sqrt((box[0] - par[GX]) ** 2 + (box[1] - par[GY]) ** 2 + (box[2] - par[GH]) ** 2)
+    return d <= math.hypot(box[3], box[4]) + par[GOALR]
+
+
+@njit(cache=True)
+def _samples(h, origin, rot, kk, heights, level, bz, brise, drift, par):
+    """Sub-step positions of the K children: (K, n+1) complex, (1 or K, n+1) heights."""
+    kn, m = bz.shape[1], bz.shape[2]
+    xy = np.empty((kn, m), dtype=np.complex128)
+    for a in range(kn):
+        for i in range(m):
+            xy[a, i] = origin + bz[kk, a, i] * rot + drift[i]
+    if level:
+        return xy, np.full((1, m), h)
+    hs = np.empty((kn, m))
+    step = -par[CLIMB] * (par[DUR] / (m - 1))
+    for a in range(kn):
+        for i in range(m):
+            hs[a, i] = h + min(max(heights[a] - h, step * i), brise[kk, a, i])
+    return xy, hs
+
+
+@njit(cache=True)
+def _expand(node, tree, bz, brise, bend, bscal, child, tracks, climbs, drift, par, near):
+    """TreeBuilder.expand over EncounterModel.expand: the K children of ``node``, appended
+    to the tree; returns the first child's index."""
+    (visits, value_sum, first_child, is_leaf, value, key, state, depth, parent, action, code,
+     min_sep, closest, t_closest, count, depth_limit) = tree  # fmt: skip
+    txy, th, tm, tmargined, tstep, tc, tr = tracks
+    kn, n = climbs.size, bz.shape[2] - 1
+    first = count[0]
+    count[0] += kn
+    first_child[node] = first
+    kk = key[node]
+    lvl = depth[node]
+    origin, rot, heights, h_ends = _place(node, first, kk, state, depth, parent, action, bend,
+                                          climbs, drift, par)  # fmt: skip
+    h = state[node, 2]
+    box = _box(h, origin, rot, kk, h_ends, bscal, drift)
+    k = _near(tc, tr, lvl, box[0], box[1], box[2], math.hypot(box[3], box[4]) + par[DMIN], near)
+    walls, goal = _walls(box, par), _goal_near(box, par)
+    dt = par[DUR] / n
+    k_event = np.full(kn, n)
+    kind = np.zeros(kn, dtype=np.int8)
+    res = np.empty(3)
+    if k or walls or goal:
+        xy, hs = _samples(h, origin, rot, kk, heights, box[5], bz, brise, drift, par)
+        k_hit = np.full(kn, n)
+        if k:
+            sep2, frac, exact = _hits(xy, hs, txy, th, tm, lvl, near, k, bscal[kk, OWNSTEP],
+                                      tstep[lvl], tmargined[lvl], par[DMIN], k_hit)  # fmt: skip
+        k_out = _first_out(xy, hs, par) if walls else np.full(kn, n)
+        k_goal = _first_goal(xy, hs, par) if goal else np.full(kn, n)
+        for a in range(kn):  # the first event wins; collision, then the walls, then the goal
+            k_event[a], kind[a] = k_hit[a], _COLLISION
+            if k_out[a] < k_event[a]:
+                k_event[a], kind[a] = k_out[a], _OUT
+            if k_goal[a] < k_event[a]:
+                k_event[a], kind[a] = k_goal[a], _GOAL
+            if k:
+                _closest(sep2, frac, exact, tm, lvl, near, k, k_event[a], dt, tmargined[lvl], a,
+                         res)  # fmt: skip
+                min_sep[first + a], closest[first + a] = res[0], int(res[1])
+                t_closest[first + a] = res[2]
+    for a in range(kn):
+        c = first + a
+        if not k:
+            min_sep[c], closest[c], t_closest[c] = np.inf, -1, 0.0
+        happened = k_event[a] < n
+        cd = kind[a] if happened else _NONE
+        if cd == _NONE and (lvl + 1) * par[DUR] >= par[TLEFT] - 1e-9:
+            cd = _TIMEOUT
+        code[c] = cd
+        visits[c], value_sum[c], first_child[c] = 0, 0.0, -1
+        is_leaf[c] = lvl + 1 == depth_limit or cd != _NONE
+        if cd == _NONE:
+            value[c] = np.nan
+        elif cd == _GOAL:
+            value[c] = 1.0
+        elif cd == _TIMEOUT:
+            value[c] = 0.1
+        elif cd == _COLLISION and par[LATE] > 0:
+            t = lvl * par[DUR] + k_event[a] * dt
+            value[c] = par[LATE] * t / (depth_limit * par[DUR])
+        else:
+            value[c] = 0.0
+        key[c] = child[kk, a]
+    return first
+
+
+@njit(cache=True)
+def _pick(node, first, kn, visits, value_sum, explore, inv_sqrt, draw):
+    """The UCT choice at ``node``: children never visited first, else the best score with
+    Q min-max normalised over the siblings; ties broken by ``draw``. The child's index in its
+    block."""
+    n = visits[node]
+    best = np.empty(kn, dtype=np.int64)
+    cnt = 0
+    if n == 0:  # a fresh node: every child unvisited
+        for j in range(kn):
+            best[cnt] = j
+            cnt += 1
+    else:
+        for j in range(kn):  # children never visited come first
+            if visits[first + j] == 0:
+                best[cnt] = j
+                cnt += 1
+        if cnt == 0:
+            q = np.empty(kn)
+            for j in range(kn):
+                q[j] = value_sum[first + j] / visits[first + j]
+            lo, hi = q.min(), q.max()
+            # Q normalised over the siblings (as mctx does): leaf values 1 - d/d_max of
+            # neighbouring actions differ by ~1 %, which the exploration term would swamp.
+            scale = 1.0 / (hi - lo) if hi - lo > 1e-12 else 0.0
+            e = explore[n]
+            scores = np.empty(kn)
+            for j in range(kn):
+                scores[j] = (q[j] - lo) * scale + e * inv_sqrt[visits[first + j]]
+            top = scores.max()
+            for j in range(kn):
+                if scores[j] == top:
+                    best[cnt] = j
+                    cnt += 1
+    return best[0] if cnt == 1 else best[int(draw * cnt)]
+
+
+@njit(cache=True)
+def run(tree, bz, brise, bend, bscal, child, tracks, climbs, drift, par, explore, inv_sqrt,
+        draws, simulations):  # fmt: skip
+    """``simulations`` MCTS simulations from the root (node 0) of ``tree`` (the algorithm:
+    the docstring of uavxai.avoidance.mcts). Returns the number of nodes."""
+    (visits, value_sum, first_child, is_leaf, value, key, state, depth, parent, action, code,
+     min_sep, closest, t_closest, count, depth_limit) = tree  # fmt: skip
+    kn = climbs.size
+    near = np.empty(tracks[5].shape[1], dtype=np.int64)
+    path = np.zeros(depth_limit + 1, dtype=np.int64)
+    draw = 0
+    for _ in range(simulations):
+        node, length = 0, 1
+        while not is_leaf[node]:
+            first = first_child[node]
+            if first < 0:
+                first = _expand(node, tree, bz, brise, bend, bscal, child, tracks, climbs, drift,
+                                par, near)  # fmt: skip
+            pick = _pick(node, first, kn, visits, value_sum, explore, inv_sqrt, draws[draw])
+            draw += 1
+            node = first + pick
+            path[length] = node
+            length += 1
+        v = value[node]
+        if v != v:  # nan: an open leaf at the depth limit, scored when first reached
+            d = math.sqrt((state[node, 0] - par[GX]) ** 2 + (state[node, 1] - par[GY]) ** 2
+                          + (state[node, 2] - par[GH]) ** 2)  # fmt: skip
+            v = value[node] = 1.0 - d / par[DMAX]
+        for k in range(length):
+            p = path[k]
+            visits[p] += 1
+            value_sum[p] += v
+    return count[0]
+
+
+def search(
+    model: EncounterModel,
+    root: np.ndarray,
+    goal: np.ndarray,
+    tracks: Sequence[Track],
+    *,
+    simulations: int,
+    c: float,
+    hold_s: float,
+    rng: np.random.Generator,
+    time_left_s: float = math.inf,
+) -> SearchTree:
+    """Run MCTS from ``root`` (a model state row) and return the tree (the algorithm: the
+    docstring of :mod:`uavxai.avoidance.mcts`).
+
+    ``tracks[d]`` holds the intruders during tree level ``d``, i.e. over
+    ``[d * hold_s, (d + 1) * hold_s]`` from now; the search depth is ``len(tracks)``.
+    ``time_left_s`` is when the episode times out: nodes reached later are time-outs.
+    Node 0 is the root; the children of a node are K consecutive nodes in action order (K the
+    action set's size, ``model.actions``), as :class:`uavxai.avoidance.mcts.TreeBuilder`
+    gives them.
+    """
+    depth_limit = len(tracks)
+    explore, inv_sqrt = _uct_tables(simulations, c)
+    draws = rng.random(simulations * depth_limit)  # tie-breaks, one per step, as in Python
+    keys, child = model.motions(np.asarray(root, dtype=float).tolist(), hold_s, depth_limit)
+    bodies = [model.motion(key) for key in keys]
+    n = model.substeps(hold_s)
+    bend = np.stack([b.table for b in bodies])
+    bscal = np.array(
+        [(b.ball.real, b.ball.imag, b.ball_r, model._own_step(b, hold_s / n)) for b in bodies]
+    )
+    bz = np.stack([b.z for b in bodies])
+    brise = np.stack([b.rise for b in bodies])
+    tree = _empty_tree(model, root, simulations, depth_limit)
+    size = run(tree, bz, brise, bend, bscal, child, _pack(tracks, n), model.climbs,
+               model.drift(hold_s, n), _params(model, goal, hold_s, time_left_s), explore,
+               inv_sqrt, draws, simulations)  # fmt: skip
+    return _as_search_tree(tree, int(size), model.actions.size, hold_s, time_left_s)
+
+
+@functools.lru_cache(maxsize=8)
+def _uct_tables(simulations: int, c: float) -> tuple[np.ndarray, np.ndarray]:
+    """UCT's ``2C sqrt(2 ln n)`` and ``1 / sqrt(n_j)`` by visit count: the score is
+    ``Q + [2C sqrt(2 ln n)] * [1 / sqrt(n_j)]``, both from tables."""
+    explore = np.array(
+        [2.0 * c * math.sqrt(2.0 * math.log(n)) if n else 0.0 for n in range(simulations)]
+    )
+    inv_sqrt = np.array([1.0 / math.sqrt(n) if n else math.inf for n in range(simulations)])
+    explore.flags.writeable = inv_sqrt.flags.writeable = False
+    return explore, inv_sqrt
+
+
+def _pack(tracks: Sequence[Track], n: int) -> tuple:
+    """The intruders' tracks per tree level, as arrays."""
+    count = tracks[0].count
+    margin = np.stack([np.zeros((n + 1, count)) if t.margin is None else t.margin
+                       for t in tracks])  # fmt: skip
+    return (
+        np.stack([t.xy for t in tracks]),
+        np.stack([t.h for t in tracks]),
+        margin,
+        np.array([t.margin is not None for t in tracks]),
+        np.array([t.step_max for t in tracks]),
+        np.stack([t.centre for t in tracks]).reshape(len(tracks), count, 3),
+        np.stack([t.radius for t in tracks]).reshape(len(tracks), count),
+    )
+
+
+def _params(model: EncounterModel, goal: np.ndarray, hold_s: float, time_left_s: float):
+    cfg = model.config
+    gh = float(goal[2])
+    return np.array(
+        [cfg.d_min_m, cfg.goal_radius_m, *cfg.x_bounds, *cfg.y_bounds, *cfg.h_bounds,
+         cfg.climb_rate_mps, hold_s, time_left_s, cfg.late_collision_value, cfg.d_max,
+         float(model.vertical), cfg.height_target(-1, gh), cfg.height_target(0, gh),
+         cfg.height_target(1, gh), float(goal[0]), float(goal[1]), gh],  # fmt: skip
+        dtype=float,
+    )
+
+
+def _empty_tree(model: EncounterModel, root: np.ndarray, simulations: int, depth_limit: int):
+    """The kernel's tree arrays, sized for the most nodes the search can make, root filled."""
+    k = model.actions.size
+    cap = 1 + k * (1 + simulations * max(depth_limit - 1, 0))
+    state = np.zeros((cap, 8))
+    state[0] = np.asarray(root, dtype=float)[:8]
+    tree = (
+        np.zeros(cap, dtype=np.int64),  # visits
+        np.zeros(cap),  # value_sum
+        np.full(cap, -1, dtype=np.int64),  # first_child
+        np.zeros(cap, dtype=np.bool_),  # is_leaf
+        np.full(cap, np.nan),  # value
+        np.zeros(cap, dtype=np.int64),  # key
+        state,
+        np.zeros(cap, dtype=np.int64),  # depth
+        np.full(cap, -1, dtype=np.int64),  # parent
+        np.full(cap, -1, dtype=np.int64),  # action
+        np.zeros(cap, dtype=np.int8),  # code
+        np.full(cap, np.inf),  # min_sep
+        np.full(cap, -1, dtype=np.int64),  # closest
+        np.full(cap, np.nan),  # t_closest
+        np.ones(1, dtype=np.int64),  # count
+        depth_limit,
+    )
+    return tree
+
+
+def _as_search_tree(tree, size: int, k: int, hold_s: float, time_left_s: float) -> SearchTree:
+    (visits, value_sum, first_child, _, _, _, state, depth, parent, action, code, min_sep,
+     closest, t_closest, _, _) = tree  # fmt: skip
+    d = depth[:size].copy()
+    states = state[:size].copy()
+    return SearchTree(
+        parent=parent[:size].copy(),
+        action=action[:size].copy(),
+        depth=d,
+        visits=visits[:size].copy(),
+        value_sum=value_sum[:size].copy(),
+        min_sep=min_sep[:size].copy(),
+        closest=closest[:size].copy(),
+        terminal=code[:size].copy(),
+        pos=states[:, :3].copy(),
+        t_closest=t_closest[:size] + np.maximum(d - 1, 0) * hold_s,
+        state=states,
+        first_child=first_child[:size].copy(),
+        branching=k,
+        time_left_s=time_left_s,
+    )
