@@ -23,8 +23,9 @@ from uavxai.avoidance.types import PlannerConfig
 from uavxai.dynamics.traffic import draw_intruders
 from uavxai.paths import scenarios_dir
 from uavxai.scenario import load_scenario
-from uavxai.sim.build import episode_goal, fly
+from uavxai.sim.build import fly
 from uavxai.sim.observers import OwnPath
+from uavxai.sim.spec import episode_goal, episode_spec
 
 HORIZONS_S = (4, 8, 12, 16)
 
@@ -47,11 +48,8 @@ def main() -> None:
             goal = episode_goal(sc)
             intruders = draw_intruders(sc, np.random.default_rng(seed), args.intruders)
             fly(
-                sc,
+                episode_spec(sc, goal=goal, dynamics="jsbsim", intruders=intruders),
                 make_planner("mcts_vertical", cfg),
-                goal,
-                dynamics="jsbsim",
-                intruders=intruders,
                 observers=[log],
             )
             drift = model_drift(cfg, log.own, log.actions, np.asarray(goal), HORIZONS_S, every=2)
