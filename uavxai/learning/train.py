@@ -466,7 +466,7 @@ def _episode_row(
     env = slot.env
     return {
         "episode": episode,
-        "intruders": slot.count,
+        "intruders": len(env.episode_spec.intruders),
         "outcome": env.outcome,
         "steps": env.steps,
         "return_goal": round(float(returns[0]), 4),

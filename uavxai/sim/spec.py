@@ -61,10 +61,18 @@ def episode_goal(scenario: Scenario, service_point: Sequence[float] | None = Non
 @lru_cache(maxsize=32)
 def _service_point(scenario_json: str) -> Point:
     """The planned service point of a scenario, once per process (campaign episodes, training
-    episodes and tests fly the same scenario many times; the plan is deterministic)."""
+    episodes and tests fly the same scenario many times; the plan is deterministic).
+
+    Planned on a fork of torch's random state: a learned service planner draws from it, and
+    the caller's stream (a training run's network initialisation) must not depend on whether
+    this process had planned the point before."""
+    import torch
+
     from uavxai.service.stage import plan_service  # the service layer only when needed
 
-    return _point(plan_service(Scenario.model_validate_json(scenario_json)).service_point)
+    with torch.random.fork_rng(devices=[]):
+        plan = plan_service(Scenario.model_validate_json(scenario_json))
+    return _point(plan.service_point)
 
 
 def _point(v: Sequence[float]) -> Point:
