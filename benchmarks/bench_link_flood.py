@@ -39,6 +39,7 @@ from uavxai.scenario import default_scenario  # noqa: E402
 from uavxai.sim.build import fly  # noqa: E402
 from uavxai.sim.episode import Observer  # noqa: E402
 from uavxai.sim.run import mavlink_path  # noqa: E402
+from uavxai.sim.spec import episode_spec  # noqa: E402
 
 GCS_SYSTEM = 255
 FLOOD_DATAGRAMS = 20_000
@@ -123,9 +124,11 @@ def one_run(sc, flooded: bool) -> tuple[float, float, dict, int, float | None]:
     cpu0 = t0.user + t0.system
     try:
         r = fly(
-            sc, planner, tuple(sc.ownship.goal), dynamics="jsbsim",
-            path=mavlink_path(sc, f"udpin:127.0.0.1:{port}"), observers=[station],
-        )  # fmt: skip
+            episode_spec(sc, goal=tuple(sc.ownship.goal), dynamics="jsbsim"),
+            planner,
+            path=mavlink_path(sc, f"udpin:127.0.0.1:{port}"),
+            observers=[station],
+        )
         t1 = os.times()
         cpu = t1.user + t1.system - cpu0  # set-up included; the attacker's CPU not
     finally:

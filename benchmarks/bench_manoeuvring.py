@@ -24,7 +24,7 @@ import numpy as np
 
 from uavxai.avoidance.planners import make_planner
 from uavxai.avoidance.types import PlannerConfig
-from uavxai.learning.env import EncounterEnv, episode_intruders
+from uavxai.learning.env import EncounterEnv
 from uavxai.metrics import rate, risk_ratio
 from uavxai.scenario import default_scenario
 
@@ -36,7 +36,7 @@ def episode(method: str, scenario, seed: int, n: int) -> tuple[str, float, list[
     cfg = PlannerConfig.from_scenario(scenario, seed=seed, **over)
     planner = make_planner("mcts" if method == "mcts_paper" else method, cfg)
     planner.reset(seed)
-    env = EncounterEnv(scenario, intruders=episode_intruders(scenario, seed, n))
+    env = EncounterEnv(scenario, n_intruders=n)
     env.reset(seed=seed)
     min_sep, ms = np.inf, []
     while not env.outcome:

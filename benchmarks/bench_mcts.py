@@ -30,16 +30,15 @@ import numpy as np
 from uavxai.avoidance import PlannerConfig, make_planner
 from uavxai.avoidance.exhaustive import ExhaustivePlanner
 from uavxai.avoidance.types import Ownship, Planner
-from uavxai.learning.env import default_goal, episode_intruders
 from uavxai.scenario import default_scenario
+from uavxai.sim.build import open_world
 from uavxai.sim.build import run_kinematic as run_episode
-from uavxai.sim.kinematic import KinematicWorld
+from uavxai.sim.spec import episode_spec
 from uavxai.surveillance.tracker import truth_beliefs
 
 
 def encounters(scenario, count: int, n_intruders: int) -> list[tuple[Ownship, list, tuple]]:
     """Seeded encounters: (ownship, intruders, goal)."""
-    goal = default_goal(scenario)
     out = []
     for seed in range(count):
         rng = np.random.default_rng(1000 + seed)
@@ -51,8 +50,9 @@ def encounters(scenario, count: int, n_intruders: int) -> list[tuple[Ownship, li
             heading=float(rng.uniform(0, 2 * math.pi)),
             bank=math.radians(float(rng.choice([-20, -10, 0, 10, 20]))),
         )
-        with KinematicWorld(scenario, episode_intruders(scenario, seed, n_intruders)) as world:
-            out.append((own, truth_beliefs(world.state()), goal))
+        spec = episode_spec(scenario, seed, n_intruders=n_intruders)
+        with open_world(spec) as world:
+            out.append((own, truth_beliefs(world.state()), spec.goal))
     return out
 
 

@@ -39,8 +39,8 @@ from uavxai.comms.channel import Channel
 from uavxai.scenario import Scenario, load_scenario
 from uavxai.service.stage import plan_service
 from uavxai.sim.build import fly
-from uavxai.sim.mission import mission_of
 from uavxai.sim.observers import Service
+from uavxai.sim.spec import episode_spec
 
 SEED0 = 9_100
 SETTINGS: dict[str, dict[str, Any]] = {
@@ -78,8 +78,8 @@ def fly_plan(sc: Scenario) -> dict[str, Any]:
     service = Service(sc, channel, plan.power_w, None)
     planner = make_planner("none", PlannerConfig.from_scenario(sc))
     t0 = time.perf_counter()
-    result = fly(sc, planner, goal, dynamics="jsbsim", intruders=[], observers=[service],
-                 mission=mission_of(sc, goal))
+    spec = episode_spec(sc, goal=goal, dynamics="jsbsim", intruders=[], mission=True)
+    result = fly(spec, planner, observers=[service])
     m = result.summary.get("mission", {})
     return {
         "outcome": result.outcome.value,

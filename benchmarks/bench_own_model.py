@@ -20,11 +20,11 @@ import numpy as np
 from uavxai.avoidance.model import model_drift
 from uavxai.avoidance.planners import make_planner
 from uavxai.avoidance.types import PlannerConfig
-from uavxai.dynamics.traffic import draw_intruders
 from uavxai.paths import scenarios_dir
 from uavxai.scenario import load_scenario
-from uavxai.sim.build import episode_goal, fly
+from uavxai.sim.build import fly
 from uavxai.sim.observers import OwnPath
+from uavxai.sim.spec import episode_spec
 
 HORIZONS_S = (4, 8, 12, 16)
 
@@ -44,17 +44,10 @@ def main() -> None:
             # measure the model as it is, without any own-error margin steering the flight
             cfg = PlannerConfig.from_scenario(sc, own_error_10s_m=0.0)
             log = OwnPath()
-            goal = episode_goal(sc)
-            intruders = draw_intruders(sc, np.random.default_rng(seed), args.intruders)
-            fly(
-                sc,
-                make_planner("mcts_vertical", cfg),
-                goal,
-                dynamics="jsbsim",
-                intruders=intruders,
-                observers=[log],
-            )
-            drift = model_drift(cfg, log.own, log.actions, np.asarray(goal), HORIZONS_S, every=2)
+            spec = episode_spec(sc, n_intruders=args.intruders, dynamics="jsbsim")
+            fly(spec, make_planner("mcts_vertical", cfg), observers=[log])
+            goal = np.asarray(spec.goal)
+            drift = model_drift(cfg, log.own, log.actions, goal, HORIZONS_S, every=2)
             for h, e in drift.items():
                 pooled[h].extend(e)
         sigma = np.array([np.sqrt(np.mean(np.square(pooled[h])) / 2) for h in HORIZONS_S])

@@ -13,7 +13,7 @@ from uavxai.avoidance import Ownship, PlannerConfig, make_planner
 from uavxai.avoidance.observation import observation_size, observe
 from uavxai.avoidance.planners import PLANNERS
 from uavxai.errors import UserError
-from uavxai.learning.env import EncounterEnv, default_goal
+from uavxai.learning.env import EncounterEnv
 from uavxai.scenario import IntruderSpec, default_scenario
 from uavxai.sim.build import run_kinematic as run_episode
 
@@ -62,15 +62,16 @@ def test_kinematic_predictions_match_what_is_flown():
     assert r.separation_error_m and max(r.separation_error_m) < 0.2
 
 
-def encounter(intruders, goal, start: Ownship, **avoidance) -> EncounterEnv:
-    """The engine's env on the default scenario, with these intruders, goal and start."""
+def encounter(intruders, goal, start: Ownship, **avoidance) -> tuple[EncounterEnv, dict]:
+    """The engine's env on the default scenario, and the reset options for these intruders,
+    goal and start."""
     sc = default_scenario("env-test", avoidance=avoidance)
-    return EncounterEnv(sc, intruders=intruders, goal=goal, start=start)
+    return EncounterEnv(sc), {"intruders": intruders, "goal": goal, "start": start}
 
 
 def test_env_goal_reward_and_termination():
-    env = encounter([], (1000.0, 1100.0, 120.0), Ownship(1000, 1000, 120, 20, 0.0))
-    obs, info = env.reset(seed=0)
+    env, options = encounter([], (1000.0, 1100.0, 120.0), Ownship(1000, 1000, 120, 20, 0.0))
+    obs, info = env.reset(seed=0, options=options)
     assert obs.shape == env.observation_space.shape and info["distance_m"] == pytest.approx(100)
     rewards, done = [], False
     while not done:
@@ -85,8 +86,10 @@ def test_env_goal_reward_and_termination():
 
 
 def test_env_time_out_is_a_truncation_worth_0_1():
-    env = encounter([], (1900.0, 1900.0, 120.0), Ownship(100, 100, 120, 20, 0.8), max_steps=3)
-    env.reset(seed=0)
+    env, options = encounter(
+        [], (1900.0, 1900.0, 120.0), Ownship(100, 100, 120, 20, 0.8), max_steps=3
+    )
+    env.reset(seed=0, options=options)
     for _ in range(3):
         *_, reward, terminated, truncated, info = env.step(HOLD)
     assert truncated and not terminated and reward == pytest.approx(0.1)
@@ -95,16 +98,16 @@ def test_env_time_out_is_a_truncation_worth_0_1():
 
 def test_env_collision_and_leaving_the_area():
     head_on = [IntruderSpec(x=1000, y=1150, h=120, heading_deg=180, speed_mps=20)]
-    env = encounter(head_on, (1000, 1900, 120), Ownship(1000, 1000, 120, 20, 0))
-    env.reset(seed=0)
+    env, options = encounter(head_on, (1000, 1900, 120), Ownship(1000, 1000, 120, 20, 0))
+    env.reset(seed=0, options=options)
     for _ in range(5):
         _, reward, terminated, _, info = env.step(HOLD)
         if terminated:
             break
     assert info["outcome"] == "collision" and reward == 0.0
     assert info["min_separation_m"] < 50.0
-    env = encounter([], (1000, 1000, 120), Ownship(1990, 500, 120, 20, 1.57))
-    env.reset(seed=0)
+    env, options = encounter([], (1000, 1000, 120), Ownship(1990, 500, 120, 20, 1.57))
+    env.reset(seed=0, options=options)
     *_, reward, terminated, _, info = env.step(HOLD)
     assert terminated and info["outcome"] == "out_of_bounds" and reward == 0.0
 
@@ -112,13 +115,9 @@ def test_env_collision_and_leaving_the_area():
 def test_turning_intruders_turn():
     turning = [IntruderSpec(x=500, y=500, h=120, heading_deg=0, speed_mps=20,
                             behaviour="random_turns")]  # fmt: skip
-    env = EncounterEnv(
-        small_scenario(),
-        intruders=turning,
-        goal=(1000, 1000, 120),
-        start=Ownship(100, 100, 120, 20, 0),
-    )
-    env.reset(seed=0)
+    env = EncounterEnv(small_scenario())
+    start = Ownship(100, 100, 120, 20, 0)
+    env.reset(seed=0, options={"intruders": turning, "goal": (1000, 1000, 120), "start": start})
     headings = []
     for _ in range(30):
         env.step(HOLD)
@@ -141,18 +140,6 @@ def test_observation_size_is_independent_of_the_intruder_count():
     first = obs[10:18]
     assert first[1] == pytest.approx(100 / 500) and first[7] == 1.0
     assert obs[10 + 2 * 8 + 7] == 0.0  # third slot absent
-
-
-def test_default_goal():
-    assert default_goal(default_scenario("g")) == (1000.0, 1000.0, 100.0)
-    high = default_scenario(
-        "g",
-        world={"h": [150, 300]},
-        ownship={"start": {"h": 200}},
-        intruders={"altitude_m": [160, 200]},
-    )
-    assert default_goal(high) == (1000.0, 1000.0, 150.0)  # 100 m clamped into world.h
-    assert default_goal(default_scenario("g", ownship={"goal": [1, 2, 120]})) == (1.0, 2.0, 120.0)
 
 
 def test_planner_factory():

@@ -12,9 +12,9 @@ import pytest
 from uavxai.avoidance import Ownship, PlannerConfig
 from uavxai.avoidance.mcts import TreeBuilder, predict_levels, search
 from uavxai.avoidance.model import NONE, EncounterModel, ownship_state
-from uavxai.learning.env import default_goal, episode_intruders
 from uavxai.scenario import default_scenario
-from uavxai.sim.kinematic import KinematicWorld
+from uavxai.sim.build import open_world
+from uavxai.sim.spec import episode_spec
 from uavxai.surveillance.tracker import truth_beliefs
 
 # what the kernel and the Python expansion must agree on exactly, and to rounding
@@ -26,14 +26,15 @@ def crowded(seed: int, n_intruders: int, actions: str):
     """A seeded crowded encounter: config, model, root, goal, tracks."""
     scenario = default_scenario("kernel-test", intruders={"count": n_intruders})
     cfg = dataclasses.replace(PlannerConfig.from_scenario(scenario), actions=actions)
-    with KinematicWorld(scenario, episode_intruders(scenario, seed, n_intruders)) as world:
+    spec = episode_spec(scenario, seed, n_intruders=n_intruders)
+    with open_world(spec) as world:
         intruders = truth_beliefs(world.state())
     heading = 0.7 * seed
     own = Ownship(900.0 + 40 * seed, 800.0, 115.0 + seed, 17.0 + seed, heading,
                   bank=math.radians(10.0 * (seed % 3 - 1)))  # fmt: skip
     model = EncounterModel(cfg)
     tracks = predict_levels(model, intruders, cfg.depth, cfg.action_hold_s)
-    return cfg, model, ownship_state(own), np.asarray(default_goal(scenario)), tracks
+    return cfg, model, ownship_state(own), np.asarray(spec.goal), tracks
 
 
 @pytest.mark.parametrize("actions", ["paper", "vertical"])

@@ -44,8 +44,8 @@ def seen(specs: list[IntruderSpec]) -> list[Intruder]:
 
 def fly(planner, own: Ownship, intruders, steps: int) -> tuple[str, float]:
     """Closed loop on the kinematic model: (outcome or '', minimum separation)."""
-    env = EncounterEnv(SCENARIO, intruders=intruders, goal=GOAL, start=own)
-    env.reset(seed=0)
+    env = EncounterEnv(SCENARIO)
+    env.reset(seed=0, options={"intruders": intruders, "goal": GOAL, "start": own})
     min_sep = math.inf
     for _ in range(steps):
         d = planner.plan(env.ownship, env.intruders, GOAL, step=env.steps)

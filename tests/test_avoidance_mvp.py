@@ -106,10 +106,9 @@ def test_mvp_avoids_a_head_on_in_closed_loop():
     results = {}
     for name in ("none", "mvp"):
         planner = make_planner(name, cfg)
-        env = EncounterEnv(
-            default_scenario("mvp-test"), intruders=[spec], goal=(1000.0, 1800.0, 120.0), start=own
-        )
-        env.reset(seed=0)
+        env = EncounterEnv(default_scenario("mvp-test"))
+        goal = (1000.0, 1800.0, 120.0)
+        env.reset(seed=0, options={"intruders": [spec], "goal": goal, "start": own})
         min_sep = math.inf
         for _ in range(30):
             d = planner.plan(env.ownship, env.intruders, (1000.0, 1800.0, 120.0), step=env.steps)

@@ -367,7 +367,7 @@ def test_mcts_survives_random_turn_traffic():
     """30 seeded kinematic episodes among 20 random-turn intruders that the planner sees with
     their true turn rates: at most 1 collision (the constant-velocity planner of the paper
     collided in 28 of 100 such episodes; the new one in 1 of 100)."""
-    from uavxai.learning.env import EncounterEnv, episode_intruders
+    from uavxai.learning.env import EncounterEnv
     from uavxai.scenario import default_scenario
 
     scenario = default_scenario(intruders={"behaviour": "random_turns"})
@@ -375,7 +375,7 @@ def test_mcts_survives_random_turn_traffic():
     for seed in range(30):
         cfg = PlannerConfig.from_scenario(scenario, seed=seed)
         planner = MCTSPlanner(cfg)
-        env = EncounterEnv(scenario, intruders=episode_intruders(scenario, seed, 20))
+        env = EncounterEnv(scenario, n_intruders=20)
         env.reset(seed=seed)
         while not env.outcome:
             seen = env.intruders  # the truth picture: true turn rates, g tan(phi) / V

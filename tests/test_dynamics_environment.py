@@ -274,20 +274,20 @@ def _drift_sigma_8s(dynamics: str, turbulence: str) -> float:
     from uavxai.avoidance.model import model_drift
     from uavxai.avoidance.planners import make_planner
     from uavxai.avoidance.types import PlannerConfig
-    from uavxai.dynamics.traffic import draw_intruders
     from uavxai.paths import scenarios_dir
     from uavxai.scenario import load_scenario
-    from uavxai.sim.build import episode_goal, fly
+    from uavxai.sim.build import fly
     from uavxai.sim.observers import OwnPath
+    from uavxai.sim.spec import episode_spec
 
     base = load_scenario(scenarios_dir() / "manoeuvring.yaml")
     env = base.environment.model_copy(update={"turbulence": turbulence})
     sc = base.model_copy(update={"environment": env}).with_seed(1001)
     cfg = PlannerConfig.from_scenario(sc)
-    goal, path = episode_goal(sc), OwnPath()
-    intruders = draw_intruders(sc, np.random.default_rng(1001), 20)
+    spec, path = episode_spec(sc, n_intruders=20, dynamics=dynamics), OwnPath()
+    goal = spec.goal
     planner = make_planner("mcts_vertical", cfg)
-    fly(sc, planner, goal, dynamics=dynamics, intruders=intruders, observers=[path])
+    fly(spec, planner, observers=[path])
     drift = model_drift(cfg, path.own, path.actions, np.asarray(goal), (8,), every=2)[8]
     assert drift.size > 20, drift.size
     return float(np.sqrt(np.mean(drift**2) / 2))

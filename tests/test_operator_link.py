@@ -23,6 +23,7 @@ from uavxai.scenario import default_scenario
 from uavxai.sim.build import fly
 from uavxai.sim.episode import Observer
 from uavxai.sim.run import mavlink_path
+from uavxai.sim.spec import episode_spec
 from uavxai.vocabulary import Outcome
 
 KEY_HEX = "5a" * 32
@@ -81,7 +82,8 @@ def _fly(station: GroundStation | None, port: int, dynamics: str = "kinematic", 
     planner = make_planner("mcts_fast", PlannerConfig.from_scenario(sc))
     observers = [station] if station else []
     path = mavlink_path(sc, f"udpout:127.0.0.1:{port}")
-    return fly(sc, planner, GOAL, dynamics=dynamics, path=path, observers=observers)
+    spec = episode_spec(sc, goal=GOAL, dynamics=dynamics)
+    return fly(spec, planner, path=path, observers=observers)
 
 
 @pytest.mark.parametrize(
@@ -219,7 +221,7 @@ def test_the_runs_tlog_holds_every_frame_the_counters_count(tmp_path) -> None:
     planner = make_planner("mcts_fast", PlannerConfig.from_scenario(sc))
     tlog = tmp_path / "link.tlog"
     path = mavlink_path(sc, f"udpout:127.0.0.1:{port}", tlog)
-    r = fly(sc, planner, GOAL, dynamics="kinematic", path=path, observers=[gcs])
+    r = fly(episode_spec(sc, goal=GOAL, dynamics="kinematic"), planner, path=path, observers=[gcs])
     counters = r.summary["bridge"]
     log = mavutil.mavlink_connection(str(tlog))
     kinds: dict[str, int] = {}

@@ -90,6 +90,7 @@ def test_a_missions_bar_counts_what_it_will_fly_and_ends_full() -> None:
     from uavxai.sim.episode import Observer
     from uavxai.sim.mission import mission_of
     from uavxai.sim.observers import ProgressBar
+    from uavxai.sim.spec import episode_spec
 
     class Totals(Observer):
         def __init__(self) -> None:
@@ -106,8 +107,11 @@ def test_a_missions_bar_counts_what_it_will_fly_and_ends_full() -> None:
     with Progress(console=Console(file=io.StringIO())) as progress:
         bar = ProgressBar(progress, sc.name, sc.avoidance.max_steps)
         planner = make_planner("mcts_fast", PlannerConfig.from_scenario(sc))
-        r = fly(sc, planner, station, dynamics="kinematic", mission=mission,
-                observers=[bar, totals])  # fmt: skip
+        r = fly(
+            episode_spec(sc, goal=station, dynamics="kinematic", mission=mission),
+            planner,
+            observers=[bar, totals],
+        )
         end = progress.tasks[bar.task]
     assert r.summary["mission"]["phases"].keys() == {"transit", "on_station", "returning"}
     assert end.completed == end.total == r.steps

@@ -15,6 +15,7 @@ from uavxai.sim.clock import Clock
 from uavxai.sim.episode import Observer
 from uavxai.sim.judge import Judge
 from uavxai.sim.kinematic import KinematicWorld
+from uavxai.sim.spec import episode_spec
 from uavxai.vocabulary import Outcome
 
 EQ = {
@@ -83,7 +84,11 @@ def test_an_output_is_an_observer_and_sees_every_event() -> None:
     sc = default_scenario("obs", avoidance={"max_steps": 7}, seed=4)
     count = _Count()
     planner = make_planner("none", PlannerConfig.from_scenario(sc))
-    r = fly(sc, planner, (1900, 1900, 120), dynamics="kinematic", intruders=[], observers=[count])
+    r = fly(
+        episode_spec(sc, goal=(1900, 1900, 120), dynamics="kinematic", intruders=[]),
+        planner,
+        observers=[count],
+    )
     assert r.outcome is Outcome.TIMEOUT and r.steps == 7
     assert count.events == {"start": 1, "decision": 7, "sample": 70, "end": 1}
     assert r.summary["counted"] and r.summary["outcome"] == "timeout"
@@ -119,7 +124,9 @@ def test_throughput_integrates_every_sample_flown(stop_after: int | None) -> Non
     planner = make_planner("none", PlannerConfig.from_scenario(sc))
     # the throughput first: it has seen a sample when the other observer interrupts
     r = fly(
-        sc, planner, (1900, 1900, 120), dynamics="kinematic", intruders=[], observers=[tput, seen]
+        episode_spec(sc, goal=(1900, 1900, 120), dynamics="kinematic", intruders=[]),
+        planner,
+        observers=[tput, seen],
     )
     assert len(seen.pos) == (40 if stop_after is None else 15)
     assert r.outcome is (Outcome.TIMEOUT if stop_after is None else Outcome.INTERRUPTED)
@@ -180,8 +187,12 @@ def test_the_planner_believes_what_the_adsb_frames_on_the_link_carry(tmp_path: P
             link.decoded = []
 
     planner = make_planner("none", PlannerConfig.from_scenario(sc))
-    r = fly(sc, planner, (1900, 1900, 120), path=mavlink_path(sc, f"udpout:127.0.0.1:{port}"),
-            observers=[Grab()])  # fmt: skip
+    r = fly(
+        episode_spec(sc, goal=(1900, 1900, 120), dynamics="jsbsim"),
+        planner,
+        path=mavlink_path(sc, f"udpout:127.0.0.1:{port}"),
+        observers=[Grab()],
+    )
     assert r.steps == 8 and decoded
     mav = mavutil.mavlink.MAVLink(None)
     received = []

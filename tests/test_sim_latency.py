@@ -24,6 +24,7 @@ from uavxai.sim.build import fly
 from uavxai.sim.clock import Clock
 from uavxai.sim.companion import Companion
 from uavxai.sim.episode import Observer
+from uavxai.sim.spec import episode_spec
 
 LAT = {
     "name": "latency-eq",
@@ -74,8 +75,11 @@ def _fly_kinematic(latency: float) -> _BankAt:
         avoidance={"max_steps": 25, "decision_latency_s": latency},
     )
     seen = _BankAt()
-    fly(sc, make_planner("mcts", PlannerConfig.from_scenario(sc)), (1000, 1000, 120),
-        dynamics="kinematic", observers=[seen])  # fmt: skip
+    fly(
+        episode_spec(sc, goal=(1000, 1000, 120), dynamics="kinematic"),
+        make_planner("mcts", PlannerConfig.from_scenario(sc)),
+        observers=[seen],
+    )
     return seen
 
 
@@ -208,8 +212,12 @@ def test_without_latency_the_intruders_fly_ahead_while_the_companion_searches() 
     config, goal = PlannerConfig.from_scenario(sc), (1000, 1000, 120)
     remote, local = _Ahead(), _Ahead()
     with Companion("mcts", config, scenario=sc) as planner:
-        fly(sc, planner, goal, dynamics="jsbsim", observers=[remote])
-    fly(sc, make_planner("mcts", config), goal, dynamics="jsbsim", observers=[local])
+        fly(episode_spec(sc, goal=goal, dynamics="jsbsim"), planner, observers=[remote])
+    fly(
+        episode_spec(sc, goal=goal, dynamics="jsbsim"),
+        make_planner("mcts", config),
+        observers=[local],
+    )
     assert remote.ahead == [120] * len(remote.ahead) and len(remote.ahead) == 15
     assert local.ahead == [0] * 15  # in-process: nothing to overlap, lockstep
     assert len(remote.states) == len(local.states) == 150

@@ -14,6 +14,7 @@ from uavxai.scenario import default_scenario
 from uavxai.sim.build import fly
 from uavxai.sim.episode import Observer
 from uavxai.sim.mission import MissionConfig, mission_of
+from uavxai.sim.spec import episode_spec
 from uavxai.vocabulary import Outcome
 
 STATION = (1000.0, 1000.0, 120.0)
@@ -36,7 +37,9 @@ def test_phases_in_order_and_the_orbit_holds_its_radius() -> None:
     m = _mission(sc, service_s=120.0)
     track = Track()
     planner = make_planner("mcts_fast", PlannerConfig.from_scenario(sc))
-    r = fly(sc, planner, STATION, dynamics="kinematic", mission=m, observers=[track])
+    r = fly(
+        episode_spec(sc, goal=STATION, dynamics="kinematic", mission=m), planner, observers=[track]
+    )
     assert r.outcome is Outcome.COMPLETED
     phases = r.summary["mission"]["phases"]
     assert list(phases) == ["transit", "on_station", "returning"]
@@ -55,7 +58,9 @@ def test_an_intruder_crossing_the_orbit_is_avoided_and_the_orbit_rejoined() -> N
     m = _mission(sc, service_s=90.0, return_home=False)
     track = Track()
     planner = make_planner("mcts", PlannerConfig.from_scenario(sc))
-    r = fly(sc, planner, STATION, dynamics="kinematic", mission=m, observers=[track])
+    r = fly(
+        episode_spec(sc, goal=STATION, dynamics="kinematic", mission=m), planner, observers=[track]
+    )
     seq = [ph for _, ph in r.summary["mission"]["transitions"]]
     assert "avoiding" in seq and seq.index("avoiding") < len(seq) - 1
     assert seq[seq.index("avoiding") + 1] == "on_station"  # rejoined
@@ -68,7 +73,7 @@ def test_no_service_time_or_an_explicit_goal_is_the_papers_transit_episode() -> 
     assert mission_of(default_scenario("g", ownship={"goal": [900, 900, 120]}), STATION) is None
     assert mission_of(sc, STATION) is not None
     planner = make_planner("none", PlannerConfig.from_scenario(sc))
-    r = fly(sc, planner, STATION, dynamics="kinematic")
+    r = fly(episode_spec(sc, goal=STATION, dynamics="kinematic"), planner)
     assert r.outcome is Outcome.GOAL and "mission" not in r.summary
 
 
@@ -99,8 +104,12 @@ def test_ground_station_sees_auto_and_the_phases_as_status_texts() -> None:
     m = _mission(sc, service_s=30.0)
     planner = make_planner("mcts_fast", PlannerConfig.from_scenario(sc))
     path = mavlink_path(sc, f"udpout:127.0.0.1:{port}")
-    r = fly(sc, planner, STATION, dynamics="kinematic", path=path, mission=m,
-            observers=[GroundStation()])  # fmt: skip
+    r = fly(
+        episode_spec(sc, goal=STATION, dynamics="kinematic", mission=m),
+        planner,
+        path=path,
+        observers=[GroundStation()],
+    )
     gcs.close()
     assert r.outcome is Outcome.COMPLETED
     # the scenario's own mission is flown in AUTO, as ArduPlane flies a mission; its phases
@@ -136,7 +145,11 @@ def test_on_station_the_search_is_valued_against_the_missions_time_left() -> Non
     m = _mission(sc, service_s=90.0, return_home=False)
     budgets = _Budgets()
     planner = make_planner("mcts", PlannerConfig.from_scenario(sc))
-    r = fly(sc, planner, STATION, dynamics="kinematic", mission=m, observers=[budgets])
+    r = fly(
+        episode_spec(sc, goal=STATION, dynamics="kinematic", mission=m),
+        planner,
+        observers=[budgets],
+    )
     assert r.outcome is Outcome.COMPLETED
     cfg = planner.config
     horizon = cfg.depth * cfg.action_hold_s

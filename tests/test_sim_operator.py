@@ -17,6 +17,7 @@ from uavxai.scenario import ScenarioError, default_scenario, parse_scenario
 from uavxai.sim.build import fly
 from uavxai.sim.episode import Observer
 from uavxai.sim.run import mavlink_path
+from uavxai.sim.spec import episode_spec
 from uavxai.vocabulary import Outcome
 
 
@@ -39,7 +40,7 @@ def _fly(commands: list[dict], path=None, **changes):
     planner = make_planner(sc.avoidance.planner, PlannerConfig.from_scenario(sc))
     watch = Watch()
     kwargs = {"path": path(sc)} if path is not None else {}
-    r = fly(sc, planner, GOAL, dynamics="kinematic", observers=[watch], **kwargs)
+    r = fly(episode_spec(sc, goal=GOAL, dynamics="kinematic"), planner, observers=[watch], **kwargs)
     return r, watch
 
 
@@ -149,7 +150,7 @@ def test_the_recording_shows_the_operators_modes_as_phases(tmp_path) -> None:
     setup = {"bounds": {"x": sc.world.x, "y": sc.world.y, "h": sc.world.h}, "origin": None,
              "users": np.zeros((0, 3)), "service_point": None, "search_path": None}  # fmt: skip
     rec = Rerun(RunRecorder(rrd), setup)
-    fly(sc, planner, GOAL, dynamics="kinematic", observers=[rec])
+    fly(episode_spec(sc, goal=GOAL, dynamics="kinematic"), planner, observers=[rec])
     texts = []
     for chunk in RrdReader(str(rrd)).stream().to_chunks():
         if chunk.entity_path == "/mission/phase":

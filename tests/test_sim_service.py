@@ -96,9 +96,9 @@ def test_walking_users_make_the_mission_replan_and_move_its_orbit() -> None:
     from uavxai.scenario import default_scenario
     from uavxai.service.stage import plan_service
     from uavxai.sim.build import fly
-    from uavxai.sim.mission import mission_of
     from uavxai.sim.observers import Service
     from uavxai.sim.run import _replanner
+    from uavxai.sim.spec import episode_spec
 
     sc = default_scenario(
         "walk",
@@ -114,8 +114,11 @@ def test_walking_users_make_the_mission_replan_and_move_its_orbit() -> None:
     service = Service(sc, Channel.from_scenario(sc, users=plan.users), plan.power_w, None,
                       replan=_replanner(sc))  # fmt: skip
     planner = make_planner("mcts_fast", PlannerConfig.from_scenario(sc))
-    r = fly(sc, planner, station, dynamics="kinematic", observers=[service],
-            mission=mission_of(sc, station))  # fmt: skip
+    r = fly(
+        episode_spec(sc, goal=station, dynamics="kinematic", mission=True),
+        planner,
+        observers=[service],
+    )
     points = r.summary["mission"]["service_points"]
     assert r.outcome.value == "completed"
     assert len(points) >= 4  # the first plan, then every 20 s on station

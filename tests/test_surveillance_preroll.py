@@ -18,6 +18,7 @@ from uavxai.sim.clock import Clock
 from uavxai.sim.episode import Observer
 from uavxai.sim.kinematic import KinematicWorld
 from uavxai.sim.picture import Picture, Receiver
+from uavxai.sim.spec import episode_spec
 from uavxai.surveillance.adsb import (
     NACP_EPU_M,
     NACP_VEPU_M,
@@ -47,7 +48,7 @@ def _first_picture(preroll_s: float, seed: int = 6):
     )  # fmt: skip
     first = _First()
     planner = make_planner("none", PlannerConfig.from_scenario(sc))
-    fly(sc, planner, GOAL, dynamics="kinematic", observers=[first])
+    fly(episode_spec(sc, goal=GOAL, dynamics="kinematic"), planner, observers=[first])
     return sc, first.event
 
 

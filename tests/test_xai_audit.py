@@ -26,14 +26,14 @@ from uavxai.avoidance.mcts import predict_levels
 from uavxai.avoidance.model import GOAL, NONE, OUT_OF_BOUNDS, EncounterModel
 from uavxai.avoidance.planners import make_planner
 from uavxai.avoidance.types import Intruder, Ownship, PlannerConfig
-from uavxai.dynamics.traffic import draw_intruders
 from uavxai.recording.recorder import _plan_label
 from uavxai.recording.tree_graph import CHOSEN_COLOR, tree_graph
 from uavxai.scenario import Scenario, load_scenario
-from uavxai.sim.build import episode_goal, episode_steps, fly
+from uavxai.sim.build import fly
 from uavxai.sim.episode import Observer
 from uavxai.sim.mission import CONFLICT_FACTOR, ON_ORBIT_SHARE, MissionConfig, orbit_clearance
 from uavxai.sim.observers import DecisionsJSONL, TrajectoryCSV, Trust
+from uavxai.sim.spec import episode_goal, episode_spec
 from uavxai.vocabulary import ACTIONS, HOLD
 from uavxai.xai.explain import explain_command
 
@@ -80,7 +80,9 @@ def fly_recorded(
     ``mission`` (MissionConfig) the whole mission, to its station."""
     folder.mkdir(parents=True, exist_ok=True)
     planner = make_planner(planner_name, PlannerConfig.from_scenario(sc))
-    goal = episode_goal(sc) if mission is None else mission.station
+    # the run's episode: the scenario's goal and intruders at its seed, or the mission's station
+    spec = episode_spec(sc, dynamics=dynamics, goal=mission and mission.station, mission=mission)
+    goal = spec.goal
     keep = _Keep()
     observers = [
         Trust(),
@@ -88,13 +90,11 @@ def fly_recorded(
         DecisionsJSONL(folder / "decisions.jsonl"),
         keep,
     ]
-    intruders = draw_intruders(sc, np.random.default_rng(sc.seed), None)
-    result = fly(sc, planner, goal, dynamics=dynamics, intruders=intruders, observers=observers,
-                 mission=mission)  # fmt: skip
+    result = fly(spec, planner, observers=observers)
     (folder / "summary.json").write_text(json.dumps(result.summary))
     records = [json.loads(line) for line in (folder / "decisions.jsonl").open()]
     run = Run(folder, planner.config, tuple(goal), records, keep.decisions, result.summary)
-    run.max_steps, run.mission, run.goals = episode_steps(sc, mission), mission, keep.goals
+    run.max_steps, run.mission, run.goals = spec.max_steps, mission, keep.goals
     return run
 
 

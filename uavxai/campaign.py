@@ -134,6 +134,25 @@ def _planner(scenario: Scenario, method: str):
     return planner
 
 
+def campaign_spec(
+    scenario: Scenario,
+    n_intruders: int,
+    seed: int,
+    dynamics: str = "kinematic",
+    goal: Sequence[float] | None = None,
+):
+    """The episode a campaign of ``scenario`` flies at ``seed`` with ``n_intruders``: to the
+    campaign's goal (None: the scenario's, :func:`uavxai.sim.spec.episode_goal` at the seed
+    its file names, whatever the episode's seed: the same goal for every episode), no
+    mission. An encounter campaign's one intruder is its encounter's (``fly_encounter``)."""
+    from uavxai.sim.spec import episode_spec
+
+    encounter = [] if scenario.encounters is not None else None
+    return episode_spec(
+        scenario, seed, n_intruders=n_intruders, dynamics=dynamics, goal=goal, intruders=encounter
+    )
+
+
 def run_campaign_episode(
     scenario: Scenario,
     method: str,
@@ -145,17 +164,12 @@ def run_campaign_episode(
     """Fly one campaign episode on the episode engine (the commands go straight to the
     autopilot, no recording) and return its ``episodes.csv`` row (without ``episode``), plus
     ``decision_ms`` (every decision's planner time, for the pooled median). ``goal``: the
-    campaign's goal (None: the scenario's, see :func:`uavxai.sim.build.episode_goal`)."""
-    from uavxai.dynamics.traffic import draw_intruders
-    from uavxai.sim.build import DYNAMICS, episode_goal, fly
+    campaign's goal (None: the scenario's, see :func:`campaign_spec`)."""
+    from uavxai.sim.build import fly
 
     if method not in METHODS:
         raise UserError(f"method '{method}' is not one of {', '.join(METHODS)}.")
-    if dynamics not in DYNAMICS:
-        raise UserError(f"dynamics '{dynamics}' is not one of {', '.join(DYNAMICS)}.")
-    sc = scenario.with_seed(seed)
-    # The campaign's goal: the same for every episode (its scenario's, not the episode seed's).
-    goal = episode_goal(scenario) if goal is None else tuple(goal)
+    spec = campaign_spec(scenario, n_intruders, seed, dynamics, goal)
     extra: dict = {}
     if scenario.encounters is not None:  # episode i is encounter i, with its one intruder
         from uavxai.sim.encounter import fly_encounter
@@ -173,8 +187,7 @@ def run_campaign_episode(
             "path_excess": float(rec.path_excess),
         }
     else:
-        intruders = draw_intruders(sc, np.random.default_rng(seed), n_intruders)
-        r = fly(sc, _planner(scenario, method), goal, dynamics=dynamics, intruders=intruders)
+        r = fly(spec, _planner(scenario, method))
     if r.outcome is Outcome.INTERRUPTED:
         # a signal to this process: the campaign stops here (its caller keeps the finished
         # episodes), and a flight cut short is no episode of its results
@@ -192,7 +205,7 @@ def run_campaign_episode(
         "flight_time_s": round(float(r.flight_time_s), 3),
         "nmac": int(r.nmac),
         "decision_ms_p50": round(float(np.median(ms)), 4) if ms else math.nan,
-        **{k: round(float(v), 3) for k, v in zip(GOAL_COLUMNS, goal, strict=True)},
+        **{k: round(float(v), 3) for k, v in zip(GOAL_COLUMNS, spec.goal, strict=True)},
         **extra,
         "decision_ms": ms,
     }
@@ -275,11 +288,11 @@ def run_campaign(
     """Fly a campaign; returns the episode rows in (method, intruders, episode) order.
 
     ``on_done`` is called with each row as it finishes (for a progress bar). ``goal``: where
-    every episode flies (None: :func:`uavxai.sim.build.episode_goal` of ``scenario``).
+    every episode flies (None: :func:`uavxai.sim.spec.episode_goal` of ``scenario``).
     ``finished``: rows of tasks flown before (a resumed campaign's journal,
     :mod:`uavxai.journal`), taken as they are instead of flown again.
     """
-    from uavxai.sim.build import episode_goal
+    from uavxai.sim.spec import episode_goal
 
     _check(scenario, methods, intruders, episodes, dynamics, workers)
     tasks = campaign_tasks(methods, intruders, episodes)
@@ -827,7 +840,7 @@ def _campaign_goal(scenario: Scenario, goal: Sequence[float] | None, console) ->
     (``ownship.goal``, else its service point). `uavxai evaluate --seed N` passes the goal of
     the scenario file's own seed, so that a campaign extended with another seed flies to the
     same goal and merges with the first."""
-    from uavxai.sim.build import episode_goal
+    from uavxai.sim.spec import episode_goal
 
     goal = tuple(float(g) for g in (episode_goal(scenario) if goal is None else goal))
     where = "ownship.goal" if scenario.ownship.goal is not None else "the service point"

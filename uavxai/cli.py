@@ -665,7 +665,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
                           args.argv, keep=args.resume)  # fmt: skip
     from uavxai.campaign import evaluate_command
     from uavxai.scenario import load_scenario
-    from uavxai.sim.build import episode_goal
+    from uavxai.sim.spec import episode_goal
 
     # the goal of the file's own seed: --seed draws other encounters, not another goal, so a
     # campaign extended with another --seed merges with the first (`uavxai merge`)

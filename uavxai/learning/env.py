@@ -25,8 +25,7 @@ are seen up to one sample late.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
-from functools import partial
+from collections.abc import Sequence
 from typing import Any
 
 import gymnasium as gym
@@ -43,38 +42,21 @@ from uavxai.avoidance.types import (
     Ownship,
     PlannerConfig,
 )
-from uavxai.dynamics.traffic import draw_intruders
-from uavxai.scenario import IntruderSpec, Scenario, Start
-from uavxai.sim.build import start_episode
+from uavxai.scenario import Scenario, Start
+from uavxai.sim.build import open_world, start_episode
 from uavxai.sim.command import DirectPath
 from uavxai.sim.episode import Episode, Observer
-from uavxai.sim.kinematic import KinematicWorld
+from uavxai.sim.spec import EpisodeSpec, episode_spec
 from uavxai.surveillance.tracker import truth_beliefs
 from uavxai.vocabulary import HOLD, Outcome
 
-IntruderSource = Sequence[IntruderSpec] | Callable[[np.random.Generator], Sequence[IntruderSpec]]
+# What reset(options=...) may set for the episode, passed on to episode_spec.
+RESET_OPTIONS = ("start", "goal", "intruders", "n_intruders")
 
 
-def default_goal(scenario: Scenario) -> tuple[float, float, float]:
-    """The ownship's goal: ``ownship.goal``, else the centre of the users' region at 100 m
-    (clamped to the world's altitude band), where the service-point search starts."""
-    if scenario.ownship.goal is not None:
-        x, y, h = scenario.ownship.goal
-        return float(x), float(y), float(h)
-    r, (h_lo, h_hi) = scenario.comms.users.region, scenario.world.h
-    return 0.5 * (r.x[0] + r.x[1]), 0.5 * (r.y[0] + r.y[1]), min(max(100.0, h_lo), h_hi)
-
-
-def episode_intruders(
-    scenario: Scenario, seed: int, n_intruders: int | None = None
-) -> list[IntruderSpec]:
-    """The intruders of episode ``seed``: the scenario's list, or ``n_intruders`` drawn."""
-    return draw_intruders(scenario, np.random.default_rng(seed), n_intruders)
-
-
-def _start(start: Start | Ownship) -> Start:
+def _start(start: Start | Ownship | None) -> Start | None:
     """A scenario start; an Ownship's position, speed and heading (it starts wings level)."""
-    if isinstance(start, Start):
+    if start is None or isinstance(start, Start):
         return start
     heading = math.degrees(start.heading) % 360.0
     return Start(x=start.x, y=start.y, h=start.h, heading_deg=heading, speed_mps=start.speed)
@@ -119,10 +101,12 @@ class _Period(Observer):
 class EncounterEnv(gym.Env):
     """Episodes of ``scenario`` on the engine; an action (0..8) per decision period.
 
-    ``intruders`` is a list, or a function of the episode's random generator that draws one;
-    None draws ``n_intruders`` (None: the scenario's count) afresh at every reset, from the
-    reset's seed. ``goal`` None: :func:`default_goal`; ``start`` None: the scenario's
-    (``start`` and ``goal`` may be changed between episodes). Rewards are the paper's eq 14,
+    Each ``reset(seed=...)`` flies :func:`uavxai.sim.spec.episode_spec` of the scenario at that
+    seed (kept as :attr:`episode_spec`): the start, goal, intruders and step budget that
+    `uavxai run` and `uavxai evaluate` fly for it. ``options`` may change it for one episode:
+    ``start`` (a scenario ``Start`` or an ``Ownship``), ``goal`` (x, y, h), ``intruders`` (a
+    list of ``IntruderSpec``) or ``n_intruders`` (how many to draw; the constructor's
+    ``n_intruders`` otherwise, None: the scenario's). Rewards are the paper's eq 14,
     paid at the end: 1 at the goal, 0 for a collision or leaving the area, 0.1 at the
     time-out (which is reported as ``truncated``: the observation holds no clock); 0 on every
     other step. The ``info`` dict carries ``outcome``, ``min_separation_m`` over the step,
@@ -136,28 +120,22 @@ class EncounterEnv(gym.Env):
         self,
         scenario: Scenario,
         *,
-        intruders: IntruderSource | None = None,
         n_intruders: int | None = None,
-        goal: Goal | None = None,
-        start: Start | Ownship | None = None,
         n_nearest: int = 5,
         sample_hz: float | None = None,
     ) -> None:
         self.scenario = scenario
         self.config = PlannerConfig.from_scenario(scenario)
-        self.goal = np.asarray(default_goal(scenario) if goal is None else goal, dtype=float)
-        self.start: Start | Ownship = scenario.ownship.start if start is None else start
+        self.n_intruders = n_intruders
         self.n_nearest = n_nearest
         self.sample_hz = sample_hz
-        if intruders is None:
-            intruders = partial(draw_intruders, scenario, count=n_intruders)
-        self._source = intruders
         self.action_space = spaces.Discrete(N_ACTIONS)
         size = observation_size(n_nearest)
         self.observation_space = spaces.Box(-np.inf, np.inf, (size,), dtype=np.float32)
         self._seat = _Seat(self.config)
         self._period = _Period()
         self._episode: Episode | None = None
+        self._spec: EpisodeSpec | None = None
         self.outcome = ""
 
     # --------------------------------------------------------------------- gymnasium API
@@ -165,18 +143,32 @@ class EncounterEnv(gym.Env):
         self, *, seed: int | None = None, options: dict | None = None
     ) -> tuple[np.ndarray, dict]:
         super().reset(seed=seed)
-        specs = list(self._source(self.np_random) if callable(self._source) else self._source)
+        options = dict(options or {})
+        unknown = set(options) - set(RESET_OPTIONS)
+        if unknown:
+            raise ValueError(
+                f"reset options {sorted(unknown)} unknown; allowed: {', '.join(RESET_OPTIONS)}"
+            )
         world_seed = seed if seed is not None else int(self.np_random.integers(2**31))
         self.close()
-        sc = self._flown_scenario(world_seed)
-        world = KinematicWorld(sc, intruders=specs, seed=world_seed)
+        spec = episode_spec(
+            self._sampled(self.scenario),
+            world_seed,
+            n_intruders=options.get("n_intruders", self.n_intruders),
+            dynamics="kinematic",
+            goal=options.get("goal"),
+            start=_start(options.get("start")),
+            intruders=options.get("intruders"),
+        )
+        world = open_world(spec)
+        self._spec = spec
         self._episode = start_episode(
-            sc,
+            spec.scenario,
             world,
             self._seat,
             DirectPath(world),
-            tuple(float(g) for g in self.goal),
-            max_steps=self.config.max_steps,
+            spec.goal,
+            max_steps=spec.max_steps,
             observers=[self._period],
             picture=truth_beliefs,
         )
@@ -192,7 +184,7 @@ class EncounterEnv(gym.Env):
         ep = self._live()
         self._seat.action = int(action)
         ended = ep.advance(ep.decide())
-        truncated = ended is None and ep.steps >= self.config.max_steps
+        truncated = ended is None and ep.steps >= self.episode_spec.max_steps
         if truncated:
             ended = Outcome.TIMEOUT
         reward = 0.0
@@ -207,6 +199,18 @@ class EncounterEnv(gym.Env):
             self._episode.world.close()
 
     # ------------------------------------------------------------------------- the state
+    @property
+    def episode_spec(self) -> EpisodeSpec:
+        """The episode flown since the last reset (:func:`uavxai.sim.spec.episode_spec`)."""
+        if self._spec is None:
+            raise RuntimeError("no episode yet; call reset()")
+        return self._spec
+
+    @property
+    def goal(self) -> np.ndarray:
+        """The episode's goal (x, y, h)."""
+        return np.asarray(self.episode_spec.goal, dtype=float)
+
     @property
     def t(self) -> float:
         return self._live().state.t
@@ -249,15 +253,13 @@ class EncounterEnv(gym.Env):
             raise RuntimeError("no episode yet; call reset()")
         return self._episode
 
-    def _flown_scenario(self, seed: int) -> Scenario:
-        """The scenario with this episode's start, seed and sample rate."""
-        sc = self.scenario
+    def _sampled(self, sc: Scenario) -> Scenario:
+        """The scenario at this env's sample rate (training judges fewer samples)."""
+        if self.sample_hz is None:
+            return sc
         update: dict[str, Any] = {
-            "seed": int(seed),
-            "ownship": sc.ownship.model_copy(update={"start": _start(self.start)}),
+            "dynamics": sc.dynamics.model_copy(update={"trajectory_hz": self.sample_hz})
         }
-        if self.sample_hz is not None:
-            update["dynamics"] = sc.dynamics.model_copy(update={"trajectory_hz": self.sample_hz})
         return sc.model_copy(update=update)
 
     def _info(self) -> dict:

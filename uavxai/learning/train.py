@@ -61,9 +61,10 @@ from uavxai.avoidance.learned import (
 from uavxai.avoidance.types import N_ACTIONS, PlannerConfig
 from uavxai.errors import UserError
 from uavxai.geometry import bearing, closest_point_of_approach, wrap_angle
-from uavxai.learning.env import EncounterEnv, default_goal, episode_intruders
+from uavxai.learning.env import EncounterEnv
 from uavxai.outputs import write_figure, write_output
 from uavxai.scenario import Scenario, Start
+from uavxai.sim.spec import episode_goal
 
 
 @dataclass(frozen=True)
@@ -168,30 +169,19 @@ class _Episodes:
     """The scenario's encounters, one env per slot, each with its own seed stream."""
 
     def __init__(self, scenario: Scenario, hp: Hyperparameters, slot: int) -> None:
-        from uavxai.dynamics.traffic import draw_intruders
-
         self.scenario, self.hp = scenario, hp
         self.rng = np.random.default_rng(np.random.SeedSequence(hp.seed, spawn_key=(slot,)))
         self.config = PlannerConfig.from_scenario(scenario)
-        self.count = hp.intruders[0]
-        self.env = EncounterEnv(
-            scenario,
-            intruders=lambda rng: draw_intruders(scenario, rng, self.count),
-            n_nearest=hp.n_nearest,
-            sample_hz=hp.sample_hz,
-        )
+        self.env = EncounterEnv(scenario, n_nearest=hp.n_nearest, sample_hz=hp.sample_hz)
 
     def reset(self) -> np.ndarray:
-        env, rng, hp = self.env, self.rng, self.hp
-        self.count = int(rng.integers(hp.intruders[0], hp.intruders[1] + 1))
+        """The next episode: a fresh intruder count; the scenario's route (its start and the
+        goal every episode of it flies) or, for ``random_start_share``, a random one."""
+        rng, hp = self.rng, self.hp
+        options: dict = {"n_intruders": int(rng.integers(hp.intruders[0], hp.intruders[1] + 1))}
         if rng.random() < hp.random_start_share:
-            env.start, env.goal = self._random_route()
-        else:
-            env.start, env.goal = (
-                self.scenario.ownship.start,
-                np.asarray(default_goal(self.scenario), dtype=float),
-            )
-        env.reset(seed=int(rng.integers(2**31)))
+            options["start"], options["goal"] = self._random_route()
+        self.env.reset(seed=int(rng.integers(2**31)), options=options)
         return self.obs()
 
     def obs(self) -> np.ndarray:
@@ -202,7 +192,7 @@ class _Episodes:
         pos, vel = self.env.intruder_arrays()
         return situation(self.hp, self.env.own, pos, vel, self.env.goal)
 
-    def _random_route(self) -> tuple[Start, np.ndarray]:
+    def _random_route(self) -> tuple[Start, tuple[float, float, float]]:
         """A start and goal anywhere in the area, at least 600 m apart, 150 m off the walls."""
         w, sc = self.scenario.world, self.scenario
         margin = 150.0
@@ -220,8 +210,8 @@ class _Episodes:
             heading_deg=float(self.rng.uniform(0.0, 360.0)),
             speed_mps=float(self.rng.uniform(*sc.avoidance.speed_mps)),
         )
-        goal_h = float(default_goal(sc)[2])
-        return start, np.array([b[0], b[1], goal_h])
+        goal_h = episode_goal(sc)[2]  # the height the scenario's own goal is at
+        return start, (float(b[0]), float(b[1]), goal_h)
 
 
 # ---------------------------------------------------------------------------------- training
@@ -245,10 +235,7 @@ def validate(
         for i in range(hp.validation_episodes):
             seed = hp.validation_seed + i
             env = EncounterEnv(
-                scenario,
-                intruders=episode_intruders(scenario, seed, n),
-                n_nearest=hp.n_nearest,
-                sample_hz=hp.sample_hz,
+                scenario, n_intruders=n, n_nearest=hp.n_nearest, sample_hz=hp.sample_hz
             )
             env.reset(seed=seed)
             while not env.outcome:
@@ -474,7 +461,7 @@ def _episode_row(
     env = slot.env
     return {
         "episode": episode,
-        "intruders": slot.count,
+        "intruders": len(env.episode_spec.intruders),
         "outcome": env.outcome,
         "steps": env.steps,
         "return_goal": round(float(returns[0]), 4),

@@ -1,30 +1,29 @@
-"""Putting an episode together: the world (by dynamics name), the goal, the command path.
+"""Flying an episode: the world (by dynamics name), the command path, the observers.
 
 ``fly`` is the one entry point behind ``uavxai run`` and both kinds of ``uavxai evaluate``;
-what differs between them is only which dynamics, which command path and which observers.
+each flies an :class:`uavxai.sim.spec.EpisodeSpec` (start, goal, intruders, step budget),
+so what differs between them is only which dynamics, which command path and which observers.
 """
 
 from __future__ import annotations
 
-import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from functools import lru_cache
 
 import numpy as np
 
 from uavxai.avoidance.types import Planner
 from uavxai.dynamics.orbit import scenario_orbit_radius
-from uavxai.dynamics.track_pilot import TrackLike
-from uavxai.scenario import IntruderSpec, Scenario
+from uavxai.scenario import Scenario
 from uavxai.sim.clock import Clock
 from uavxai.sim.command import CommandPath, DirectPath, Dynamics
 from uavxai.sim.episode import Episode, EpisodeResult, Observer
 from uavxai.sim.judge import Judge
 from uavxai.sim.kinematic import KinematicWorld
-from uavxai.sim.mission import Mission, MissionConfig
+from uavxai.sim.mission import Mission
 from uavxai.sim.operator import Operator, ScriptedOperator
 from uavxai.sim.picture import Picture
+from uavxai.sim.spec import EpisodeSpec, episode_spec
 from uavxai.surveillance.tracker import truth_beliefs
 from uavxai.vocabulary import DYNAMICS_MODELS
 
@@ -48,70 +47,49 @@ DYNAMICS: dict[str, Callable[..., Dynamics]] = {
 assert tuple(DYNAMICS) == DYNAMICS_MODELS, tuple(DYNAMICS)  # the names the CLI offers
 
 
-def episode_goal(scenario: Scenario, service_point: Sequence[float] | None = None):
-    """Where the episode flies: ``ownship.goal`` if the scenario names one, else the service
-    point (planned here when not given)."""
-    if scenario.ownship.goal is not None:
-        return tuple(float(v) for v in scenario.ownship.goal)
-    if service_point is None:
-        return _service_point(scenario.model_dump_json())
-    return tuple(float(v) for v in np.asarray(service_point, dtype=float))
-
-
-@lru_cache(maxsize=32)
-def _service_point(scenario_json: str) -> tuple[float, float, float]:
-    """The planned service point of a scenario, once per process (campaign episodes and
-    tests fly the same scenario many times; the plan is deterministic)."""
-    from uavxai.service.stage import plan_service
-
-    point = plan_service(Scenario.model_validate_json(scenario_json)).service_point
-    return tuple(float(v) for v in np.asarray(point, dtype=float))
+def open_world(spec: EpisodeSpec) -> Dynamics:
+    """The world of ``spec``: its dynamics with its intruders, seed and tracks."""
+    return DYNAMICS[spec.dynamics](spec.scenario, list(spec.intruders), spec.seed, spec.tracks)
 
 
 def fly(
-    scenario: Scenario,
+    spec: EpisodeSpec,
     planner: Planner,
-    goal: Sequence[float],
     *,
-    dynamics: str = "jsbsim",
-    intruders: list[IntruderSpec] | None = None,
-    tracks: Mapping[int, TrackLike] | None = None,
     path: Callable[[Dynamics], CommandPath] = DirectPath,
     observers: Sequence[Observer] = (),
-    mission: MissionConfig | None = None,
 ) -> EpisodeResult:
-    """Fly one seeded episode of ``scenario`` (its seed) and return its result; the world is
-    closed and every observer closed whatever happens. With a ``mission`` the episode flies
-    it (transit, on station, return; ``goal`` is then the service point) instead of ending at
-    the goal. ``tracks``: intruders (by index) that follow a trajectory (the track pilot)."""
-    seed = scenario.seed
+    """Fly the episode ``spec`` (:func:`uavxai.sim.spec.episode_spec`) and return its result;
+    the world is closed and every observer closed whatever happens. With a mission the
+    episode flies it (transit, on station, return; the goal is then the service point)
+    instead of ending at the goal."""
+    scenario, seed = spec.scenario, spec.seed
     world = command = None
     try:
-        world = DYNAMICS[dynamics](scenario, intruders, seed, tracks)
+        world = open_world(spec)
         planner.reset(seed)
         command = path(world)
         # a companion planner decodes and tracks the traffic on its own core, too
         picture = Picture(scenario, command.relay, getattr(planner, "receiver", None))
         if hasattr(command, "bridge"):  # ground stations see the traffic the planner sees
             command.bridge.truth_adsb = picture.truth
-        flying = Mission(mission, command.announce) if mission is not None else None
-        start = scenario.ownship.start
+        flying = Mission(spec.mission, command.announce) if spec.mission is not None else None
+        start = spec.start
         operator = Operator(
             (start.x, start.y, start.h), scenario_orbit_radius(scenario), start.speed_mps
         )
         script = [ScriptedOperator(scenario)] if scenario.operator.commands else []
-        max_steps = episode_steps(scenario, mission)
         episode = start_episode(
             scenario,
             world,
             planner,
             command,
-            goal,
-            max_steps=max_steps,
+            spec.goal,
+            max_steps=spec.max_steps,
             observers=[picture, *script, operator, *([flying] if flying else []), *observers],
             picture=picture,
             mission=flying,
-            label={"scenario": scenario.name, "seed": seed, "dynamics": dynamics},
+            label={"scenario": scenario.name, "seed": seed, "dynamics": spec.dynamics},
         )
         return episode.run()
     finally:
@@ -121,15 +99,6 @@ def fly(
             command.close()
         if world is not None:
             world.close()
-
-
-def episode_steps(scenario: Scenario, mission: MissionConfig | None) -> int:
-    """Decisions before the episode times out: ``avoidance.max_steps``, or for a mission
-    there and back plus the time on station."""
-    av = scenario.avoidance
-    if mission is None:
-        return av.max_steps
-    return 2 * av.max_steps + math.ceil(mission.service_s / av.decision_period_s)
 
 
 def start_episode(
@@ -216,29 +185,27 @@ def run_kinematic(
 ) -> KinematicResult:
     """Fly one seeded kinematic episode of ``scenario`` with ``planner`` (a registered name
     or a planner object). ``n_intruders`` draws that many intruders (None: the scenario's);
-    ``goal`` None: :func:`episode_goal`. The same seed gives the same episode."""
+    ``goal`` None: :func:`uavxai.sim.spec.episode_goal` of the scenario at ``seed``. The same
+    seed gives the same episode (:func:`uavxai.sim.spec.episode_spec`)."""
     from uavxai.avoidance.planners import make_planner
     from uavxai.avoidance.types import PlannerConfig
-    from uavxai.dynamics.traffic import draw_intruders
     from uavxai.sim.observers import Trust
 
-    sc = scenario.with_seed(seed)
+    spec = episode_spec(scenario.with_seed(seed), n_intruders=n_intruders, goal=goal)
     if isinstance(planner, str):
-        config = PlannerConfig.from_scenario(sc)
-        planner = make_planner(planner, config, checkpoint=sc.avoidance.checkpoint)
-    goal = episode_goal(sc) if goal is None else tuple(float(g) for g in goal)
-    intruders = draw_intruders(sc, np.random.default_rng(seed), n_intruders)
+        config = PlannerConfig.from_scenario(spec.scenario)
+        planner = make_planner(planner, config, checkpoint=spec.scenario.avoidance.checkpoint)
     trust, keep = Trust(), _Keep(keep_decisions)
-    r = fly(sc, planner, goal, dynamics="kinematic", intruders=intruders, observers=[trust, keep])
+    r = fly(spec, planner, observers=[trust, keep])
     return KinematicResult(
         planner=planner.name,
         seed=seed,
-        n_intruders=len(intruders),
+        n_intruders=len(spec.intruders),
         outcome=r.outcome.value,
         steps=r.steps,
         min_separation_m=r.min_separation_m,
         flight_time_s=r.flight_time_s,
-        final_distance_m=float(np.linalg.norm(keep.path[-1] - np.asarray(goal))),
+        final_distance_m=float(np.linalg.norm(keep.path[-1] - np.asarray(spec.goal))),
         decision_ms=r.decision_ms,
         separation_error_m=trust.errors,
         path=np.array(keep.path),

@@ -224,14 +224,15 @@ def fly_encounter(
 ) -> tuple[EpisodeResult, EncounterRecord, Encounter]:
     """Fly encounter ``seed`` of ``scenario`` (with ``seed`` as the episode's seed)."""
     from uavxai.sim.build import fly
+    from uavxai.sim.spec import episode_spec
 
     sc = flight_scenario(scenario.with_seed(seed))
     enc = draw_encounter(scenario, seed)
     config = PlannerConfig.from_scenario(sc)
     rec = EncounterObserver(config)
-    goal = tuple(float(v) for v in sc.ownship.goal)
-    r = fly(sc, planner, goal, dynamics=dynamics, intruders=[intruder_spec(enc)],
-            tracks={0: enc.intruder}, observers=[rec, *observers])
+    spec = episode_spec(sc, dynamics=dynamics, intruders=[intruder_spec(enc)],
+                        tracks={0: enc.intruder})  # fmt: skip
+    r = fly(spec, planner, observers=[rec, *observers])
     own, intr = np.array(rec.own), np.array(rec.intruder)
     hmd, vmd = hmd_vmd(own, intr)
     wc = sc.avoidance.well_clear

@@ -21,9 +21,8 @@ from uavxai.outputs import write_output
 from uavxai.paths import invocation
 from uavxai.processes import interrupts_deferred
 from uavxai.scenario import Scenario
-from uavxai.sim.build import episode_goal, fly
+from uavxai.sim.build import fly
 from uavxai.sim.command import MavlinkPath
-from uavxai.sim.mission import mission_of
 from uavxai.sim.observers import (
     DecisionsJSONL,
     Energy,
@@ -36,6 +35,7 @@ from uavxai.sim.observers import (
     Trust,
 )
 from uavxai.sim.quicklook import PLOT, QuickLook
+from uavxai.sim.spec import EpisodeSpec, episode_spec
 
 console = Console(stderr=True, soft_wrap=True)
 
@@ -91,6 +91,14 @@ def mavlink_path(scenario: Scenario, link: str | None, tlog: Path | None = None)
     return build
 
 
+def run_spec(scenario: Scenario, service) -> EpisodeSpec:
+    """The episode `uavxai run` flies for ``scenario`` (at its seed): in JSBSim, to the
+    scenario's goal (``service``'s point unless it names one), the mission if it has one."""
+    return episode_spec(
+        scenario, dynamics="jsbsim", service_point=service.service_point, mission=True
+    )
+
+
 def run_episode(
     scenario: Scenario,
     out: Path,
@@ -111,7 +119,7 @@ def run_episode(
     from uavxai.sim.observers import TrajectoryCSV
 
     sc = scenario
-    goal = episode_goal(sc, service.service_point)
+    spec = run_spec(sc, service)
     config, checkpoint = PlannerConfig.from_scenario(sc), sc.avoidance.checkpoint
     # On its own core, as on a UAV's companion computer: it searches while the world flies
     # (the intruders, with an instant decision; everyone, with a latency).
@@ -126,8 +134,7 @@ def run_episode(
         DecisionsJSONL(out / "decisions.jsonl"),
         QuickLook(out / PLOT, channel, service.power_w, energy, sc.avoidance.d_min_m),
     ]
-    mission = mission_of(sc, goal)
-    if mission is not None:
+    if spec.mission is not None:
         observers.append(Service(sc, channel, service.power_w, out, replan=_replanner(sc)))
     record = sc.log.rerun if record is None else record
     if record or spawn or rerun_file is not None:
@@ -146,17 +153,14 @@ def run_episode(
     observers.append(SummaryJSON(out / "summary.json", extra))  # last: once the files are closed
     try:
         result = fly(
-            sc,
+            spec,
             planner,
-            goal,
-            dynamics="jsbsim",
             path=mavlink_path(
                 sc,
                 mavlink if mavlink is not None else sc.bridge.mavlink,
                 out / "link.tlog" if sc.bridge.tlog else None,
             ),
             observers=observers,
-            mission=mission,
         )
     finally:
         with interrupts_deferred():  # the planner's process is closed in order, not cut off
