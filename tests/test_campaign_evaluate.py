@@ -15,6 +15,8 @@ import pytest
 
 from uavxai.campaign import (
     EPISODE_COLUMNS,
+    FLIGHT_COLUMNS,
+    FLIGHT_RESULTS,
     RESULT_COLUMNS,
     TIMING_COLUMNS,
     evaluate_command,
@@ -65,7 +67,7 @@ def test_evaluate_writes_results_episodes_and_plots(tmp_path: Path) -> None:
     )
     assert report["episodes"] == 12
     columns, results = _read(tmp_path / "results.csv")
-    assert columns == list(RESULT_COLUMNS)
+    assert columns == list(RESULT_COLUMNS + FLIGHT_RESULTS)
     assert columns[:9] == [
         "method",
         "intruders",
@@ -90,7 +92,7 @@ def test_evaluate_writes_results_episodes_and_plots(tmp_path: Path) -> None:
             assert float(r[f"{k}_lo"]) <= float(r[k]) <= float(r[f"{k}_hi"])
         assert float(r["mean_steps"]) >= 1 and float(r["decision_ms_p50"]) > 0
     columns, episodes = _read(tmp_path / "episodes.csv")
-    assert columns == list(EPISODE_COLUMNS)
+    assert columns == list(EPISODE_COLUMNS + FLIGHT_COLUMNS)
     assert len(episodes) == 12
     assert {e["outcome"] for e in episodes} <= {"goal", "collision", "timeout", "out_of_bounds"}
     assert [int(e["seed"]) for e in episodes[:3]] == [SCENARIO.seed + i for i in range(3)]
@@ -167,7 +169,7 @@ def test_merge_campaigns_of_different_methods(tmp_path: Path) -> None:
     merged = merge_campaigns([tmp_path / "a", tmp_path / "b"], tmp_path / "ab")
     assert [r["method"] for r in merged] == ["none", "mcts_fast"]
     columns, rows = _read(tmp_path / "ab" / "results.csv")
-    assert columns == list(RESULT_COLUMNS) and len(rows) == 2
+    assert columns == list(RESULT_COLUMNS + FLIGHT_RESULTS) and len(rows) == 2
     _, a_rows = _read(tmp_path / "a" / "results.csv")
     assert rows[0] == a_rows[0]
     # flown apart, mcts_fast had no `none` to compare with; merged, it has (seed 1 is an NMAC
@@ -180,6 +182,14 @@ def test_merge_campaigns_of_different_methods(tmp_path: Path) -> None:
     assert (tmp_path / "ab" / "collision_rate.png").is_file()
     with pytest.raises(UserError, match="seed 0: flown in both"):
         merge_campaigns([tmp_path / "a", tmp_path / "a"], tmp_path / "aa")
+    # a campaign written before the flight-quality columns merges with them empty
+    old = tmp_path / "a" / "episodes.csv"
+    head, *body = (ln.split(",") for ln in old.read_text().splitlines())
+    keep = [i for i, c in enumerate(head) if c not in FLIGHT_COLUMNS]
+    old.write_text("".join(",".join(r[i] for i in keep) + "\n" for r in [head, *body]))
+    merge_campaigns([tmp_path / "a", tmp_path / "b"], tmp_path / "old")
+    _, merged_rows = _read(tmp_path / "old" / "episodes.csv")
+    assert [r["path_excess"] == "" for r in merged_rows] == [True, True, False, False]
 
 
 def test_merge_pools_seeds_into_the_campaign_flown_at_once(tmp_path: Path) -> None:

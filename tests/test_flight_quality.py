@@ -68,6 +68,7 @@ def test_an_avoiding_kinematic_episode_reports_what_it_flew() -> None:
     which costs path and bank; the `none` planner flying the same start has neither."""
     from uavxai.scenario import IntruderSpec, default_scenario
     from uavxai.sim.build import fly
+    from uavxai.sim.spec import episode_spec
 
     sc = default_scenario().model_copy(deep=True)
     start = sc.ownship.start
@@ -79,7 +80,38 @@ def test_an_avoiding_kinematic_episode_reports_what_it_flew() -> None:
     for method in ("none", "mcts"):
         q = FlightQuality(((start.x, start.y, start.h), goal))
         planner = make_planner(method, PlannerConfig.from_scenario(sc))
-        fly(sc, planner, goal, dynamics="kinematic", intruders=[intruder], observers=[q])
+        fly(episode_spec(sc, goal=goal, intruders=[intruder]), planner, observers=[q])
         got[method] = q.result()
     assert got["none"].path_excess < 0.01 and got["none"].bank_over_25_s == 0.0
     assert got["mcts"].path_excess > got["none"].path_excess
+
+
+def test_campaign_rows_and_results_carry_the_flight_quality() -> None:
+    """`evaluate`'s rows have the three columns (an encounter campaign's path excess is the
+    encounter record's, by the same definition) and its results their median / means."""
+    from uavxai.campaign import FLIGHT_COLUMNS, run_campaign, summarise
+    from uavxai.paths import scenarios_dir
+    from uavxai.scenario import default_scenario, load_scenario
+    from uavxai.sim.encounter import fly_encounter
+
+    rows = run_campaign(default_scenario(), ["none", "mcts_fast"], [10], 3)
+    for r in rows:
+        assert all(k in r for k in FLIGHT_COLUMNS)
+        assert r["bank_over_25_s"] >= 0 and r["reversals_per_min"] >= 0
+    results = {r["method"]: r for r in summarise(rows)}
+    for method in ("none", "mcts_fast"):
+        mine = [r for r in rows if r["method"] == method]
+        excess = [r["path_excess"] for r in mine if math.isfinite(r["path_excess"])]
+        got = results[method]
+        assert got["median_path_excess"] == pytest.approx(float(np.median(excess)))
+        assert got["mean_reversals_per_min"] == pytest.approx(
+            float(np.mean([r["reversals_per_min"] for r in mine])))
+        assert got["mean_bank_over_25_s"] == pytest.approx(
+            float(np.mean([r["bank_over_25_s"] for r in mine])))
+
+    enc = load_scenario(scenarios_dir() / "encounters.yaml")
+    from uavxai.campaign import _planner, run_campaign_episode
+
+    row = run_campaign_episode(enc, "mcts_fast", 1, 5)
+    _, rec, _ = fly_encounter(enc, _planner(enc, "mcts_fast"), 5)
+    assert row["path_excess"] == pytest.approx(rec.path_excess, abs=1e-4)

@@ -102,9 +102,11 @@ GOAL_COLUMNS = EPISODE_COLUMNS[-3:]
 # Encounter campaigns (a scenario with `encounters`; docs/daa-metrics.md) add these:
 # per episode (uavxai.sim.encounter), and per method the weighted DAA estimates of
 # uavxai.daa_metrics.daa_summary against `none` on the same encounters.
-ENCOUNTER_COLUMNS = (
-    "weight", "hmd_m", "vmd_m", "lowc", "alert", "manoeuvre", "reversals", "path_excess",
-)
+ENCOUNTER_COLUMNS = ("weight", "hmd_m", "vmd_m", "lowc", "alert", "manoeuvre", "reversals")
+# How each episode was flown (uavxai.sim.flight_quality), after the goal's columns; results
+# gain their median / means. Files written before they existed are merged with them empty.
+FLIGHT_COLUMNS = ("path_excess", "reversals_per_min", "bank_over_25_s")
+FLIGHT_RESULTS = ("median_path_excess", "mean_reversals_per_min", "mean_bank_over_25_s")
 DAA_RATES = (
     "nmac_prob", "nmac_risk_ratio", "induced_risk_ratio", "lowc_prob", "lowc_ratio",
     "alert_rate", "unnecessary_manoeuvre_rate",
@@ -166,15 +168,19 @@ def run_campaign_episode(
     ``decision_ms`` (every decision's planner time, for the pooled median). ``goal``: the
     campaign's goal (None: the scenario's, see :func:`campaign_spec`)."""
     from uavxai.sim.build import fly
+    from uavxai.sim.flight_quality import FlightQuality
 
     if method not in METHODS:
         raise UserError(f"method '{method}' is not one of {', '.join(METHODS)}.")
     spec = campaign_spec(scenario, n_intruders, seed, dynamics, goal)
     extra: dict = {}
+    start = (spec.start.x, spec.start.y, spec.start.h)
+    quality = FlightQuality(None if spec.mission else (start, spec.goal))
     if scenario.encounters is not None:  # episode i is encounter i, with its one intruder
         from uavxai.sim.encounter import fly_encounter
 
-        r, rec, _ = fly_encounter(scenario, _planner(scenario, method), seed, dynamics)
+        r, rec, _ = fly_encounter(scenario, _planner(scenario, method), seed, dynamics,
+                                  observers=[quality])  # fmt: skip
         n_intruders = 1
         extra = {
             "weight": float(rec.weight),
@@ -184,10 +190,9 @@ def run_campaign_episode(
             "alert": int(rec.alert),
             "manoeuvre": int(rec.manoeuvre),
             "reversals": int(rec.reversals),
-            "path_excess": float(rec.path_excess),
         }
     else:
-        r = fly(spec, _planner(scenario, method))
+        r = fly(spec, _planner(scenario, method), observers=[quality])
     if r.outcome is Outcome.INTERRUPTED:
         # a signal to this process: the campaign stops here (its caller keeps the finished
         # episodes), and a flight cut short is no episode of its results
@@ -206,6 +211,7 @@ def run_campaign_episode(
         "nmac": int(r.nmac),
         "decision_ms_p50": round(float(np.median(ms)), 4) if ms else math.nan,
         **{k: round(float(v), 3) for k, v in zip(GOAL_COLUMNS, spec.goal, strict=True)},
+        **quality.result().row(),
         **extra,
         "decision_ms": ms,
     }
@@ -517,8 +523,9 @@ def columns_of(rows: Sequence[dict]) -> tuple[tuple[str, ...], tuple[str, ...]]:
     """The (episodes.csv, results.csv) columns of a campaign's rows: with the encounter
     columns when every row is an encounter's."""
     if rows and all(_is_encounter_row(r) for r in rows):
-        return EPISODE_COLUMNS + ENCOUNTER_COLUMNS, RESULT_COLUMNS + DAA_COLUMNS
-    return EPISODE_COLUMNS, RESULT_COLUMNS
+        return (EPISODE_COLUMNS + FLIGHT_COLUMNS + ENCOUNTER_COLUMNS,
+                RESULT_COLUMNS + FLIGHT_RESULTS + DAA_COLUMNS)  # fmt: skip
+    return EPISODE_COLUMNS + FLIGHT_COLUMNS, RESULT_COLUMNS + FLIGHT_RESULTS
 
 
 def _daa_row(method: str, rs: list[dict], baseline: list[dict] | None) -> dict:
@@ -603,7 +610,24 @@ def _summary_row(method: str, n: int, rs: list[dict], baseline: list[dict] | Non
             seeds = sorted(set(mine) & set(base))  # the same encounters only
             rr = risk_ratio([mine[s] for s in seeds], [base[s] for s in seeds])
             row[prefix], row[f"{prefix}_lo"], row[f"{prefix}_hi"] = rr.ratio, rr.lo, rr.hi
+    row.update(_flight_results(rs))
     return row
+
+
+def _flight_results(rs: list[dict]) -> dict:
+    """The median path excess (over the episodes that made progress) and the mean reversal
+    rate and steep-bank time of one results row; nan where no episode has the number."""
+
+    def finite(key: str) -> np.ndarray:
+        v = np.array([_number(r.get(key)) for r in rs])
+        return v[np.isfinite(v)]
+
+    excess, per_min, steep = (finite(k) for k in FLIGHT_COLUMNS)
+    return {
+        "median_path_excess": float(np.median(excess)) if excess.size else math.nan,
+        "mean_reversals_per_min": float(per_min.mean()) if per_min.size else math.nan,
+        "mean_bank_over_25_s": float(steep.mean()) if steep.size else math.nan,
+    }
 
 
 def write_csv(path: Path, columns: Sequence[str], rows: Iterable[dict]) -> None:
@@ -716,6 +740,8 @@ def merge_campaigns(sources: Sequence[str | Path], out: str | Path, title: str =
                     f"{', '.join(ENCOUNTER_COLUMNS)} must be numbers, the weight > 0."
                 ) from None
         for r in rows:
+            for column in FLIGHT_COLUMNS:  # not in files written before they existed
+                r.setdefault(column, "")
             key = (r["method"], r["intruders"], r["seed"])
             if key in flown_by:
                 raise UserError(
@@ -965,7 +991,8 @@ def results_table(results: Sequence[dict]):
         return "-" if math.isnan(v) else f"{v:.3f} [{lo:.3f}, {hi:.3f}]"
 
     t = Table("method", "intruders", "episodes", "goal", "collision (95 % CI)", "NMAC (95 % CI)",
-              "risk ratio (95 % CI)", "steps", "ms p50")  # fmt: skip
+              "risk ratio (95 % CI)", "steps", "path excess p50", "reversals/min",
+              "ms p50")  # fmt: skip
     for r in results:
         t.add_row(
             r["method"],
@@ -976,6 +1003,8 @@ def results_table(results: Sequence[dict]):
             ci(r, "nmac_rate"),
             ci(r, "risk_ratio"),
             f"{r['mean_steps']:.1f}",
+            f"{_number(r.get('median_path_excess')):.1%}",
+            f"{_number(r.get('mean_reversals_per_min')):.1f}",
             f"{r['decision_ms_p50']:.2f}",
         )
     return t
