@@ -253,3 +253,34 @@ def test_a_campaign_flown_in_process_leaves_nothing_that_turns_a_child_deaf() ->
         env=ENV, capture_output=True, text=True, timeout=120,
     )  # fmt: skip
     assert child.stdout.strip() == "True", child.stderr
+
+
+def test_a_pooled_campaign_takes_a_signal_between_waits_not_inside_them() -> None:
+    """A signal during a pooled campaign is noted, then raised once the current wait is over:
+    a KeyboardInterrupt raised inside concurrent.futures' `wait` (it takes every future's lock
+    in turn) could leave a lock held, and the pool's thread then waited for it at exit for
+    ever (seen once in CI: a campaign under a burst of SIGTERMs saved and never ended)."""
+    import threading
+
+    from uavxai.campaign import run_campaign
+    from uavxai.scenario import default_scenario
+
+    mine = signal.getsignal(signal.SIGINT)
+    seen: list = []
+
+    def on_done(row: dict) -> None:
+        seen.append(signal.getsignal(signal.SIGINT))
+        if len(seen) == 3:
+            signal.raise_signal(signal.SIGINT)  # as a Ctrl-C would, mid-campaign
+
+    with pytest.raises(KeyboardInterrupt):
+        run_campaign(default_scenario(), ["none"], [2], 400, workers=2, on_done=on_done)
+    assert 3 <= len(seen) < 400
+    assert all(h not in (mine, signal.SIG_DFL, signal.default_int_handler) for h in seen)
+    assert signal.getsignal(signal.SIGINT) is mine  # the caller's handler back
+    deadline = time.monotonic() + 10.0
+    while time.monotonic() < deadline and any(
+        "ExecutorManagerThread" in type(t).__name__ for t in threading.enumerate()
+    ):
+        time.sleep(0.1)
+    assert not [t for t in threading.enumerate() if "ExecutorManagerThread" in type(t).__name__]

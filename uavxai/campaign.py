@@ -321,6 +321,9 @@ def run_campaign(
     return [rows[k] if k in rows else finished[t] for k, t in enumerate(tasks)]
 
 
+_POLL_S = 0.25  # how long a signal waits to stop a pooled campaign, s
+
+
 def _run_pool(scenario, tasks, order, common, workers, on_done) -> dict[int, dict]:
     from uavxai import forkserver_preload
 
@@ -337,13 +340,21 @@ def _run_pool(scenario, tasks, order, common, workers, on_done) -> dict[int, dic
         pool.submit(_run_task, scenario, tasks[k], *common): k for k in order
     }
     try:
-        while pending:
-            done, _ = wait(pending, return_when=FIRST_COMPLETED)
-            for f in done:
-                k = pending.pop(f)
-                rows[k] = f.result()
-                if on_done:
-                    on_done(rows[k])
+        # A signal is noted while the pool runs and raised between two waits, never inside
+        # concurrent.futures: a KeyboardInterrupt raised in `wait` (which takes every future's
+        # lock in turn) could leave a future's lock held by this thread, and the pool's own
+        # thread, cancelling that future, then waited for it for ever at exit (a campaign
+        # that saved its files and never ended, under a burst of SIGTERMs).
+        with interrupts_deferred() as caught:
+            while pending and not caught:
+                done, _ = wait(pending, timeout=_POLL_S, return_when=FIRST_COMPLETED)
+                for f in done:
+                    k = pending.pop(f)
+                    rows[k] = f.result()
+                    if on_done:
+                        on_done(rows[k])
+        if caught:  # delivered above as the handler does; one that ignores it stops us too
+            raise KeyboardInterrupt(f"signal {caught[0]}")
     except BaseException:
         # Interrupted (Ctrl-C, SIGTERM) or failed: stop the workers now, not after their
         # running episodes (they ignore SIGTERM: killed); the caller keeps what finished.
