@@ -129,14 +129,17 @@ def short(duration: int = 60, window: tuple[int, int] = (20, 30), **encounters):
 def _fly(sc, method: str, seed: int, dynamics: str = "kinematic"):
     from uavxai.avoidance.planners import make_planner
     from uavxai.avoidance.types import PlannerConfig
-    from uavxai.sim.encounter import EncounterObserver, fly_encounter
+    from uavxai.sim.encounter import EncounterObserver, fly_encounter, route
+    from uavxai.sim.flight_quality import FlightQuality
 
-    keep = EncounterObserver(PlannerConfig.from_scenario(sc))  # a second recorder: positions
+    start, _ = route(sc)
+    quality = FlightQuality((start, sc.ownship.goal))  # the ownship's samples
+    keep = EncounterObserver(PlannerConfig.from_scenario(sc))  # a second recorder: the intruder
     r, rec, enc = fly_encounter(sc, make_planner(method, PlannerConfig.from_scenario(sc)), seed,
-                                dynamics, observers=[keep])
+                                dynamics, quality, observers=[keep])
     import numpy as np
 
-    return r, rec, enc, np.array(keep.own), np.array(keep.intruder)
+    return r, rec, enc, np.array(quality.own), np.array(keep.intruder), quality.result()
 
 
 def test_the_same_encounter_seed_is_the_same_flight() -> None:
@@ -164,7 +167,7 @@ def test_a_flown_encounter_without_avoidance_meets_its_sampled_geometry_at_tca()
     hz = sc.dynamics.trajectory_hz
     checked = 0
     for seed in range(8):
-        r, rec, enc, own, intr = _fly(sc, "none", seed)
+        r, rec, enc, own, intr, quality = _fly(sc, "none", seed)
         start, heading = route(sc)
         ahead = np.array([math.sin(heading), math.cos(heading)])
         across = own[:, :2] - start[:2] - np.outer((own[:, :2] - start[:2]) @ ahead, ahead)
@@ -177,7 +180,7 @@ def test_a_flown_encounter_without_avoidance_meets_its_sampled_geometry_at_tca()
         assert math.hypot(*(intr[k, :2] - own[k, :2])) == pytest.approx(enc.hmd, abs=25.0)
         assert intr[k, 2] - own[k, 2] == pytest.approx(enc.vmd, abs=5.0)
         assert rec.hmd_m <= enc.hmd + 25.0  # the flown closest approach is no farther
-        assert rec.path_excess == pytest.approx(0.0, abs=1e-9)
+        assert quality.path_excess == pytest.approx(0.0, abs=1e-9)
         assert not rec.alert and not rec.manoeuvre and rec.reversals == 0
     assert checked >= 5
 
@@ -278,7 +281,7 @@ def test_a_jsbsim_encounter_with_a_cessna_flies_to_its_end_and_records_its_colum
 
     sc = short(duration=30, window=(10, 20))
     enc = draw_encounter(sc, 2)
-    r, rec, _, own, intr = _fly(sc, "none", 2, "jsbsim")
+    r, rec, _, own, intr, _ = _fly(sc, "none", 2, "jsbsim")
     assert r.outcome.value == "timeout" and r.steps == 30  # flown to its end, no failure
     assert rec.weight == enc.weight and rec.lowc  # 85 m by 24 m: inside well clear
     assert rec.hmd_m == pytest.approx(enc.hmd, abs=30.0)

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from uavxai.avoidance import PlannerConfig, make_planner
+from uavxai.daa_metrics import reversals
 from uavxai.dynamics.state import TrafficState
 from uavxai.sim.flight_quality import FlightQuality
 
@@ -113,5 +114,8 @@ def test_campaign_rows_and_results_carry_the_flight_quality() -> None:
     from uavxai.campaign import _planner, run_campaign_episode
 
     row = run_campaign_episode(enc, "mcts_fast", 1, 5)
-    _, rec, _ = fly_encounter(enc, _planner(enc, "mcts_fast"), 5)
-    assert row["path_excess"] == pytest.approx(rec.path_excess, abs=1e-4)
+    quality = FlightQuality(((-3000.0, 0.0, 120.0), enc.ownship.goal))  # the file's route
+    _, rec, _ = fly_encounter(enc, _planner(enc, "mcts_fast"), 5, quality=quality)
+    assert row["path_excess"] == pytest.approx(quality.result().path_excess, abs=1e-4)
+    assert row["reversals"] == rec.reversals == reversals(quality.bank_cmd)
+    assert len(quality.own) == len(quality.t) > 1

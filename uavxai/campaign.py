@@ -179,8 +179,7 @@ def run_campaign_episode(
     if scenario.encounters is not None:  # episode i is encounter i, with its one intruder
         from uavxai.sim.encounter import fly_encounter
 
-        r, rec, _ = fly_encounter(scenario, _planner(scenario, method), seed, dynamics,
-                                  observers=[quality])  # fmt: skip
+        r, rec, _ = fly_encounter(scenario, _planner(scenario, method), seed, dynamics, quality)
         n_intruders = 1
         extra = {
             "weight": float(rec.weight),

@@ -23,11 +23,10 @@ The record's definitions (docs/daa-metrics.md, "In campaigns"):
   in that state: another bank command (by more than 1e-6 rad), another acceleration as flown
   (a speed-up at the top speed, a slow-down at the bottom one, is none), or a height target
   more than 1 m off the leg's height. ``none`` never manoeuvres;
-* ``reversals``: :func:`uavxai.daa_metrics.reversals` of the bank commands sent;
-* ``path_excess``: flown 3-D path length over the progress made along the straight route
-  (start toward goal) by the episode's end, minus 1 (0 for a straight, level flight). Not over
-  the ``none`` flight's length: every encounter lasts ``duration_s``, so two flights at the
-  same speed have the same length whatever they did; the progress lost is the cost.
+* ``reversals``: :func:`uavxai.daa_metrics.reversals` of the bank commands sent.
+
+The ownship's samples, its bank commands and its path excess are :class:`FlightQuality`'s
+(every campaign episode's), which the encounter's observer reads rather than records again.
 """
 
 from __future__ import annotations
@@ -40,7 +39,7 @@ import numpy as np
 
 from uavxai.avoidance.direct import DirectPlanner
 from uavxai.avoidance.types import Planner, PlannerConfig
-from uavxai.daa_metrics import hmd_vmd, loss_of_well_clear, path_length, reversals
+from uavxai.daa_metrics import hmd_vmd, loss_of_well_clear, reversals
 from uavxai.encounters import (
     Encounter,
     EncounterConfig,
@@ -56,6 +55,7 @@ from uavxai.errors import UserError
 from uavxai.geometry import bearing
 from uavxai.scenario import IntruderSpec, Scenario, aircraft_height_loop, aircraft_speed_range
 from uavxai.sim.episode import Episode, EpisodeResult, Observer
+from uavxai.sim.flight_quality import FlightQuality
 
 BANK_TOL_RAD = 1e-6
 HEIGHT_TOL_M = 1.0
@@ -153,26 +153,23 @@ class EncounterRecord:
     alert: bool
     manoeuvre: bool
     reversals: int
-    path_excess: float
     sampled_hmd_m: float  # the encounter's, at TCA
     sampled_vmd_m: float
     tca_s: float
 
 
 class EncounterObserver(Observer):
-    """Records what the DAA columns need: the ownship and intruder positions at every sample,
-    and per decision the command sent and what ``none`` would have sent in that state."""
+    """Records what the DAA columns need beyond the ownship's flight (``FlightQuality``'s): the
+    intruder's position at every sample, and per decision whether the command sent differs from
+    what ``none`` would have sent in that state."""
 
     def __init__(self, config: PlannerConfig) -> None:
         self.none = DirectPlanner(config)
-        self.own: list[np.ndarray] = []
         self.intruder: list[np.ndarray] = []
-        self.bank: list[float] = []
         self.alert = False
         self.manoeuvre = False
 
     def _keep(self, state) -> None:
-        self.own.append(state.pos[0].copy())
         self.intruder.append(state.pos[1].copy() if state.n > 1 else np.full(3, np.nan))
 
     def on_start(self, ep: Episode) -> None:
@@ -183,7 +180,6 @@ class EncounterObserver(Observer):
 
     def on_decision(self, ep: Episode, event) -> None:
         d = event.decision
-        self.bank.append(float(d.bank_cmd_rad))
         if d.planner == self.none.name:
             return  # the baseline neither alerts nor manoeuvres
         goal = ep.aim()
@@ -207,22 +203,16 @@ class EncounterObserver(Observer):
         return float(accel)
 
 
-def path_excess_along(own: np.ndarray, start: np.ndarray, heading: float) -> float:
-    """Flown 3-D path length over the progress along the route (start, heading) minus 1; nan
-    when the ownship made no progress."""
-    ahead = np.array([math.sin(heading), math.cos(heading)])
-    progress = float((own[-1, :2] - start[:2]) @ ahead)
-    return path_length(own) / progress - 1.0 if progress > 1e-6 else math.nan
-
-
 def fly_encounter(
     scenario: Scenario,
     planner: Planner,
     seed: int,
     dynamics: str = "kinematic",
+    quality: FlightQuality | None = None,
     observers=(),
 ) -> tuple[EpisodeResult, EncounterRecord, Encounter]:
-    """Fly encounter ``seed`` of ``scenario`` (with ``seed`` as the episode's seed)."""
+    """Fly encounter ``seed`` of ``scenario`` (with ``seed`` as the episode's seed); ``quality``
+    (a new one when None) records the ownship's flight along the straight route."""
     from uavxai.sim.build import fly
     from uavxai.sim.spec import episode_spec
 
@@ -232,11 +222,12 @@ def fly_encounter(
     rec = EncounterObserver(config)
     spec = episode_spec(sc, dynamics=dynamics, intruders=[intruder_spec(enc)],
                         tracks={0: enc.intruder})  # fmt: skip
-    r = fly(spec, planner, observers=[rec, *observers])
-    own, intr = np.array(rec.own), np.array(rec.intruder)
+    if quality is None:
+        quality = FlightQuality(((spec.start.x, spec.start.y, spec.start.h), spec.goal))
+    r = fly(spec, planner, observers=[quality, rec, *observers])
+    own, intr = np.array(quality.own), np.array(rec.intruder)
     hmd, vmd = hmd_vmd(own, intr)
     wc = sc.avoidance.well_clear
-    start, heading = route(sc)
     record = EncounterRecord(
         weight=float(enc.weight),
         hmd_m=hmd,
@@ -244,8 +235,7 @@ def fly_encounter(
         lowc=loss_of_well_clear(own, intr, wc.horizontal_m, wc.vertical_m),
         alert=rec.alert,
         manoeuvre=rec.manoeuvre,
-        reversals=reversals(rec.bank),
-        path_excess=path_excess_along(own, start, heading),
+        reversals=reversals(quality.bank_cmd),
         sampled_hmd_m=float(enc.hmd),
         sampled_vmd_m=float(enc.vmd),
         tca_s=float(enc.tca),

@@ -5,8 +5,10 @@ held for long. :class:`FlightQuality` watches an episode and gives, for ``episod
 
 * ``path_excess``: the flown 3-D path length over the progress made along the straight route
   (start toward goal) by the episode's end, minus 1 (0 for a straight, level flight;
-  :func:`uavxai.sim.encounter.path_excess_along`, the encounter campaigns' definition). NaN on a
-  mission (its route is not a line) and when no progress was made;
+  :func:`path_excess_along`). NaN on a mission (its route is not a line) and when no progress
+  was made. Not over an unequipped flight's length: an encounter lasts a fixed time, so two
+  flights at the same speed have the same length whatever they did; the progress lost is the
+  cost;
 * ``reversals_per_min``: turn-direction reversals of the bank commands sent
   (:func:`uavxai.daa_metrics.reversals`) per minute of flight;
 * ``bank_over_25_s``: time flown with the actual bank angle above 25 deg either way, s
@@ -22,13 +24,20 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from uavxai.daa_metrics import reversals
+from uavxai.daa_metrics import path_length, reversals
 from uavxai.geometry import bearing
-from uavxai.sim.encounter import path_excess_along
 from uavxai.sim.episode import Episode, Observer
 
 STEEP_BANK_DEG = 25.0
 COLUMNS = ("path_excess", "reversals_per_min", "bank_over_25_s")
+
+
+def path_excess_along(own: np.ndarray, start: np.ndarray, heading: float) -> float:
+    """Flown 3-D path length over the progress along the route (start, heading) minus 1; nan
+    when the ownship made no progress."""
+    ahead = np.array([math.sin(heading), math.cos(heading)])
+    progress = float((own[-1, :2] - start[:2]) @ ahead)
+    return path_length(own) / progress - 1.0 if progress > 1e-6 else math.nan
 
 
 @dataclass(frozen=True)
