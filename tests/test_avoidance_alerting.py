@@ -85,3 +85,70 @@ def test_the_same_inputs_give_the_same_decisions() -> None:
     da, db = a.plan(OWN, pic, GOAL), b.plan(OWN, pic, GOAL)
     assert (da.action, da.bank_cmd_rad, da.alt_target_m) == (db.action, db.bank_cmd_rad,
                                                              db.alt_target_m)  # fmt: skip
+
+
+def test_an_alerted_tree_keeps_the_route_while_the_route_line_is_clear() -> None:
+    """Alerted by an aircraft that will pass 400 m to the side (inside well clear, outside the
+    tree's conflict distance): the route's action, at every seed. The plain vertical tree,
+    free to prefer any of the clear lines, leaves the route at some seed (what the encounter
+    campaigns counted as unnecessary manoeuvres)."""
+    side = Intruder(id=7, x=1400.0, y=3000.0, h=120.0, vx=0.0, vy=-35.0)
+    config = PlannerConfig(x_bounds=(0, 2000), y_bounds=(-500, 4500))
+    route = make_planner("none", config).plan(OWN, [side], GOAL).action
+    daa, free = make_planner("mcts_daa", config), make_planner("mcts_vertical", config)
+    kept, left = [], []
+    for seed in range(8):
+        daa.reset(seed)
+        free.reset(seed)
+        d = daa.plan(OWN, [side], GOAL)
+        assert d.children, "the alert hands the decision to the tree"
+        assert next(c for c in d.children if c.action == route).meets is None
+        kept.append(d.action == route)
+        left.append(free.plan(OWN, [side], GOAL).action != route)
+    assert all(kept)
+    assert any(left)
+
+
+def test_an_alerted_tree_leaves_the_route_when_it_conflicts_and_avoids_the_nmac_radius() -> None:
+    """Head on, 900 m (15 s): the route's line meets the intruder; the tree turns or climbs away, and it
+    works with the NMAC cylinder's radius (avoidance.nmac) as its conflict distance."""
+    config = PlannerConfig(x_bounds=(0, 2000), y_bounds=(-500, 4500), nmac_m=(200.0, 30.0))
+    daa = make_planner("mcts_daa", config)
+    route = make_planner("none", config).plan(OWN, [_head_on(900.0)], GOAL).action
+    d = daa.plan(OWN, [_head_on(900.0)], GOAL)
+    assert d.d_min_m == 200.0
+    assert next(c for c in d.children if c.action == route).meets is not None
+    assert d.action != route
+
+
+def test_the_scenario_sets_the_nmac_and_well_clear_cylinders_of_the_planner() -> None:
+    from uavxai.paths import scenarios_dir
+    from uavxai.scenario import load_scenario
+
+    sc = load_scenario(scenarios_dir() / "encounters.yaml")
+    a = sc.avoidance.model_copy(update={
+        "nmac": sc.avoidance.nmac.model_copy(update={"horizontal_m": 180.0}),
+        "well_clear": sc.avoidance.well_clear.model_copy(update={"vertical_m": 90.0}),
+    })  # fmt: skip
+    config = PlannerConfig.from_scenario(sc.model_copy(update={"avoidance": a}))
+    assert config.nmac_m == (180.0, 30.48) and config.alert_well_clear_m == (609.6, 90.0)
+    assert make_planner("mcts_daa", config).inner.config.d_min_m == 180.0
+
+
+def test_after_a_route_conflict_the_route_is_held_again_only_once_clear_for_the_hold() -> None:
+    """Hysteresis: once the route's line has conflicted, the tree chooses freely until that
+    line has been clear for alert_hold_s (5 decisions of 1 s); from then on the route again.
+    Without it a line grazing the conflict distance rocks the wings left and right."""
+    config = PlannerConfig(x_bounds=(0, 2000), y_bounds=(-500, 4500))
+    side = [Intruder(id=7, x=1400.0, y=3000.0, h=120.0, vx=0.0, vy=-35.0)]
+    route = make_planner("none", config).plan(OWN, side, GOAL).action
+    free_in_hold, after = [], []
+    for seed in range(8):
+        tree = make_planner("mcts_daa", config).inner
+        tree.reset(seed)
+        tree.plan(OWN, [_head_on(900.0)], GOAL)  # the route's line conflicts
+        actions = [tree.plan(OWN, side, GOAL).action for _ in range(8)]
+        free_in_hold.append(any(a != route for a in actions[:5]))
+        after += actions[5:]
+    assert any(free_in_hold)
+    assert all(a == route for a in after)

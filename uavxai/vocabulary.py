@@ -90,6 +90,7 @@ ACTIONS: tuple[Action, ...] = _table()
 ACTION_SETS = {"paper": 9, "vertical": len(ACTIONS)}
 N_ACTIONS = ACTION_SETS["paper"]  # the paper's nine: the learned planners' output size
 HOLD = 4  # hold the bank command, hold speed: the reference every other option is compared to
+CLIMB, DESCEND = (next(a.index for a in ACTIONS if a.climb == c) for c in (+1, -1))
 BANK_SIGNS = tuple(a.bank for a in ACTIONS[:N_ACTIONS:3])  # (-1, 0, +1) by bank index
 ACCEL_SIGNS = tuple(a.accel for a in ACTIONS[:3])  # (+1, 0, -1) by accel index
 assert ACTIONS[HOLD].bank == 0 and ACTIONS[HOLD].accel == 0

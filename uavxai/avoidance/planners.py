@@ -57,11 +57,18 @@ register("mcts_vertical")(
         dataclasses.replace(config, actions="vertical"), name="mcts_vertical"
     )
 )
-# mcts_vertical behind an alerting stage: it searches only while traffic threatens well clear.
+# mcts_vertical behind an alerting stage: it searches only while traffic threatens well clear,
+# for lines clear of the NMAC cylinder's radius, and leaves its route only when the route's
+# line conflicts.
+def _daa_config(config: PlannerConfig) -> PlannerConfig:
+    return dataclasses.replace(
+        config, actions="vertical", d_min_m=max(config.d_min_m, config.nmac_m[0])
+    )
+
+
 register("mcts_daa")(
     lambda config, checkpoint: AlertingPlanner(
-        MCTSPlanner(dataclasses.replace(config, actions="vertical"), name="mcts_daa"),
-        name="mcts_daa",
+        MCTSPlanner(_daa_config(config), name="mcts_daa", hold_route=True), name="mcts_daa"
     )
 )
 register("mvp")(lambda config, checkpoint: MVPPlanner(config))

@@ -158,6 +158,10 @@ class PlannerConfig:
     # after the last such prediction; otherwise the ownship flies its route.
     alert_horizon_s: float = 55.0
     alert_well_clear_m: tuple[float, float] = (609.6, 76.2)
+    # The near-mid-air-collision cylinder (horizontal, vertical m; avoidance.nmac): `mcts_daa`
+    # searches with d_min_m at least its horizontal radius, so that a line it keeps clears an
+    # NMAC, the event detect-and-avoid is judged by, not only a collision.
+    nmac_m: tuple[float, float] = (152.4, 30.48)
     alert_hold_s: float = 5.0
 
     def __post_init__(self) -> None:
@@ -250,6 +254,8 @@ class PlannerConfig:
             "own_error_10s_m": a.mcts.own_error_10s_m,
             "uncertainty_horizon_s": a.mcts.uncertainty_horizon_s,
             "actions": a.actions,
+            "alert_well_clear_m": (a.well_clear.horizontal_m, a.well_clear.vertical_m),
+            "nmac_m": (a.nmac.horizontal_m, a.nmac.vertical_m),
             "seed": scenario.seed,
             "wind_mps": env.wind_enu[:2],
             "gusts": env.turbulence != "none",
