@@ -41,6 +41,17 @@ class DirectPlanner:
     def reset(self, seed: int) -> None:
         """Nothing random to re-seed."""
 
+    def action(self, own: Ownship, goal: Goal) -> int:
+        """The action this planner takes (what :meth:`plan` decides, without the prediction
+        that explains it): the bank step nearest a bank proportional to the heading error."""
+        cfg = self.config
+        error = wrap_angle(bearing(goal[0] - own.x, goal[1] - own.y) - own.heading)
+        wanted = max(-cfg.bank_limit_rad, min(cfg.bank_limit_rad, HEADING_GAIN * error))
+        # Bank actions 0, 1, 2 (left, hold, right); ties go to holding.
+        options = [float(bank_command(own.bank, 3 * b + HOLD_SPEED, cfg)) for b in range(3)]
+        b = min((1, 0, 2), key=lambda i: abs(options[i] - wanted))
+        return 3 * b + HOLD_SPEED
+
     def plan(
         self, own: Ownship, intruders: Sequence[Intruder], goal: Goal, *, step: int = 0
     ) -> Decision:
@@ -48,12 +59,7 @@ class DirectPlanner:
         check_plan_inputs(own, intruders, goal)
         cfg = self.config
         error = wrap_angle(bearing(goal[0] - own.x, goal[1] - own.y) - own.heading)
-        wanted = max(-cfg.bank_limit_rad, min(cfg.bank_limit_rad, HEADING_GAIN * error))
-        # Bank actions 0, 1, 2 (left, hold, right); ties go to holding.
-        options = [float(bank_command(own.bank, 3 * b + HOLD_SPEED, cfg)) for b in range(3)]
-        b = min((1, 0, 2), key=lambda i: abs(options[i] - wanted))
-        action = 3 * b + HOLD_SPEED
-
+        action = self.action(own, goal)
         pos, vel = intruder_arrays(intruders)
         period = cfg.decision_period_s
         goal_xyz = np.asarray(goal, dtype=float)
@@ -67,7 +73,7 @@ class DirectPlanner:
             exact=True,
         )
         return Decision(
-            bank_cmd_rad=options[b],
+            bank_cmd_rad=float(bank_command(own.bank, action, cfg)),
             accel_mps2=float(accel_command(action, cfg)),
             action=action,
             children=[],

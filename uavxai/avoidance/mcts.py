@@ -152,7 +152,7 @@ class TreePlanner:
         if own.vertical:
             return CLIMB if own.vertical < 0 else DESCEND
         assert self.route is not None
-        return self.route.plan(own, [], goal).action
+        return self.route.action(own, goal)
 
 
 class MCTSPlanner(TreePlanner):

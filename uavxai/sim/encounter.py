@@ -38,6 +38,7 @@ from functools import lru_cache
 import numpy as np
 
 from uavxai.avoidance.direct import DirectPlanner
+from uavxai.avoidance.model import accel_command, bank_command
 from uavxai.avoidance.types import Planner, PlannerConfig
 from uavxai.daa_metrics import hmd_vmd, loss_of_well_clear, reversals
 from uavxai.encounters import (
@@ -183,16 +184,18 @@ class EncounterObserver(Observer):
         if d.planner == self.none.name:
             return  # the baseline neither alerts nor manoeuvres
         goal = ep.aim()
-        base = self.none.plan(event.own, event.intruders, goal)
+        base = self.none.action(event.own, goal)
         if not self.alert:
-            child = next((c for c in d.children if c.action == base.action), None)
+            child = next((c for c in d.children if c.action == base), None)
             self.alert = child is not None and child.meets is not None
         if not self.manoeuvre:
+            cfg = self.none.config
             high = d.alt_target_m is not None and abs(d.alt_target_m - goal[2]) > HEIGHT_TOL_M
             accel = self._effective(event.own, d.accel_mps2)
-            self.manoeuvre = (abs(d.bank_cmd_rad - base.bank_cmd_rad) > BANK_TOL_RAD
-                              or abs(accel - self._effective(event.own, base.accel_mps2)) > 1e-9
-                              or high)
+            bank = float(bank_command(event.own.bank, base, cfg))
+            base_accel = self._effective(event.own, float(accel_command(base, cfg)))
+            self.manoeuvre = (abs(d.bank_cmd_rad - bank) > BANK_TOL_RAD
+                              or abs(accel - base_accel) > 1e-9 or high)
 
     def _effective(self, own, accel: float) -> float:
         """An acceleration command as flown: none beyond the speed limits (a speed-up at the
