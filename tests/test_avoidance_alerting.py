@@ -110,8 +110,9 @@ def test_an_alerted_tree_keeps_the_route_while_the_route_line_is_clear() -> None
 
 
 def test_an_alerted_tree_leaves_the_route_when_it_conflicts_and_avoids_the_nmac_radius() -> None:
-    """Head on, 900 m (15 s): the route's line meets the intruder; the tree turns or climbs away, and it
-    works with the NMAC cylinder's radius (avoidance.nmac) as its conflict distance."""
+    """Head on, 900 m (15 s): the route's line meets the intruder; the tree turns or climbs
+    away, and it works with the NMAC cylinder's radius (avoidance.nmac) as its conflict
+    distance."""
     config = PlannerConfig(x_bounds=(0, 2000), y_bounds=(-500, 4500), nmac_m=(200.0, 30.0))
     daa = make_planner("mcts_daa", config)
     route = make_planner("none", config).plan(OWN, [_head_on(900.0)], GOAL).action

@@ -48,8 +48,9 @@ from pathlib import Path
 import numpy as np
 
 from uavxai.avoidance.planners import PLANNERS
+from uavxai.campaign_plots import plot_campaign
 from uavxai.errors import UserError
-from uavxai.outputs import csv_cell, write_figure, write_output
+from uavxai.outputs import cell_number, csv_cell, write_output
 from uavxai.processes import interrupts_deferred
 from uavxai.scenario import Scenario
 from uavxai.sim.build import DYNAMICS as _DYNAMICS
@@ -524,11 +525,6 @@ def _is_encounter_row(r: dict) -> bool:
     return str(r.get("weight", "")) != ""
 
 
-def _number(v) -> float:
-    """A cell as a number; empty (not defined, as write_csv writes nan) is nan."""
-    return math.nan if v is None or v == "" else float(v)
-
-
 def columns_of(rows: Sequence[dict]) -> tuple[tuple[str, ...], tuple[str, ...]]:
     """The (episodes.csv, results.csv) columns of a campaign's rows: with the encounter
     columns when every row is an encounter's."""
@@ -558,7 +554,7 @@ def _daa_row(method: str, rs: list[dict], baseline: list[dict] | None) -> dict:
 
     def columns(group: dict[int, dict]) -> dict[str, np.ndarray]:
         def col(key: str) -> np.ndarray:
-            return np.array([_number(group[s][key]) for s in seeds])
+            return np.array([cell_number(group[s][key]) for s in seeds])
 
         cols = {k: col(k) > 0.5 for k in ("nmac", "lowc", "alert", "manoeuvre")}
         cols.update(reversals=col("reversals"), path_excess=col("path_excess"))
@@ -629,7 +625,7 @@ def _flight_results(rs: list[dict]) -> dict:
     rate and steep-bank time of one results row; nan where no episode has the number."""
 
     def finite(key: str) -> np.ndarray:
-        v = np.array([_number(r.get(key)) for r in rs])
+        v = np.array([cell_number(r.get(key)) for r in rs])
         return v[np.isfinite(v)]
 
     excess, per_min, steep = (finite(k) for k in FLIGHT_COLUMNS)
@@ -659,66 +655,6 @@ def _cell(v):
     return v
 
 
-PLOTS = (
-    ("goal_rate", "goal rate", "goal_rate.png"),
-    ("collision_rate", "collision rate", "collision_rate.png"),
-    ("mean_steps", "mean steps (decisions)", "steps.png"),
-)
-
-
-# One look per method in every figure.
-_STYLE = {
-    "mcts": ("tab:blue", "o"),
-    "mcts_fast": ("tab:orange", "s"),
-    "mcts_vertical": ("tab:cyan", "*"),
-    "mcts_daa": ("tab:olive", "X"),
-    "exhaustive": ("tab:green", "^"),
-    "dqn": ("tab:purple", "v"),
-    "safe_dqn": ("tab:brown", "P"),
-    "none": ("tab:red", "D"),
-}
-
-
-def plot_results(results: Sequence[dict], out: Path, title: str = "") -> list[Path]:
-    """Goal rate, collision rate and steps against the intruder count, one line per method."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    methods = list(dict.fromkeys(r["method"] for r in results))
-    paths = []
-    for key, label, name in PLOTS:
-        fig, ax = plt.subplots(figsize=(6.0, 4.0), dpi=120)
-        for i, m in enumerate(methods):
-            rs = sorted((r for r in results if r["method"] == m), key=lambda r: r["intruders"])
-            colour, marker = _STYLE.get(m, (f"C{i % 10}", "o"))
-            # Methods often tie (several at zero collisions): distinct markers and shrinking
-            # sizes keep every one visible where lines lie on top of each other.
-            ax.plot(
-                [r["intruders"] for r in rs],
-                [r[key] for r in rs],
-                color=colour,
-                marker=marker,
-                markersize=9 - 1.0 * (i % 5),
-                linewidth=2.2 - 0.25 * (i % 5),
-                label=m,
-            )
-        ax.set_xlabel("intruders")
-        ax.set_ylabel(label)
-        if key.endswith("_rate"):
-            ax.set_ylim(-0.02, 1.02)
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
-        if title:
-            ax.set_title(title, fontsize=9)
-        fig.tight_layout()
-        write_figure(out / name, fig)
-        plt.close(fig)
-        paths.append(out / name)
-    return paths
-
-
 def merge_campaigns(sources: Sequence[str | Path], out: str | Path, title: str = "") -> list[dict]:
     """One campaign from several of the same scenario and dynamics: other methods, other
     intruder counts, or more seeds of the same ones (a campaign extended later, or split over
@@ -743,7 +679,7 @@ def merge_campaigns(sources: Sequence[str | Path], out: str | Path, title: str =
                     if not 0 < float(r["weight"]) < math.inf:
                         raise ValueError
                     for column in ENCOUNTER_COLUMNS[1:]:
-                        _number(r.get(column))
+                        cell_number(r.get(column))
             except (TypeError, ValueError):
                 raise UserError(
                     f"{src / 'episodes.csv'} line {i}: in an encounter campaign "
@@ -795,7 +731,7 @@ def merge_campaigns(sources: Sequence[str | Path], out: str | Path, title: str =
         episode_columns, result_columns = columns_of(episodes)
         write_csv(out / "results.csv", result_columns, results)
         write_csv(out / "episodes.csv", episode_columns, episodes)
-        plot_results(results, out, title)
+        plot_campaign(results, out, title)
     return results
 
 
@@ -970,7 +906,7 @@ def _save(rows: list[dict], out: Path, title: str) -> tuple[list[dict], list[Pat
         episode_columns, result_columns = columns_of(rows)
         write_csv(out / "episodes.csv", episode_columns, rows)
         write_csv(out / "results.csv", result_columns, results)
-        return results, plot_results(results, out, title)
+        return results, plot_campaign(results, out, title)
 
 
 def _keep_finished(rows: list[dict], out: Path, console) -> None:
@@ -1013,8 +949,8 @@ def results_table(results: Sequence[dict]):
             ci(r, "nmac_rate"),
             ci(r, "risk_ratio"),
             f"{r['mean_steps']:.1f}",
-            f"{_number(r.get('median_path_excess')):.1%}",
-            f"{_number(r.get('mean_reversals_per_min')):.1f}",
+            f"{cell_number(r.get('median_path_excess')):.1%}",
+            f"{cell_number(r.get('mean_reversals_per_min')):.1f}",
             f"{r['decision_ms_p50']:.2f}",
         )
     return t
@@ -1025,7 +961,7 @@ def daa_table(results: Sequence[dict]):
     from rich.table import Table
 
     def ci(r: dict, key: str) -> str:
-        v, lo, hi = (_number(r.get(k)) for k in (key, f"{key}_lo", f"{key}_hi"))
+        v, lo, hi = (cell_number(r.get(k)) for k in (key, f"{key}_lo", f"{key}_hi"))
         return "-" if math.isnan(v) else f"{v:.3g} [{lo:.3g}, {hi:.3g}]"
 
     t = Table("method", "encounters", "P(NMAC)", "NMAC risk ratio", "induced", "P(LoWC)",
@@ -1035,6 +971,6 @@ def daa_table(results: Sequence[dict]):
         t.add_row(r["method"], str(r["episodes"]), ci(r, "nmac_prob"), ci(r, "nmac_risk_ratio"),
                   ci(r, "induced_risk_ratio"), ci(r, "lowc_prob"), ci(r, "lowc_ratio"),
                   ci(r, "alert_rate"), ci(r, "unnecessary_manoeuvre_rate"),
-                  f"{_number(r.get('mean_reversals')):.2f}",
-                  f"{_number(r.get('mean_path_excess')):.4f}", str(r.get("ci_check", "")))
+                  f"{cell_number(r.get('mean_reversals')):.2f}",
+                  f"{cell_number(r.get('mean_path_excess')):.4f}", str(r.get("ci_check", "")))
     return t

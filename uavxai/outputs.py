@@ -16,6 +16,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import io
+import math
 import os
 import tempfile
 from pathlib import Path
@@ -101,3 +102,9 @@ def csv_cell(value):
         except ValueError:
             return "'" + value
     return value
+
+
+def cell_number(value) -> float:
+    """A results cell as a number: empty or None (a value not defined, which the CSV files
+    keep empty) is nan."""
+    return math.nan if value is None or value == "" else float(value)

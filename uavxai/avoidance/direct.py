@@ -57,9 +57,9 @@ class DirectPlanner:
     ) -> Decision:
         t0 = time.perf_counter()
         check_plan_inputs(own, intruders, goal)
-        cfg = self.config
-        error = wrap_angle(bearing(goal[0] - own.x, goal[1] - own.y) - own.heading)
         action = self.action(own, goal)
+        error = wrap_angle(bearing(goal[0] - own.x, goal[1] - own.y) - own.heading)
+        cfg = self.config
         pos, vel = intruder_arrays(intruders)
         period = cfg.decision_period_s
         goal_xyz = np.asarray(goal, dtype=float)

@@ -239,9 +239,7 @@ def decision_from_tree(
     route_action: int | None = None,
 ) -> Decision:
     """Everything a tree says about a decision: per-root-action stats, plan, explanation.
-
-    ``route_action``: the action that flies the route, taken instead of ``action`` when its
-    line has no conflict (None: ``action``, or the cornered rule's when every line conflicts).
+    The action taken: :func:`_final_action` (``route_action``: the route's, or None).
 
     The best line under every root action is re-flown exactly against every intruder (the
     search itself may skip far ones), and those numbers are written back into the tree.
@@ -263,13 +261,7 @@ def decision_from_tree(
     children, horizons = measured_children(
         children, lines, tree, samples, t_events, tracks, ids, own, cfg
     )
-    cornered = cornered_choice(children)  # every option conflicts: a rule words can state
-    if cornered is not None:
-        action = cornered.action
-    elif route_action is not None:
-        kept = next((c for c in children if c.action == route_action), None)
-        if kept is not None and kept.meets is None:
-            action = route_action
+    action, cornered = _final_action(children, action, route_action)
 
     chosen_line = lines[action]
     plan = [np.array([[own.x, own.y, own.h]])]
@@ -307,11 +299,27 @@ def decision_from_tree(
         confidence=chosen.visits / visits_root if visits_root else 0.0,
         branch_min_separation_m=chosen.predicted_min_separation_m,
         branch_horizon_s=horizons[action],
-        cornered=cornered is not None,
+        cornered=cornered,
         planner=name,
         d_min_m=cfg.d_min_m,
     )
     return decision
+
+
+def _final_action(
+    children: Sequence[ChildStats], action: int, route_action: int | None
+) -> tuple[int, bool]:
+    """The action taken and whether the cornered rule chose it: every option conflicts, the
+    rule words can state (:func:`cornered_choice`); else the route's when its line has no
+    conflict (``route_action`` given); else the search's ``action``."""
+    cornered = cornered_choice(children)
+    if cornered is not None:
+        return cornered.action, True
+    if route_action is not None:
+        kept = next((c for c in children if c.action == route_action), None)
+        if kept is not None and kept.meets is None:
+            return route_action, False
+    return action, False
 
 
 def height_command(
