@@ -92,6 +92,8 @@ def test_an_alerted_tree_keeps_the_route_while_the_route_line_is_clear() -> None
     tree's conflict distance): the route's action, at every seed. The plain vertical tree,
     free to prefer any of the clear lines, leaves the route at some seed (what the encounter
     campaigns counted as unnecessary manoeuvres)."""
+    import uavxai.xai  # noqa: F401  (the narrator)
+
     side = Intruder(id=7, x=1400.0, y=3000.0, h=120.0, vx=0.0, vy=-35.0)
     config = PlannerConfig(x_bounds=(0, 2000), y_bounds=(-500, 4500))
     route = make_planner("none", config).plan(OWN, [side], GOAL).action
@@ -104,7 +106,15 @@ def test_an_alerted_tree_keeps_the_route_while_the_route_line_is_clear() -> None
         assert d.children, "the alert hands the decision to the tree"
         assert next(c for c in d.children if c.action == route).meets is None
         kept.append(d.action == route)
-        left.append(free.plan(OWN, [side], GOAL).action != route)
+        free_d = free.plan(OWN, [side], GOAL)
+        left.append(free_d.action != route)
+        # said as what it is: the route rule, not the search, chose (when they differ)
+        assert d.route_kept == (free_d.action != route)
+        assert not free_d.route_kept
+        if d.route_kept:
+            assert "keeps to its route" in d.explanation
+            assert "has no conflict to avoid" in d.counterfactual
+            assert "agree" not in d.explanation
     assert all(kept)
     assert any(left)
 

@@ -17,8 +17,9 @@ RESULTS = Path(__file__).resolve().parents[1] / "docs" / "results"
 def _rows(*files: str) -> list[dict]:
     rows: dict[str, dict] = {}
     for f in files:
-        for r in csv.DictReader(open(RESULTS / f, encoding="utf-8")):
-            rows[r["method"]] = r  # each file carries its own `none` row: one is kept
+        with open(RESULTS / f, encoding="utf-8") as fh:
+            for r in csv.DictReader(fh):
+                rows[r["method"]] = r  # each file carries its own `none` row: one is kept
     return list(rows.values())
 
 

@@ -145,7 +145,6 @@ class TreePlanner:
         decision.ms = 1000.0 * (time.perf_counter() - t_start)
         return decision
 
-
     def route_action(self, own: Ownship, goal: Goal) -> int:
         """The action that flies the route: back to the leg's height when a vertical command
         is on (one step of it), else the `none` planner's (steer for the goal, hold speed)."""
@@ -261,6 +260,7 @@ def decision_from_tree(
     children, horizons = measured_children(
         children, lines, tree, samples, t_events, tracks, ids, own, cfg
     )
+    searched = action
     action, cornered = _final_action(children, action, route_action)
 
     chosen_line = lines[action]
@@ -300,6 +300,7 @@ def decision_from_tree(
         branch_min_separation_m=chosen.predicted_min_separation_m,
         branch_horizon_s=horizons[action],
         cornered=cornered,
+        route_kept=action == route_action and action != searched,
         planner=name,
         d_min_m=cfg.d_min_m,
     )

@@ -468,6 +468,9 @@ class Decision:
     branch_horizon_s: float = 0.0  # how far ahead the chosen line reaches, s
     # every option conflicted and the planner chose by uavxai.avoidance.lines.cornered_key
     cornered: bool = False
+    # the route's line had no conflict, so the route's action was taken whatever the search
+    # preferred (`mcts_daa`: a detect-and-avoid system leaves its route only to avoid)
+    route_kept: bool = False
     planner: str = ""  # which planner decided (mcts, exhaustive, none, ...)
     d_min_m: float = 50.0  # the collision distance the planner worked with
     # (explanation, counterfactual) in words. Planners return evidence and leave this None;
@@ -538,6 +541,7 @@ class Decision:
             "branch_min_separation_m": _finite(self.branch_min_separation_m),
             "branch_horizon_s": self.branch_horizon_s,
             "cornered": self.cornered,
+            "route_kept": self.route_kept,
             "d_min_m": self.d_min_m,
             # the episode's time left that the search valued its lines against (None: no tree)
             "time_left_s": None if self.tree is None else _finite(self.tree.time_left_s),

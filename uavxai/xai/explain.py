@@ -44,6 +44,9 @@ def explain(decision: Decision) -> tuple[str, str]:
     if decision.cornered:
         parts.append(_cornered(chosen, decision))
         parts.append(f"{_short(chosen.action)} {_meets(chosen)}")
+    elif decision.route_kept:
+        parts.append(f"it keeps to its route, whose line ({_short(chosen.action)}) "
+                     f"{_keeps(chosen, decision)}, no predicted conflict")  # fmt: skip
     else:
         hold = by_action.get(HOLD)
         if _all_end(decision):
@@ -67,6 +70,10 @@ def counterfactual(decision: Decision) -> str:
     head = f"why not {_short(runner.action)}{_flies_as(runner)}"
     if decision.cornered:
         return f"{head}: {_cornered_loser(runner, chosen, decision)}"
+    if decision.route_kept:
+        return (f"{head}: the search preferred it ({runner.visits} simulations against "
+                f"{chosen.visits}, Q {runner.q:.3f} against {chosen.q:.3f}), but it leaves the "
+                "route, and the route's line has no conflict to avoid")  # fmt: skip
     if _conflict(runner, decision.d_min_m):
         if not _conflict(chosen, decision.d_min_m):
             return f"{head}: it {_meets(runner)}, {_breach(runner, decision.d_min_m)}"
@@ -274,6 +281,8 @@ def _support(decision: Decision) -> str:
         if decision.cornered:  # chosen by the rule above, not by its value
             return "every action sequence to the search depth scored"
         return "the best of every action sequence to the search depth"
+    if decision.route_kept:  # chosen by the route rule, not by its simulations
+        return f"{100 * decision.confidence:.0f}% of simulations went to it"
     return f"{100 * decision.confidence:.0f}% of simulations agree"
 
 
