@@ -118,10 +118,10 @@ SERVICE_PLANNERS = ("d3qn", "dqn", "random", "grid")
 
 @dataclass(frozen=True)
 class ChannelValidity:
-    """Where a standard air-to-ground channel model holds (3GPP TR 36.777 Tables B-1 and B-2):
-    aerial heights ``h_min_m < h <= h_max_m`` above the ground node and horizontal distances
-    ``d2D <= d2d_max_m``. The scenario refuses a flight area that leaves it
-    (uavxai.scenario.Scenario); the formulas are uavxai.comms.pathloss."""
+    """Where a standard air-to-ground channel model holds (3GPP TR 36.777 V15.0.0 Tables
+    B-1 and B-2): aerial heights ``h_min_m < h <= h_max_m`` above the ground node and
+    horizontal distances ``d2D <= d2d_max_m``. The scenario refuses a flight area that leaves
+    it (uavxai.scenario.Scenario); the formulas are uavxai.comms.pathloss."""
 
     standard: str
     h_min_m: float  # exclusive, as the standard writes "22.5 m < h_UT"

@@ -17,11 +17,15 @@ the gain, are nearer the dB average too.
 
 ``al_hourani`` is the paper's model (uavxai.comms.channel): P_LoS from the elevation angle,
 PL = FSPL + eta_LoS or eta_NLoS, no shadowing. The three 3GPP models are those of TR 36.777
-Annex B (aerial vehicles, extending TR 38.901 Table 7.4.1-1 / 7.4.2-1 to aerial heights),
-written below with their table references. Conventions of the standard: f_c in GHz, distances
-and heights in m; ``h`` is h_UT, the aerial node's height. Here the UAV is the base station and
-the users are the ground nodes; the link is reciprocal, so h_UT is the UAV's height above the
-user, d2D the horizontal and d3D the straight-line distance between them.
+V15.0.0 Annex B (aerial vehicles, extending TR 38.901 Table 7.4.1-1 / 7.4.2-1 to aerial
+heights): Table B-1 the LoS probability, Table B-2 the path loss, Table B-3 the shadow-fading
+sigma, written below with their table references and checked coefficient by coefficient
+against the sources listed in docs/channel-3gpp.md. Conventions of the standard: f_c in GHz,
+distances and heights in m; ``h`` is h_UT, the aerial node's height. Here the UAV is the base
+station and the users are the ground nodes; the link is reciprocal, so h_UT is the UAV's height
+above the user, d2D the horizontal and d3D the straight-line distance between them. Table B-1
+was fitted with the ground node on a mast (its Note 1: 35 m RMa-AV, 25 m UMa-AV, 10 m UMi-AV);
+a user on the ground sits lower, a difference the standard offers no correction for.
 
 Validity (uavxai.vocabulary.CHANNEL_MODELS): UMa-AV and UMi-AV 22.5 m < h <= 300 m and
 d2D <= 4 km, RMa-AV 10 m < h <= 300 m and d2D <= 10 km. Below those heights TR 36.777 sends
@@ -161,14 +165,20 @@ def free_space_1m_db(fc_ghz: float) -> float:
 
 
 def free_space_3gpp_db(d3d: np.ndarray, fc_ghz: float) -> np.ndarray:
-    """PL_FS = 20 log10(40 pi d3D f_c / 3), the free-space loss as TR 36.777 Table B-2
-    writes it (f_c in GHz, d3D in m)."""
+    """PL_FS = 20 log10(40 pi d3D f_c / 3), the free-space loss (f_c in GHz, d3D in m). TR
+    36.777 Table B-2 names UMi-AV's floor only "PL', the free space path loss" (its Note 3);
+    this is that loss in the form its RMa-AV rows write, 20 log10(40 pi f_c / 3) at 1 m."""
     return 20.0 * log10(d3d) + free_space_1m_db(fc_ghz)
 
 
 class AerialModel(ABC):
     """A TR 36.777 Annex B model: its LoS probability, path loss per state and shadow-fading
-    sigma per state (the NLoS sigma is a constant in every table row), as one LargeScale."""
+    sigma per state (the NLoS sigma is a constant in every row of Table B-3), as one LargeScale.
+
+    Where the table sets P_LOS = 1 (UMa-AV above 100 m, RMa-AV above 40 m) it has no NLoS
+    sigma, and UMa-AV no NLoS path loss either; the NLoS formulas are still evaluated there
+    (one array for every link) but carry the weight 1 - P_LOS = 0 in the mean and are never
+    drawn."""
 
     sigma_nlos: float
 
@@ -197,15 +207,17 @@ class AerialModel(ABC):
 
 
 class UMaAV(AerialModel):
-    """Urban macro, aerial (TR 36.777 Tables B-1, B-2), 22.5 m < h <= 300 m, d2D <= 4 km.
+    """Urban macro, aerial (TR 36.777 Tables B-1, B-2, B-3), 22.5 m < h <= 300 m, d2D <= 4 km.
 
     LoS probability (Table B-1):
         22.5 m < h <= 100 m:  d1 = max(460 log10 h - 700, 18), p1 = 4300 log10 h - 3800,
                               P_LOS by :func:`los_probability_d1_p1`
         100 m < h <= 300 m:   P_LOS = 1
-    Path loss (Table B-2):
+    Path loss (Table B-2) and shadow-fading sigma (Table B-3):
         LoS:  PL = 28.0 + 22 log10 d3D + 20 log10 f_c,         sigma_SF = 4.64 exp(-0.0066 h)
+              (no breakpoint for 22.5 m <= h <= 300 m, d2D <= 4 km: Table B-2 Note 1)
         NLoS: PL = -17.5 + (46 - 7 log10 h) log10 d3D + 20 log10(40 pi f_c / 3),  sigma_SF = 6
+              (rows for h <= 100 m only, where P_LOS < 1 can occur)
     (the NLoS row has no max(PL_LoS, ...) in the table, unlike UMi-AV and RMa-AV).
     """
 
@@ -227,16 +239,19 @@ class UMaAV(AerialModel):
 
 
 class UMiAV(AerialModel):
-    """Urban micro, aerial (TR 36.777 Tables B-1, B-2), 22.5 m < h <= 300 m, d2D <= 4 km.
+    """Urban micro, aerial (TR 36.777 Tables B-1, B-2, B-3), 22.5 m < h <= 300 m, d2D <= 4 km.
 
     LoS probability (Table B-1), over the whole aerial range (never 1 for every d2D):
         d1 = max(294.05 log10 h - 432.94, 18), p1 = 233.98 log10 h - 0.95,
         P_LOS by :func:`los_probability_d1_p1`
-    Path loss (Table B-2), PL_FS = 20 log10(40 pi d3D f_c / 3):
+    Path loss (Table B-2) and shadow-fading sigma (Table B-3), PL_FS the free-space loss
+    (:func:`free_space_3gpp_db`):
         LoS:  PL = max(PL_FS, 30.9 + (22.25 - 0.5 log10 h) log10 d3D + 20 log10 f_c),
               sigma_SF = max(5 exp(-0.01 h), 2)
         NLoS: PL = max(PL_LoS, 32.4 + (43.2 - 7.6 log10 h) log10 d3D + 20 log10 f_c),
               sigma_SF = 8
+    Inside the range (d3D >= h > 22.5 m) neither max binds; they are kept as the table writes
+    them.
     """
 
     sigma_nlos = 8.0
@@ -259,18 +274,18 @@ class UMiAV(AerialModel):
 
 
 class RMaAV(AerialModel):
-    """Rural macro, aerial (TR 36.777 Tables B-1, B-2), 10 m < h <= 300 m, d2D <= 10 km.
+    """Rural macro, aerial (TR 36.777 Tables B-1, B-2, B-3), 10 m < h <= 300 m, d2D <= 10 km.
 
     LoS probability (Table B-1):
         10 m < h <= 40 m:   d1 = max(1350.8 log10 h - 1602, 18),
                             p1 = max(15021 log10 h - 16053, 1000),
                             P_LOS by :func:`los_probability_d1_p1`
         40 m < h <= 300 m:  P_LOS = 1
-    Path loss (Table B-2):
+    Path loss (Table B-2) and shadow-fading sigma (Table B-3), no breakpoint above 10 m:
         LoS:  PL = max(23.9 - 1.8 log10 h, 20) log10 d3D + 20 log10(40 pi f_c / 3),
               sigma_SF = 4.2 exp(-0.0046 h)
         NLoS: PL = max(PL_LoS, -12 + (35 - 5.3 log10 h) log10 d3D + 20 log10(40 pi f_c / 3)),
-              sigma_SF = 6
+              sigma_SF = 6 (Table B-3 gives it for h <= 40 m only, where P_LOS < 1 can occur)
     """
 
     sigma_nlos = 6.0
