@@ -212,3 +212,25 @@ def test_track_pilot_law() -> None:
     # in the climb: the height target leads by vh / k_h
     assert p.alt_target(60.0) == pytest.approx(track.h[600] + 2.0 / 0.2)
     assert p.alt_target(200.0) == pytest.approx(340.0)  # after the end: level at 340 m
+
+
+@pytest.mark.parametrize("name", ["uav_fw", NAME])
+def test_the_planner_flies_the_roll_and_climb_limits_its_aircraft_declares(name: str) -> None:
+    """The planner's model of the ownship takes the autopilot's roll-rate and climb-rate
+    limits from the aircraft's XML (what JSBSim loads), not from a copy: the Cessna's roll
+    rate is half the UAV's, and an ownship flown as a Cessna is planned as one."""
+    import math
+
+    from uavxai.avoidance.types import PlannerConfig
+
+    sc = default_scenario()
+    sc = sc.model_copy(update={"ownship": sc.ownship.model_copy(update={"aircraft": name})})
+    cfg = PlannerConfig.from_scenario(sc)
+    a = Aircraft(name, FRAME, DT, seed=1)
+    try:
+        loaded = math.degrees(a.fdm["ap/roll-rate-limit-rad_sec"])
+        assert cfg.roll_rate_limit_deg_s == pytest.approx(loaded, abs=1e-3)
+        assert cfg.climb_rate_mps == a.fdm["ap/climb-rate-limit-mps"]
+    finally:
+        a.close()
+    assert cfg.roll_rate_limit_deg_s == (30.0 if name == "uav_fw" else 15.0)

@@ -98,9 +98,10 @@ class PlannerConfig:
     depth: int = 4
     c: float = 1.0
     action_hold_s: float = 4.0
-    roll_rate_limit_deg_s: float = 30.0  # matches the JSBSim autopilot's roll-rate limit
+    # The ownship autopilot's limits: from_scenario reads them from its aircraft's XML.
+    roll_rate_limit_deg_s: float = 30.0
     # The JSBSim autopilot holds the altitude target it is given (the goal's altitude) and
-    # climbs or descends towards it no faster than this.
+    # climbs or descends towards it no faster than this (its XML's, as the roll rate).
     climb_rate_mps: float = 2.5
     # Speed before height, as the autopilot flies it (ap/climb-rate-max-mps in
     # aircraft/uav_fw/Systems/uav_fw_autopilot.xml): it demands no climb at airspeeds below
@@ -230,6 +231,7 @@ class PlannerConfig:
     def from_scenario(cls, scenario: Scenario, **overrides: object) -> PlannerConfig:
         """The planner settings of a scenario: its `avoidance` section, world bounds and seed."""
         from uavxai.dynamics.environment import EnvironmentConfig  # jsbsim only when asked
+        from uavxai.scenario import aircraft_height_loop, aircraft_roll_rate_deg_s
 
         env = EnvironmentConfig.from_scenario(scenario)
 
@@ -254,6 +256,8 @@ class PlannerConfig:
             "own_error_10s_m": a.mcts.own_error_10s_m,
             "uncertainty_horizon_s": a.mcts.uncertainty_horizon_s,
             "actions": a.actions,
+            "roll_rate_limit_deg_s": aircraft_roll_rate_deg_s(scenario.ownship.aircraft),
+            "climb_rate_mps": aircraft_height_loop(scenario.ownship.aircraft)[1],
             "alert_well_clear_m": (a.well_clear.horizontal_m, a.well_clear.vertical_m),
             "nmac_m": (a.nmac.horizontal_m, a.nmac.vertical_m),
             "seed": scenario.seed,
