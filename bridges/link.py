@@ -24,6 +24,7 @@ from collections.abc import Callable
 from pymavlink import mavutil
 
 from uavxai.errors import UserError
+from uavxai.link_url import STREAM_KINDS, check_link, explain_link
 
 from .protocol import AUTOPILOT_COMPONENT
 
@@ -31,41 +32,10 @@ log = logging.getLogger(__name__)
 
 Peer = tuple[str, int]  # (host, port)
 
-LINK_FORMS = (
-    "udpout:HOST:PORT (send to a ground station and hear its replies)",
-    "udpin:HOST:PORT (listen; answer the ground stations the bridge accepts)",
-    "udp:HOST:PORT (same as udpin)",
-    "udpbcast:HOST:PORT (broadcast, then talk to the peers that answer)",
-    "tcp:HOST:PORT (connect)",
-    "tcpin:HOST:PORT (accept one connection at a time)",
-)
-_DATAGRAM_KINDS = {"udpout", "udpin", "udp", "udpbcast"}
-_STREAM_KINDS = {"tcp", "tcpin"}
 # A ground station's burst of more than ~256 datagrams overflows the default buffer between
 # two polls; ask for more (the kernel caps it at net.core.rmem_max).
 RECEIVE_BUFFER_BYTES = 4 * 1024 * 1024
 _READ_BYTES = 65536
-
-
-def check_link(link: str) -> tuple[str, str, int]:
-    """(kind, host, port) of a link string, or UserError naming the allowed forms."""
-    parts = link.split(":") if isinstance(link, str) else []
-    problem = None
-    if len(parts) != 3:
-        problem = "it must have the form KIND:HOST:PORT"
-    elif parts[0] not in _DATAGRAM_KINDS | _STREAM_KINDS:
-        problem = f"'{parts[0]}' is not a link kind this bridge opens"
-    elif not parts[1]:
-        problem = "the host is empty"
-    elif not parts[2].isdigit() or not 0 < int(parts[2]) < 65536:
-        problem = f"the port '{parts[2]}' is not a number between 1 and 65535"
-    if problem:
-        raise UserError(_explain(link, problem))
-    return parts[0], parts[1], int(parts[2])
-
-
-def _explain(link: object, problem: str) -> str:
-    return f"cannot use MAVLink link {link!r}: {problem}. Allowed forms: " + "; ".join(LINK_FORMS)
 
 
 def _ipv4(host: str, port: int) -> Peer:
@@ -140,7 +110,7 @@ class Link:
     ) -> None:
         self.name = link
         self.kind, host, port = check_link(link)
-        self.stream = self.kind in _STREAM_KINDS
+        self.stream = self.kind in STREAM_KINDS
         self._table = PeerTable(max_peers, peer_timeout_s, clock)
         self._target: Peer | None = None  # udpout's ground station, udpbcast's broadcast
         self._sock: socket.socket | None = None
@@ -158,7 +128,7 @@ class Link:
             else:
                 self._sock = self._open_udp(host, port)
         except (OSError, ValueError) as err:
-            raise UserError(_explain(link, f"opening it failed ({err})")) from err
+            raise UserError(explain_link(link, f"opening it failed ({err})")) from err
         if self.kind == "tcp":
             self._client = self._conn.port
             self._client_peer = _peer_of(self._client)

@@ -938,7 +938,7 @@ def aircraft_roll_rate_deg_s(name: str) -> float:
 # ----------------------------------------------------------------------------------- loading
 def check_mavlink_url(url: str) -> str:
     """Check the form of a pymavlink connection string (the bridge's rule, one place)."""
-    from uavxai.bridges.link import check_link
+    from uavxai.link_url import check_link
 
     try:
         check_link(url)

@@ -260,8 +260,7 @@ def decision_from_tree(
     children, horizons = measured_children(
         children, lines, tree, samples, t_events, tracks, ids, own, cfg
     )
-    searched = action
-    action, cornered = _final_action(children, action, route_action)
+    action, cornered, route_kept = _final_action(children, action, route_action)
 
     chosen_line = lines[action]
     plan = [np.array([[own.x, own.y, own.h]])]
@@ -300,7 +299,7 @@ def decision_from_tree(
         branch_min_separation_m=chosen.predicted_min_separation_m,
         branch_horizon_s=horizons[action],
         cornered=cornered,
-        route_kept=action == route_action and action != searched,
+        route_kept=route_kept,
         planner=name,
         d_min_m=cfg.d_min_m,
     )
@@ -309,18 +308,19 @@ def decision_from_tree(
 
 def _final_action(
     children: Sequence[ChildStats], action: int, route_action: int | None
-) -> tuple[int, bool]:
-    """The action taken and whether the cornered rule chose it: every option conflicts, the
-    rule words can state (:func:`cornered_choice`); else the route's when its line has no
-    conflict (``route_action`` given); else the search's ``action``."""
+) -> tuple[int, bool, bool]:
+    """The action taken, and whether the cornered rule or the route rule (rather than the
+    search) chose it: every option conflicts, the rule words can state
+    (:func:`cornered_choice`); else the route's when its line has no conflict
+    (``route_action`` given); else the search's ``action``."""
     cornered = cornered_choice(children)
     if cornered is not None:
-        return cornered.action, True
+        return cornered.action, True, False
     if route_action is not None:
         kept = next((c for c in children if c.action == route_action), None)
         if kept is not None and kept.meets is None:
-            return route_action, False
-    return action, False
+            return route_action, False, route_action != action
+    return action, False, False
 
 
 def height_command(
