@@ -47,16 +47,14 @@ from pathlib import Path
 
 import numpy as np
 
-from uavxai.avoidance.planners import PLANNERS
 from uavxai.campaign_plots import plot_campaign
 from uavxai.errors import UserError
 from uavxai.outputs import cell_number, csv_cell, write_output
 from uavxai.processes import interrupts_deferred
 from uavxai.scenario import Scenario
 from uavxai.sim.build import DYNAMICS as _DYNAMICS
-from uavxai.vocabulary import OUTCOMES, Outcome
+from uavxai.vocabulary import OUTCOMES, Outcome, avoidance_planners
 
-METHODS = tuple(PLANNERS)  # the planner registry's names, not a copy of them
 DYNAMICS = tuple(_DYNAMICS)
 RESULT_COLUMNS = (
     "method",
@@ -171,8 +169,8 @@ def run_campaign_episode(
     from uavxai.sim.build import fly
     from uavxai.sim.flight_quality import FlightQuality
 
-    if method not in METHODS:
-        raise UserError(f"method '{method}' is not one of {', '.join(METHODS)}.")
+    if method not in avoidance_planners():
+        raise UserError(f"method '{method}' is not one of {', '.join(avoidance_planners())}.")
     spec = campaign_spec(scenario, n_intruders, seed, dynamics, goal)
     extra: dict = {}
     start = (spec.start.x, spec.start.y, spec.start.h)
@@ -476,9 +474,11 @@ def _check_workers(ray) -> None:
 
 
 def _check(scenario, methods, intruders, episodes, dynamics, workers) -> None:
-    bad = [m for m in methods if m not in METHODS]
+    bad = [m for m in methods if m not in avoidance_planners()]
     if bad or not methods:
-        raise UserError(f"--methods {','.join(methods)}: allowed {', '.join(METHODS)}.")
+        raise UserError(
+            f"--methods {','.join(methods)}: allowed {', '.join(avoidance_planners())}."
+        )
     if not intruders or any(int(n) < 0 for n in intruders):
         raise UserError("--intruders: give one or more counts >= 0, e.g. 5,10,20,40.")
     if scenario.encounters is not None and list(intruders) != [1]:
@@ -765,8 +765,8 @@ def _checked_row(r: dict, path: Path, line: int) -> dict:
         return int(v) if whole else v
 
     out = dict(r)
-    if r.get("method") not in METHODS:
-        raise bad("method", f"a planner name, one of {', '.join(METHODS)}")
+    if r.get("method") not in avoidance_planners():
+        raise bad("method", f"a planner name, one of {', '.join(avoidance_planners())}")
     if r.get("outcome") not in OUTCOMES:
         raise bad("outcome", f"one of {', '.join(OUTCOMES)}")
     out["intruders"] = number("intruders", 0, MAX_INTRUDERS,

@@ -126,9 +126,9 @@ def _dynamics() -> tuple[str, ...]:
 
 
 def _avoidance_methods() -> tuple[str, ...]:
-    from uavxai.vocabulary import AVOIDANCE_PLANNERS  # the registry's names, checked there
+    from uavxai.vocabulary import avoidance_planners  # the registry's names, checked there
 
-    return AVOIDANCE_PLANNERS
+    return avoidance_planners()
 
 
 _SCENARIO_HELP = "a scenario file, or the name of a shipped one (`uavxai scenarios` lists them)"

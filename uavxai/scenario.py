@@ -39,11 +39,11 @@ from uavxai.errors import ScenarioError, UserError, short_repr
 from uavxai.paths import aircraft_dir, resolve_scenario
 from uavxai.vocabulary import (
     ACTION_SETS,
-    AVOIDANCE_PLANNERS,
     CHANNEL_MODEL_NAMES,
     CHANNEL_MODELS,
     SERVICE_PLANNERS,
     VERTICAL_PLANNERS,
+    avoidance_planners,
 )
 
 REFERENCE = "docs/scenario.md"
@@ -411,7 +411,7 @@ class WellClear(_Model):
 
 
 class Avoidance(_Model):
-    planner: Literal[AVOIDANCE_PLANNERS] = "mcts"  # type: ignore[valid-type]
+    planner: Annotated[str, Field(min_length=1, max_length=40)] = "mcts"
     checkpoint: Annotated[str, Field(max_length=4096)] | None = None  # dqn / safe_dqn
     d_min_m: Annotated[float, Field(gt=0, le=10_000)] = 50.0
     goal_radius_m: Annotated[float, Field(gt=0, le=100_000)] = 50.0
@@ -428,6 +428,14 @@ class Avoidance(_Model):
     actions: Literal[tuple(ACTION_SETS)] = "paper"  # type: ignore[valid-type]
     nmac: NMAC = NMAC()
     well_clear: WellClear = WellClear()
+
+    @field_validator("planner")
+    @classmethod
+    def _planner(cls, v: str) -> str:
+        names = avoidance_planners()
+        if v not in names:
+            raise ValueError(f"planner {short_repr(v)} is not one of {', '.join(names)}")
+        return v
 
     @field_validator("speed_mps")
     @classmethod

@@ -29,6 +29,7 @@ one climb followed by that action.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from enum import StrEnum
 
@@ -113,6 +114,29 @@ AVOIDANCE_PLANNERS = (
 # does) and `none`, which flies straight to the goal whatever the set. mvp resolves in the
 # horizontal plane and dqn / safe_dqn were trained on the paper's nine: they refuse it.
 VERTICAL_PLANNERS = ("mcts", "mcts_fast", "exhaustive", "mcts_vertical", "mcts_daa", "none")
+# Avoidance planners other packages install: an entry point in this group names a factory
+# ``(config: PlannerConfig, checkpoint) -> Planner`` (README, "Your own planner"). Their
+# names are read from the packages' metadata, without importing them, so that the schema can
+# check a scenario cheaply; a plugin flies the paper's nine.
+PLANNER_ENTRY_POINTS = "uavxai.planners"
+_PLUGIN_NAME = re.compile(r"[a-z][a-z0-9_]{0,39}")
+
+
+def plugin_planners() -> tuple[str, ...]:
+    """The installed plugins' planner names (group :data:`PLANNER_ENTRY_POINTS`), sorted: those
+    that are lower-case slugs of at most 40 characters and not a built-in planner's name (the
+    built-in keeps it)."""
+    from importlib.metadata import entry_points
+
+    names = {ep.name for ep in entry_points(group=PLANNER_ENTRY_POINTS)}
+    return tuple(sorted(n for n in names
+                        if _PLUGIN_NAME.fullmatch(n) and n not in AVOIDANCE_PLANNERS))  # fmt: skip
+
+
+def avoidance_planners() -> tuple[str, ...]:
+    """Every avoidance planner a scenario, `--methods` or a campaign may name: the built-in
+    ones, then the installed plugins'."""
+    return AVOIDANCE_PLANNERS + plugin_planners()
 SERVICE_PLANNERS = ("d3qn", "dqn", "random", "grid")
 
 

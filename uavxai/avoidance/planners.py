@@ -1,5 +1,7 @@
 """Avoidance planners by name: the factory behind `avoidance.planner`, `uavxai evaluate
---methods` and the pipeline.
+--methods` and the pipeline. The built-in ones are registered here; other packages add theirs
+through the entry-point group ``uavxai.planners`` (README, "Your own planner"), loaded when
+first asked for.
 
 Every planner follows :class:`uavxai.avoidance.types.Planner`: ``plan(own, intruders, goal,
 *, step) -> Decision`` and ``reset(seed)``, with ``name`` and ``config`` attributes. The
@@ -20,7 +22,13 @@ from uavxai.avoidance.mcts import MCTSPlanner
 from uavxai.avoidance.mvp import MVPPlanner
 from uavxai.avoidance.types import Planner, PlannerConfig
 from uavxai.errors import UserError
-from uavxai.vocabulary import AVOIDANCE_PLANNERS, VERTICAL_PLANNERS
+from uavxai.vocabulary import (
+    AVOIDANCE_PLANNERS,
+    PLANNER_ENTRY_POINTS,
+    VERTICAL_PLANNERS,
+    avoidance_planners,
+    plugin_planners,
+)
 
 # The paper's Tree-fast: few simulations, a shallow tree, short holds.
 TREE_FAST = {"simulations": 40, "depth": 2, "action_hold_s": 2.0}
@@ -101,14 +109,45 @@ def make_planner(
 ) -> Planner:
     """The planner called ``name`` (a key of PLANNERS) with ``config``; ``checkpoint`` is the
     model.pt of a learned planner (None: the shipped one) and is ignored by the others."""
-    factory = PLANNERS.get(name)
+    factory = PLANNERS.get(name) or _plugin(name)
     if factory is None:
         raise UserError(
-            f"unknown avoidance planner '{name}'; choose one of {', '.join(PLANNERS)}."
+            f"unknown avoidance planner '{name}'; choose one of {', '.join(avoidance_planners())}."
         )
     config = config or PlannerConfig()
     check_action_set(name, config.actions)
-    return factory(config, checkpoint)
+    planner = factory(config, checkpoint)
+    if name not in PLANNERS and not isinstance(planner, Planner):
+        raise UserError(
+            f"avoidance planner '{name}' (a plugin) made a {type(planner).__name__}, not a "
+            "planner: it needs plan(own, intruders, goal, *, step) -> Decision, reset(seed), "
+            "name and config (README, planner API)."
+        )
+    return planner
+
+
+def _plugin(name: str) -> PlannerFactory | None:
+    """The factory an installed package registers for ``name`` (entry point group
+    :data:`PLANNER_ENTRY_POINTS`), loaded (its module imported) only now that it is asked for;
+    None if no plugin has that name."""
+    if name not in plugin_planners():
+        return None
+    from importlib.metadata import entry_points
+
+    ep = next(iter(entry_points(group=PLANNER_ENTRY_POINTS, name=name)))
+    try:
+        factory = ep.load()
+    except Exception as exc:  # its code, not ours: say whose and go no further
+        raise UserError(
+            f"avoidance planner '{name}' (entry point {ep.value} of group "
+            f"{PLANNER_ENTRY_POINTS}) could not be loaded: {type(exc).__name__}: {exc}"
+        ) from None
+    if not callable(factory):
+        raise UserError(
+            f"avoidance planner '{name}': entry point {ep.value} is not a factory "
+            "(config, checkpoint) -> Planner."
+        )
+    return factory
 
 
 def check_action_set(planner: str, actions: str) -> None:
@@ -117,8 +156,8 @@ def check_action_set(planner: str, actions: str) -> None:
         raise UserError(
             f"avoidance.actions: {actions} is flown by {', '.join(VERTICAL_PLANNERS)}; "
             f"planner '{planner}' flies only the paper set (mvp resolves in the horizontal "
-            "plane, dqn and safe_dqn were trained on the nine). Use avoidance.actions: paper "
-            "with it."
+            "plane, dqn and safe_dqn were trained on the nine, a plugin flies the nine). Use "
+            "avoidance.actions: paper with it."
         )
 
 # The registry provides every planner the vocabulary names, and nothing else.
