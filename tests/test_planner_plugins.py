@@ -40,9 +40,11 @@ def _install(root: Path, entries: dict[str, str], module: str = MODULE, dist: st
 
 
 @pytest.fixture
-def plugins(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+def plugins(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
     monkeypatch.syspath_prepend(str(tmp_path))
-    return tmp_path
+    plugin_planners.cache_clear()  # a process reads its plugins once: this one installs some
+    yield tmp_path
+    plugin_planners.cache_clear()
 
 
 def test_an_installed_plugin_is_a_planner_a_scenario_and_a_campaign_may_name(plugins) -> None:
@@ -76,10 +78,10 @@ def test_a_plugin_cannot_take_a_built_in_name_or_an_unsafe_one(plugins) -> None:
 
 def test_a_broken_plugin_is_named_not_a_traceback(plugins) -> None:
     _install(plugins, {"broken": "straight"}, module="raise RuntimeError('boom')\n", dist="b")
+    _install(plugins, {"fake": "not_a_planner"}, dist="c")
     with pytest.raises(UserError, match=r"'broken' \(entry point uavxai_plugin_b:straight.*boom"):
         make_planner("broken", PlannerConfig())
-    _install(plugins, {"fake": "not_a_planner"}, dist="c")
-    with pytest.raises(UserError, match="'fake' .*made a object, not a planner"):
+    with pytest.raises(UserError, match="'fake' .*returned a 'object' object, not a planner"):
         make_planner("fake", PlannerConfig())
 
 

@@ -32,6 +32,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 from enum import StrEnum
+from functools import cache
 
 
 @dataclass(frozen=True)
@@ -122,6 +123,7 @@ PLANNER_ENTRY_POINTS = "uavxai.planners"
 _PLUGIN_NAME = re.compile(r"[a-z][a-z0-9_]{0,39}")
 
 
+@cache  # read once per process (10 ms a scan): packages are installed between runs
 def plugin_planners() -> tuple[str, ...]:
     """The installed plugins' planner names (group :data:`PLANNER_ENTRY_POINTS`), sorted: those
     that are lower-case slugs of at most 40 characters and not a built-in planner's name (the

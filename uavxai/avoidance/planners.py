@@ -119,9 +119,9 @@ def make_planner(
     planner = factory(config, checkpoint)
     if name not in PLANNERS and not isinstance(planner, Planner):
         raise UserError(
-            f"avoidance planner '{name}' (a plugin) made a {type(planner).__name__}, not a "
-            "planner: it needs plan(own, intruders, goal, *, step) -> Decision, reset(seed), "
-            "name and config (README, planner API)."
+            f"avoidance planner '{name}' (a plugin) returned a {type(planner).__name__!r} "
+            "object, not a planner: a planner needs plan(own, intruders, goal, *, step) -> "
+            "Decision, reset(seed), name and config (README, planner API)."
         )
     return planner
 
