@@ -47,6 +47,13 @@ def test_clock_counts_whole_ticks_and_refuses_rates_that_do_not_divide() -> None
         default_scenario("c", dynamics={"rate_hz": 100, "trajectory_hz": 30})
     with pytest.raises(UserError, match="decision_period_s"):
         default_scenario("c", avoidance={"decision_period_s": 1.05})
+    # one rule: a scenario copied past the schema's checks meets the same words at the clock
+    sc = default_scenario("c")
+    bad = sc.model_copy(update={"dynamics": sc.dynamics.model_copy(update={"rate_hz": 100.0,
+                                                                          "trajectory_hz": 30.0})})
+    with pytest.raises(UserError, match=r"rate_hz \(100\) must be a whole multiple of "
+                                        r"dynamics.trajectory_hz \(30\).*docs/scenario.md"):
+        Clock.from_scenario(bad)
 
 
 def test_judge_order_failure_collision_bounds_goal() -> None:

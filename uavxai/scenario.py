@@ -685,34 +685,8 @@ class Scenario(_Model):
     def _timing(self) -> Scenario:
         """What the simulation clock (uavxai.sim.clock) and the bridge's failsafe would refuse,
         refused here already so that `validate` says it."""
-        rate, traj = self.dynamics.rate_hz, self.dynamics.trajectory_hz
+        clock_ticks(self.dynamics, self.avoidance)
         period = self.avoidance.decision_period_s
-        tick = 1.0 / rate
-        sample = _whole_ticks(1.0 / traj, tick)
-        if sample is None:
-            raise ValueError(
-                f"dynamics.rate_hz ({rate:g}) must be a whole multiple of dynamics.trajectory_hz "
-                f"({traj:g}), e.g. 120 and 10"
-            )
-        decision = _whole_ticks(period, tick)
-        if decision is None:
-            raise ValueError(
-                f"avoidance.decision_period_s = {period:g} s must be a whole number (>= 1) of "
-                f"integrator steps of 1 / dynamics.rate_hz = {tick:g} s"
-            )
-        if decision % sample:
-            raise ValueError(
-                f"avoidance.decision_period_s = {period:g} s must be a whole number of "
-                f"trajectory samples (1 / dynamics.trajectory_hz = {1 / traj:g} s)"
-            )
-        latency = self.avoidance.decision_latency_s
-        lag = _whole_ticks(latency, tick) if latency > 0 else 0
-        if lag is None or lag % sample or not latency < period:
-            raise ValueError(
-                f"avoidance.decision_latency_s = {latency:g} s must be 0 or a whole number of "
-                f"trajectory samples (1 / dynamics.trajectory_hz = {1 / traj:g} s) shorter than "
-                f"avoidance.decision_period_s = {period:g} s"
-            )
         timeout = self.bridge.command_timeout_s
         if not timeout > period:
             raise ValueError(
@@ -880,7 +854,7 @@ class Scenario(_Model):
         return self.model_copy(update={"seed": int(seed)})
 
 
-_TICK_TOL = 1e-6  # as uavxai.sim.clock.whole_ticks
+_TICK_TOL = 1e-6
 
 
 def _whole_ticks(seconds: float, tick_s: float) -> int | None:
@@ -889,6 +863,45 @@ def _whole_ticks(seconds: float, tick_s: float) -> int | None:
     if n < 1 or abs(n * tick_s - seconds) > _TICK_TOL * max(1.0, seconds):
         return None
     return n
+
+
+def clock_ticks(dynamics: DynamicsConfig, avoidance: Avoidance) -> tuple[int, int, int]:
+    """(ticks per sample, per decision, of latency) of the simulation clock
+    (:class:`uavxai.sim.clock.Clock`), time counted in whole integrator ticks of
+    1 / ``dynamics.rate_hz``; ValueError naming the setting when a period is not a whole number
+    of ticks (a 100 Hz integrator with 30 Hz samples would decide every 0.9 s while the
+    planner assumes 1 s), the decision period not a whole number of samples, or the latency
+    not a whole number of samples shorter than the decision period. The one rule: the schema
+    refuses with it at load, and the clock counts with it."""
+    rate, traj = dynamics.rate_hz, dynamics.trajectory_hz
+    period = avoidance.decision_period_s
+    tick = 1.0 / rate
+    sample = _whole_ticks(1.0 / traj, tick)
+    if sample is None:
+        raise ValueError(
+            f"dynamics.rate_hz ({rate:g}) must be a whole multiple of dynamics.trajectory_hz "
+            f"({traj:g}), e.g. 120 and 10"
+        )
+    decision = _whole_ticks(period, tick)
+    if decision is None:
+        raise ValueError(
+            f"avoidance.decision_period_s = {period:g} s must be a whole number (>= 1) of "
+            f"integrator steps of 1 / dynamics.rate_hz = {tick:g} s"
+        )
+    if decision % sample:
+        raise ValueError(
+            f"avoidance.decision_period_s = {period:g} s must be a whole number of "
+            f"trajectory samples (1 / dynamics.trajectory_hz = {1 / traj:g} s)"
+        )
+    latency = avoidance.decision_latency_s
+    lag = _whole_ticks(latency, tick) if latency > 0 else 0
+    if lag is None or lag % sample or not latency < period:
+        raise ValueError(
+            f"avoidance.decision_latency_s = {latency:g} s must be 0 or a whole number of "
+            f"trajectory samples (1 / dynamics.trajectory_hz = {1 / traj:g} s) shorter than "
+            f"avoidance.decision_period_s = {period:g} s"
+        )
+    return sample, decision, lag
 
 
 @cache

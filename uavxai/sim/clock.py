@@ -11,21 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from uavxai.errors import UserError
-from uavxai.scenario import Scenario
-
-_TOL = 1e-6
-
-
-def whole_ticks(seconds: float, tick_s: float, what: str) -> int:
-    """``seconds`` as a whole number (>= 1) of ``tick_s``; UserError otherwise."""
-    n = round(seconds / tick_s)
-    if n < 1 or abs(n * tick_s - seconds) > _TOL * max(1.0, seconds):
-        raise UserError(
-            f"{what} = {seconds:g} s is not a whole number of {tick_s:g} s steps; choose rates "
-            "that divide (e.g. dynamics.rate_hz 120, dynamics.trajectory_hz 10, "
-            "avoidance.decision_period_s 1.0). See docs/scenario.md."
-        )
-    return n
+from uavxai.scenario import Scenario, clock_ticks
 
 
 @dataclass(frozen=True)
@@ -39,27 +25,14 @@ class Clock:
 
     @classmethod
     def from_scenario(cls, scenario: Scenario) -> Clock:
-        rate = scenario.dynamics.rate_hz
-        tick = 1.0 / rate
-        sample = whole_ticks(1.0 / scenario.dynamics.trajectory_hz, tick, "1 / trajectory_hz")
-        decision = whole_ticks(
-            scenario.avoidance.decision_period_s, tick, "avoidance.decision_period_s"
-        )
-        if decision % sample:
-            raise UserError(
-                f"avoidance.decision_period_s = {scenario.avoidance.decision_period_s:g} s is not "
-                f"a whole number of trajectory samples (1 / {scenario.dynamics.trajectory_hz:g} "
-                "s); see docs/scenario.md."
-            )
-        latency = scenario.avoidance.decision_latency_s
-        lag = whole_ticks(latency, tick, "avoidance.decision_latency_s") if latency > 0 else 0
-        if lag % sample or lag >= decision:
-            raise UserError(
-                f"avoidance.decision_latency_s = {latency:g} s must be a whole number of "
-                "trajectory samples shorter than avoidance.decision_period_s; see "
-                "docs/scenario.md."
-            )
-        return cls(rate_hz=rate, sample_ticks=sample, decision_ticks=decision, latency_ticks=lag)
+        """The clock of ``scenario``, by the schema's rule (:func:`clock_ticks`); a scenario
+        built past the schema's checks (``model_copy``) is refused here with its message."""
+        try:
+            sample, decision, lag = clock_ticks(scenario.dynamics, scenario.avoidance)
+        except ValueError as exc:
+            raise UserError(f"{exc}; see docs/scenario.md") from None
+        return cls(rate_hz=scenario.dynamics.rate_hz, sample_ticks=sample,
+                   decision_ticks=decision, latency_ticks=lag)  # fmt: skip
 
     @property
     def dt(self) -> float:
