@@ -42,7 +42,7 @@ from uavxai.vocabulary import (
     CHANNEL_MODEL_NAMES,
     CHANNEL_MODELS,
     SERVICE_PLANNERS,
-    VERTICAL_PLANNERS,
+    action_set_problem,
     avoidance_planners,
 )
 
@@ -454,11 +454,9 @@ class Avoidance(_Model):
                 f"bank_step_deg ({self.bank_step_deg}) must not exceed bank_limit_deg "
                 f"({self.bank_limit_deg})"
             )
-        if self.actions != "paper" and self.planner not in VERTICAL_PLANNERS:
-            raise ValueError(
-                f"actions: {self.actions} is flown by {', '.join(VERTICAL_PLANNERS)}; planner "
-                f"{self.planner} flies the paper set only (actions: paper)"
-            )
+        problem = action_set_problem(self.planner, self.actions)
+        if problem:
+            raise ValueError(problem)
         return self
 
 

@@ -142,6 +142,19 @@ def avoidance_planners() -> tuple[str, ...]:
 SERVICE_PLANNERS = ("d3qn", "dqn", "random", "grid")
 
 
+def action_set_problem(planner: str, actions: str) -> str | None:
+    """Why ``planner`` cannot fly the action set ``actions`` (None: it can). The one rule the
+    scenario schema and the planner factory both apply."""
+    if actions == "paper" or planner in VERTICAL_PLANNERS:
+        return None
+    return (
+        f"avoidance.actions: {actions} is flown by {', '.join(VERTICAL_PLANNERS)}; planner "
+        f"'{planner}' flies only the paper set (mvp resolves in the horizontal plane, dqn and "
+        "safe_dqn were trained on the nine, a plugin flies the nine). Use avoidance.actions: "
+        "paper with it."
+    )
+
+
 @dataclass(frozen=True)
 class ChannelValidity:
     """Where a standard air-to-ground channel model holds (3GPP TR 36.777 V15.0.0 Tables

@@ -25,7 +25,7 @@ from uavxai.errors import UserError
 from uavxai.vocabulary import (
     AVOIDANCE_PLANNERS,
     PLANNER_ENTRY_POINTS,
-    VERTICAL_PLANNERS,
+    action_set_problem,
     avoidance_planners,
     plugin_planners,
 )
@@ -152,13 +152,9 @@ def _plugin(name: str) -> PlannerFactory | None:
 
 def check_action_set(planner: str, actions: str) -> None:
     """A UserError if ``planner`` cannot fly the action set ``actions``."""
-    if actions != "paper" and planner not in VERTICAL_PLANNERS:
-        raise UserError(
-            f"avoidance.actions: {actions} is flown by {', '.join(VERTICAL_PLANNERS)}; "
-            f"planner '{planner}' flies only the paper set (mvp resolves in the horizontal "
-            "plane, dqn and safe_dqn were trained on the nine, a plugin flies the nine). Use "
-            "avoidance.actions: paper with it."
-        )
+    problem = action_set_problem(planner, actions)
+    if problem:
+        raise UserError(problem)
 
 # The registry provides every planner the vocabulary names, and nothing else.
 assert tuple(sorted(PLANNERS)) == tuple(sorted(AVOIDANCE_PLANNERS)), sorted(PLANNERS)
