@@ -84,3 +84,18 @@ def test_the_bridge_imports_only_the_layers_below_it() -> None:
                 if name.startswith("uavxai") and not name.startswith(BRIDGE_MAY_IMPORT):
                     wrong.append(f"{path.name}: {name}")
     assert wrong == []
+
+
+def test_planner_settings_are_declared_once_in_the_schema() -> None:
+    """PlannerConfig's defaults for what the scenario declares are the schema's, through the
+    one mapping (schema_settings) that from_scenario applies too: a default changed in the
+    schema changes the planner's."""
+    from uavxai.avoidance.types import PlannerConfig, schema_settings
+    from uavxai.scenario import Avoidance, World
+
+    mapped = schema_settings(Avoidance(), World())
+    assert len(mapped) >= 20
+    default = PlannerConfig()
+    assert {k: getattr(default, k) for k in mapped} == mapped
+    changed = schema_settings(Avoidance(d_min_m=80.0, mcts={"depth": 3}), World(x=(0, 900)))
+    assert (changed["d_min_m"], changed["depth"], changed["x_bounds"]) == (80.0, 3, (0.0, 900.0))

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Protocol, runtime_checkable
 import numpy as np
 
 from uavxai.errors import UserError
+from uavxai.scenario import Avoidance, World
 from uavxai.vocabulary import ACTION_SETS, N_ACTIONS, action_name
 
 if TYPE_CHECKING:
@@ -79,25 +80,51 @@ def climb_speed_band(gust_sigma_mps: float) -> tuple[float, float]:
     return lo, hi + gust_sigma_mps
 
 
+def schema_settings(avoidance: Avoidance, world: World) -> dict[str, object]:
+    """The planner settings the scenario schema declares (its `avoidance` section and the
+    world's bounds), by PlannerConfig field: the one mapping between the two. PlannerConfig's
+    defaults are this mapping of the schema's defaults, so a default is declared once, in the
+    schema; :meth:`PlannerConfig.from_scenario` applies it to a scenario."""
+    a, m = avoidance, avoidance.mcts
+    return {
+        "x_bounds": tuple(world.x),
+        "y_bounds": tuple(world.y),
+        "h_bounds": tuple(world.h),
+        **{k: getattr(a, k) for k in ("d_min_m", "goal_radius_m", "decision_period_s",
+                                       "max_steps", "bank_limit_deg", "bank_step_deg",
+                                       "accel_mps2", "actions")},  # fmt: skip
+        "speed_mps": tuple(a.speed_mps),
+        **{k: getattr(m, k) for k in ("simulations", "depth", "c", "action_hold_s",
+                                       "reach_horizon_s", "own_error_10s_m",
+                                       "uncertainty_horizon_s")},  # fmt: skip
+        "alert_well_clear_m": (a.well_clear.horizontal_m, a.well_clear.vertical_m),
+        "nmac_m": (a.nmac.horizontal_m, a.nmac.vertical_m),
+    }
+
+
+_SCHEMA = schema_settings(Avoidance(), World())  # the schema's defaults
+
+
 @dataclass(frozen=True)
 class PlannerConfig:
-    """Fields as the scenario's `avoidance` section, plus the flight-area bounds."""
+    """Fields as the scenario's `avoidance` section, plus the flight-area bounds; the defaults
+    of those the schema declares are the schema's (:func:`schema_settings`)."""
 
-    x_bounds: tuple[float, float] = (0.0, 2000.0)
-    y_bounds: tuple[float, float] = (0.0, 2000.0)
-    h_bounds: tuple[float, float] = (50.0, 300.0)
-    d_min_m: float = 50.0
-    goal_radius_m: float = 50.0
-    decision_period_s: float = 1.0
-    max_steps: int = 400
-    bank_limit_deg: float = 30.0
-    bank_step_deg: float = 10.0
-    accel_mps2: float = 1.0
-    speed_mps: tuple[float, float] = (12.0, 30.0)
-    simulations: int = 200
-    depth: int = 4
-    c: float = 1.0
-    action_hold_s: float = 4.0
+    x_bounds: tuple[float, float] = _SCHEMA["x_bounds"]
+    y_bounds: tuple[float, float] = _SCHEMA["y_bounds"]
+    h_bounds: tuple[float, float] = _SCHEMA["h_bounds"]
+    d_min_m: float = _SCHEMA["d_min_m"]
+    goal_radius_m: float = _SCHEMA["goal_radius_m"]
+    decision_period_s: float = _SCHEMA["decision_period_s"]
+    max_steps: int = _SCHEMA["max_steps"]
+    bank_limit_deg: float = _SCHEMA["bank_limit_deg"]
+    bank_step_deg: float = _SCHEMA["bank_step_deg"]
+    accel_mps2: float = _SCHEMA["accel_mps2"]
+    speed_mps: tuple[float, float] = _SCHEMA["speed_mps"]
+    simulations: int = _SCHEMA["simulations"]
+    depth: int = _SCHEMA["depth"]
+    c: float = _SCHEMA["c"]
+    action_hold_s: float = _SCHEMA["action_hold_s"]
     # The ownship autopilot's limits: from_scenario reads them from its aircraft's XML.
     roll_rate_limit_deg_s: float = 30.0
     # The JSBSim autopilot holds the altitude target it is given (the goal's altitude) and
@@ -120,7 +147,7 @@ class PlannerConfig:
     # "reachable" that turn, with the separation needed grown by how far the intruder could
     # stray from it within reach_horizon_s by banking anywhere within intruder_bank_limit_deg.
     intruder_model: str = "reachable"
-    reach_horizon_s: float = 4.0
+    reach_horizon_s: float = _SCHEMA["reach_horizon_s"]
     intruder_bank_limit_deg: float = 30.0
     # The separation needed grows by uncertainty_k sigmas of the track's position error,
     # sqrt(sigma_m^2 + (sigma_v t)^2) at t seconds ahead.
@@ -128,12 +155,12 @@ class PlannerConfig:
     # How far ahead a track's velocity error keeps growing that position error (None: over
     # the whole search). Re-planning every decision period, on fresh reports, answers what
     # lies beyond; a vague track otherwise fences off hundreds of metres 16 s ahead.
-    uncertainty_horizon_s: float | None = None
+    uncertainty_horizon_s: float | None = _SCHEMA["uncertainty_horizon_s"]
     # The ownship's own path is not exact either: the JSBSim aircraft strays from the model's
     # prediction of the same commands like a random acceleration, sigma (per axis) growing as
     # t^1.5; this is that sigma 10 s ahead, added to the intruders' track error (the same
     # uncertainty_k). 0: the model's path is taken as flown (as the kinematic dynamics fly it).
-    own_error_10s_m: float = 0.0
+    own_error_10s_m: float = _SCHEMA["own_error_10s_m"]
     # Value of a line that collides at the end of the search horizon (linear from 0 at once):
     # when every line meets someone, the search still prefers the one that meets them later,
     # which re-planning can still turn into a miss. 0: every collision is worth 0 (the paper).
@@ -151,18 +178,18 @@ class PlannerConfig:
     # and descend, which step a persistent vertical command; climbing (descending) the
     # autopilot's height target is this far below the flight area's ceiling (above its
     # floor), where it levels off, reached at climb_rate_mps.
-    actions: str = "paper"
+    actions: str = _SCHEMA["actions"]
     vertical_margin_m: float = 20.0
     # The alerting stage of `mcts_daa` (uavxai.avoidance.alerting): the tree decides only while
     # an intruder is predicted inside the well-clear cylinder (horizontal, vertical m; the
     # small-UAS 2000 ft / 250 ft) within alert_horizon_s (DO-365's 55 s), and for alert_hold_s
     # after the last such prediction; otherwise the ownship flies its route.
     alert_horizon_s: float = 55.0
-    alert_well_clear_m: tuple[float, float] = (609.6, 76.2)
+    alert_well_clear_m: tuple[float, float] = _SCHEMA["alert_well_clear_m"]
     # The near-mid-air-collision cylinder (horizontal, vertical m; avoidance.nmac): `mcts_daa`
     # searches with d_min_m at least its horizontal radius, so that a line it keeps clears an
     # NMAC, the event detect-and-avoid is judged by, not only a collision.
-    nmac_m: tuple[float, float] = (152.4, 30.48)
+    nmac_m: tuple[float, float] = _SCHEMA["nmac_m"]
     alert_hold_s: float = 5.0
 
     def __post_init__(self) -> None:
@@ -235,31 +262,10 @@ class PlannerConfig:
 
         env = EnvironmentConfig.from_scenario(scenario)
 
-        a, w = scenario.avoidance, scenario.world
         fields = {
-            "x_bounds": tuple(w.x),
-            "y_bounds": tuple(w.y),
-            "h_bounds": tuple(w.h),
-            "d_min_m": a.d_min_m,
-            "goal_radius_m": a.goal_radius_m,
-            "decision_period_s": a.decision_period_s,
-            "max_steps": a.max_steps,
-            "bank_limit_deg": a.bank_limit_deg,
-            "bank_step_deg": a.bank_step_deg,
-            "accel_mps2": a.accel_mps2,
-            "speed_mps": tuple(a.speed_mps),
-            "simulations": a.mcts.simulations,
-            "depth": a.mcts.depth,
-            "c": a.mcts.c,
-            "action_hold_s": a.mcts.action_hold_s,
-            "reach_horizon_s": a.mcts.reach_horizon_s,
-            "own_error_10s_m": a.mcts.own_error_10s_m,
-            "uncertainty_horizon_s": a.mcts.uncertainty_horizon_s,
-            "actions": a.actions,
+            **schema_settings(scenario.avoidance, scenario.world),
             "roll_rate_limit_deg_s": aircraft_roll_rate_deg_s(scenario.ownship.aircraft),
             "climb_rate_mps": aircraft_height_loop(scenario.ownship.aircraft)[1],
-            "alert_well_clear_m": (a.well_clear.horizontal_m, a.well_clear.vertical_m),
-            "nmac_m": (a.nmac.horizontal_m, a.nmac.vertical_m),
             "seed": scenario.seed,
             "wind_mps": env.wind_enu[:2],
             "gusts": env.turbulence != "none",
