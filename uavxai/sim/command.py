@@ -200,6 +200,7 @@ class DirectPath(_Cruise):
         from uavxai.bridges.operator import decode
 
         for msg in self._reader.push(frames).messages:
+            # pymavlink's message classes: only those addressed to a vehicle have the field
             if getattr(msg, "target_system", self._system) not in (self._system, 0):
                 continue
             read = decode(msg, self._frame, self._limits)
