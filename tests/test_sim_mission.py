@@ -128,7 +128,7 @@ class _Budgets(Observer):
 
     def on_decision(self, ep, event) -> None:
         d = event.decision
-        left = (ep.max_steps - event.step) * ep.planner.config.decision_period_s
+        left = (ep.max_steps - event.step) * ep.seat.config.decision_period_s
         valued = d.tree.time_left_s if d.tree is not None else None
         words = f"{d.explanation} {d.counterfactual}"
         self.rows.append((event.step, ep.mission.phase.value, valued, left, words))

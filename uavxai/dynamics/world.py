@@ -323,6 +323,10 @@ class JSBSimWorld(ScheduledWorld):
         (the speed target moves while an acceleration is commanded)."""
         return self.aircraft[0].read_command()
 
+    def powered_ownship(self) -> Aircraft:
+        """The ownship's JSBSim model: it reports the electrical power its motor takes."""
+        return self.aircraft[0]
+
     # --------------------------------------------------------------------------- failure
     def failure(self) -> str | None:
         """Why the run cannot go on (NaN, ground, out of the flight envelope), or None."""

@@ -45,7 +45,7 @@ from uavxai.avoidance.types import (
 from uavxai.scenario import Scenario, Start
 from uavxai.sim.build import open_world, start_episode
 from uavxai.sim.command import DirectPath
-from uavxai.sim.episode import Episode, Observer
+from uavxai.sim.episode import TRUTH, Episode, Observer
 from uavxai.sim.spec import EpisodeSpec, episode_spec
 from uavxai.surveillance.tracker import truth_beliefs
 from uavxai.vocabulary import HOLD, Outcome
@@ -170,7 +170,7 @@ class EncounterEnv(gym.Env):
             spec.goal,
             max_steps=spec.max_steps,
             observers=[self._period],
-            picture=truth_beliefs,
+            picture=TRUTH,  # the agent sees every intruder exactly
         )
         self.outcome = ""
         self._period.min_separation_m = math.inf

@@ -17,14 +17,14 @@ from uavxai.dynamics.orbit import scenario_orbit_radius
 from uavxai.scenario import Scenario
 from uavxai.sim.clock import Clock
 from uavxai.sim.command import CommandPath, DirectPath, Dynamics
-from uavxai.sim.episode import Episode, EpisodeResult, Observer
+from uavxai.sim.episode import TRUTH, Episode, EpisodeResult, Observer, TrafficPicture
 from uavxai.sim.judge import Judge
 from uavxai.sim.kinematic import KinematicWorld
 from uavxai.sim.mission import Mission
 from uavxai.sim.operator import Operator, ScriptedOperator
 from uavxai.sim.picture import Picture
+from uavxai.sim.seat import Seat, seat_of
 from uavxai.sim.spec import EpisodeSpec, episode_spec
-from uavxai.surveillance.tracker import truth_beliefs
 from uavxai.vocabulary import DYNAMICS_MODELS
 
 
@@ -54,7 +54,7 @@ def open_world(spec: EpisodeSpec) -> Dynamics:
 
 def fly(
     spec: EpisodeSpec,
-    planner: Planner,
+    planner: Planner | Seat,
     *,
     path: Callable[[Dynamics], CommandPath] = DirectPath,
     observers: Sequence[Observer] = (),
@@ -62,17 +62,18 @@ def fly(
     """Fly the episode ``spec`` (:func:`uavxai.sim.spec.episode_spec`) and return its result;
     the world is closed and every observer closed whatever happens. With a mission the
     episode flies it (transit, on station, return; the goal is then the service point)
-    instead of ending at the goal."""
+    instead of ending at the goal. ``planner``: a planner (in-process) or the seat it sits in
+    (:class:`uavxai.sim.companion.Companion`)."""
     scenario, seed = spec.scenario, spec.seed
+    seat = seat_of(planner)
     world = command = None
     try:
         world = open_world(spec)
-        planner.reset(seed)
+        seat.reset(seed)
         command = path(world)
         # a companion planner decodes and tracks the traffic on its own core, too
-        picture = Picture(scenario, command.relay, getattr(planner, "receiver", None))
-        if hasattr(command, "bridge"):  # ground stations see the traffic the planner sees
-            command.bridge.truth_adsb = picture.truth
+        picture = Picture(scenario, command.relay, seat.receiver)
+        command.show_truth_traffic(picture.truth)  # ground stations see what the planner sees
         flying = Mission(spec.mission, command.announce) if spec.mission is not None else None
         start = spec.start
         operator = Operator(
@@ -82,7 +83,7 @@ def fly(
         episode = start_episode(
             scenario,
             world,
-            planner,
+            seat,
             command,
             spec.goal,
             max_steps=spec.max_steps,
@@ -104,23 +105,24 @@ def fly(
 def start_episode(
     scenario: Scenario,
     world: Dynamics,
-    planner: Planner,
+    planner: Planner | Seat,
     command: CommandPath,
     goal: Sequence[float],
     *,
     max_steps: int,
     observers: Sequence[Observer] = (),
-    picture=truth_beliefs,
+    picture: TrafficPicture = TRUTH,
     mission: Mission | None = None,
     label: dict | None = None,
 ) -> Episode:
     """An episode of ``world`` as every episode starts: the autopilot given the goal's
     height, judged by the scenario's rules (:meth:`Judge.from_scenario`; a ``mission`` ends
-    by its own phases, not at the goal) on the scenario's clock."""
+    by its own phases, not at the goal) on the scenario's clock; ``planner`` in its seat
+    (:func:`uavxai.sim.seat.seat_of`)."""
     command.altitude(float(goal[2]), 0.0)  # the planner's model climbs to the goal's height
     return Episode(
         world,
-        planner,
+        seat_of(planner),
         command,
         Judge.from_scenario(scenario, None if mission else goal),
         Clock.from_scenario(scenario),

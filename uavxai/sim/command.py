@@ -17,13 +17,17 @@ aircraft, not the height the autopilot holds.
 
 from __future__ import annotations
 
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
 from uavxai.avoidance.types import Decision
 from uavxai.bridges.protocol import roll_from_quaternion, roll_quaternion
 from uavxai.dynamics.state import TrafficState
+
+if TYPE_CHECKING:
+    from uavxai.bridges.telemetry import Power
+    from uavxai.dynamics.aircraft import Aircraft
 
 
 class Dynamics(Protocol):
@@ -44,6 +48,8 @@ class Dynamics(Protocol):
         speed_max_mps: float | None = None,
     ) -> None: ...
     def ownship_command(self) -> dict[str, float]: ...
+    def powered_ownship(self) -> Aircraft | None:
+        """The ownship's aircraft if its model reports electric power (JSBSim), else None."""
     def failure(self) -> str | None: ...
     def close(self) -> None: ...
 
@@ -57,6 +63,15 @@ class CommandPath(Protocol):
 
     def relay(self, frames: bytes) -> None:
         """Frames for the ground stations (the ADS-B receiver's reports), if there is a link."""
+
+    def show_truth_traffic(self, on: bool) -> None:
+        """Show the ground stations every intruder's exact state (``on``: no surveillance
+        model), or only the receiver's reports that :meth:`relay` forwards."""
+
+    @property
+    def power(self) -> Power | None:
+        """The power system as the link reports it (SYS_STATUS, VFR_HUD), for the battery's
+        observer to fill in; None: no link to report it on."""
 
     def orbit(
         self, x: float, y: float, h: float, radius_m: float, clockwise: bool, speed_mps: float,
@@ -185,6 +200,7 @@ class DirectPath(_Cruise):
         from uavxai.bridges.operator import decode
 
         for msg in self._reader.push(frames).messages:
+            # pymavlink's message classes: only those addressed to a vehicle have the field
             if getattr(msg, "target_system", self._system) not in (self._system, 0):
                 continue
             read = decode(msg, self._frame, self._limits)
@@ -218,6 +234,11 @@ class DirectPath(_Cruise):
 
     def relay(self, frames: bytes) -> None:
         pass
+
+    def show_truth_traffic(self, on: bool) -> None:
+        pass
+
+    power = None  # no link: no one to show the battery to
 
     def announce(self, text: str, phase: str | None = None) -> None:
         pass
@@ -283,6 +304,13 @@ class MavlinkPath(_Cruise):
 
     def relay(self, frames: bytes) -> None:
         self.bridge.relay(frames)
+
+    def show_truth_traffic(self, on: bool) -> None:
+        self.bridge.truth_adsb = on
+
+    @property
+    def power(self) -> Power:
+        return self.bridge.power
 
     def announce(self, text: str, phase: str | None = None) -> None:
         if phase is not None:

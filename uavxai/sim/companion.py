@@ -30,6 +30,7 @@ from pathlib import Path
 from uavxai.avoidance.types import Decision, Goal, Intruder, Ownship, PlannerConfig
 from uavxai.scenario import Scenario
 from uavxai.sim.picture import Receiver
+from uavxai.sim.seat import Seat
 from uavxai.worker import Worker
 
 
@@ -80,11 +81,12 @@ class _RemoteReceiver:
         return self._worker.call("beliefs", t)
 
 
-class Companion:
+class Companion(Seat):
     """A planner (``make_planner(name, config, checkpoint)``) on its own process, behind the
-    :class:`~uavxai.avoidance.types.Planner` interface plus :meth:`submit` / :meth:`result`,
-    which let the caller fly on while it plans. Given the ``scenario``, the process also
-    decodes and tracks the traffic: :attr:`receiver` is the episode's picture's receiver.
+    :class:`~uavxai.avoidance.types.Planner` interface and in the engine's
+    :class:`~uavxai.sim.seat.Seat` (:meth:`submit` / :meth:`result`, which let the caller fly
+    on while it plans). Given the ``scenario``, the process also decodes and tracks the
+    traffic: :attr:`receiver` is the episode's picture's receiver.
 
     Starting the process costs about a second once, while the world loads its aircraft, and
     is waited for at the first call (``reset``, before the episode's clock starts).
@@ -99,6 +101,7 @@ class Companion:
     ) -> None:
         self.name = name
         self.config = config
+        self.parallel = True  # its own process: the world flies on while it searches
         path = None if checkpoint is None else str(checkpoint)
         self._worker = Worker(Onboard, name, config, path, scenario, name=f"planner '{name}'")
         self.receiver = _RemoteReceiver(self._worker) if scenario is not None else None

@@ -12,21 +12,21 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 
-from uavxai.avoidance.types import Decision, Intruder, Ownship, Planner
+from uavxai.avoidance.types import Decision, Intruder, Ownship
 from uavxai.dynamics.state import TrafficState
 from uavxai.processes import interrupts_deferred
 from uavxai.sim.clock import Clock
 from uavxai.sim.command import CommandPath, Dynamics
 from uavxai.sim.judge import Judge
+from uavxai.sim.seat import Seat, TrafficReceiver
 from uavxai.surveillance.tracker import truth_beliefs
 from uavxai.vocabulary import Outcome
-
-_ONBOARD = object()  # a pending decision's picture, still on the companion that planned it
 
 
 def ownship_view(state: TrafficState, bank_cmd: float, vertical: int = 0) -> Ownship:
@@ -45,7 +45,40 @@ def ownship_view(state: TrafficState, bank_cmd: float, vertical: int = 0) -> Own
     )
 
 
-Picture = Callable[[TrafficState], list[Intruder]]
+class TrafficPicture(Protocol):
+    """What the engine needs of the planner's picture of the traffic
+    (:class:`uavxai.sim.picture.Picture`, or :data:`TRUTH`)."""
+
+    receiver: TrafficReceiver | None  # where its beliefs are formed (None: nowhere: exact)
+    truth: bool  # every intruder's exact state (no surveillance model)
+
+    def __call__(self, state: TrafficState) -> list[Intruder]: ...
+
+
+class _Truth:
+    """Every intruder's exact state, the paper's setting (:func:`truth_beliefs`)."""
+
+    receiver = None
+    truth = True
+
+    def __call__(self, state: TrafficState) -> list[Intruder]:
+        return truth_beliefs(state)
+
+
+TRUTH: TrafficPicture = _Truth()
+
+
+@dataclass
+class _Pending:
+    """A decision on its way to the autopilot: the step and picture it was planned from
+    (``onboard``: the picture is the seat's own, it comes back with the decision)."""
+
+    step: int
+    t: float
+    own: Ownship
+    intruders: list[Intruder]
+    truth: TrafficState
+    onboard: bool = False
 
 
 @dataclass
@@ -85,12 +118,13 @@ class Observer:
 
 
 class Episode:
-    """An episode of ``world`` flown by ``planner`` through ``path`` towards ``goal``."""
+    """An episode of ``world`` flown by the planner in ``seat`` through ``path`` towards
+    ``goal``."""
 
     def __init__(
         self,
         world: Dynamics,
-        planner: Planner,
+        seat: Seat,
         path: CommandPath,
         judge: Judge,
         clock: Clock,
@@ -98,12 +132,12 @@ class Episode:
         goal: Sequence[float],
         max_steps: int,
         observers: Sequence[Observer] = (),
-        picture: Picture = truth_beliefs,
+        picture: TrafficPicture = TRUTH,
         label: dict | None = None,
         mission=None,
     ) -> None:
         self.world = world
-        self.planner = planner
+        self.seat = seat
         self.path = path
         self.judge = judge
         self.clock = clock
@@ -120,9 +154,7 @@ class Episode:
         self.decision_ms: list[float] = []
         self.sample_metrics: dict = {}  # per-sample values observers share (rates, users)
         self.operator = None  # uavxai.sim.operator.Operator, when a ground station may command
-        # a decision on its way to the autopilot: its step, picture and, planned in-process,
-        # the decision itself (None: the companion is still planning it)
-        self._pending: tuple | None = None
+        self._pending: _Pending | None = None  # a decision on its way to the autopilot
         self.nmac = False  # any near mid-air collision (the judge's cylinder) so far
         self.wall0 = time.perf_counter()
 
@@ -144,8 +176,8 @@ class Episode:
         decision = plan.decide(self, own, intruders) if plan is not None else None
         if decision is None and self.clock.latency_ticks:
             # in-process: planned now, applied later; a companion: planning meanwhile
-            planned = self._start_search(own, intruders, goal)
-            self._pending = (self.steps, state.t, own, intruders, state, planned)
+            self._start_search(own, intruders, goal)
+            self._pending = _Pending(self.steps, state.t, own, intruders, state)
             self.steps += 1
             return None
         if decision is None:  # the avoidance planner flies
@@ -159,34 +191,30 @@ class Episode:
         """A companion that also tracks the traffic plans from its own picture of it: one
         round trip fewer per decision, the same beliefs (they come back with the decision,
         :meth:`_arrive`). Only where nothing else needs the picture before the planner."""
-        onboard = getattr(self.planner, "receiver", None)
+        onboard = self.seat.receiver
         if (
             onboard is None
             or self.plan() is not None
-            or getattr(self.picture, "receiver", None) is not onboard
-            or getattr(self.picture, "truth", True)
+            or self.picture.receiver is not onboard
+            or self.picture.truth
         ):
             return False
-        self.planner.submit_onboard(own, state.t, goal, step=self._budget_step())
-        self._pending = (self.steps, state.t, own, _ONBOARD, state, None)
+        self.seat.submit_onboard(own, state.t, goal, step=self._budget_step())
+        self._pending = _Pending(self.steps, state.t, own, [], state, onboard=True)
         self.steps += 1
         return True
 
     def _search(self, own: Ownship, intruders: list[Intruder], goal) -> Decision:
         """The planner's decision now."""
-        planned = self._start_search(own, intruders, goal)
-        return planned if planned is not None else self.planner.result()
+        self._start_search(own, intruders, goal)
+        return self.seat.result()
 
-    def _start_search(self, own: Ownship, intruders: list[Intruder], goal) -> Decision | None:
-        """Plan in-process (the decision), or submit to a companion, which searches on its
-        own core while the world flies the intruders through the period ahead (None: its
-        :meth:`result` has the decision)."""
-        submit = getattr(self.planner, "submit", None)
-        if submit is None:
-            return self.planner.plan(own, intruders, goal, step=self._budget_step())
-        submit(own, intruders, goal, step=self._budget_step())
-        self._fly_intruders_ahead()
-        return None
+    def _start_search(self, own: Ownship, intruders: list[Intruder], goal) -> None:
+        """Submit the picture to the seat; one that plans on another core searches while
+        the world flies the intruders through the period ahead."""
+        self.seat.submit(own, intruders, goal, step=self._budget_step())
+        if self.seat.parallel:
+            self._fly_intruders_ahead()
 
     def _fly_intruders_ahead(self) -> None:
         """Nothing the intruders do before the next decision depends on the command being
@@ -226,25 +254,24 @@ class Episode:
         """The pending decision reaches the autopilot now (``send``), or the episode ended
         before it did: it is still recorded, as the planner made it. Without a ``latency``
         it is applied at the picture's time, as an in-process decision."""
-        step, t, own, intruders, truth, planned = self._pending
-        self._pending = None
-        decision = planned if planned is not None else self.planner.result()
-        if intruders is _ONBOARD:
-            intruders = self.planner.beliefs  # what the companion planned from
+        p, self._pending = self._pending, None
+        decision = self.seat.result()
+        intruders = self.seat.beliefs if p.onboard else p.intruders  # what it planned from
         if send:
             self.path.send(decision, self.state.t)
         applied = self.state.t if latency else None
-        return self._decided(DecisionEvent(step, t, own, intruders, decision, truth, applied))
+        event = DecisionEvent(p.step, p.t, p.own, intruders, decision, p.truth, applied)
+        return self._decided(event)
 
     def ownship(self) -> Ownship:
         """The ownship as the planner sees it now (:func:`ownship_view` of the autopilot's
         commands)."""
         cmd = self.world.ownship_command()
-        vertical = self.planner.config.vertical_of(cmd.get("alt_target_m"))
+        vertical = self.seat.config.vertical_of(cmd.get("alt_target_m"))
         own = ownship_view(self.state, cmd["bank_cmd_rad"], vertical)
         cruise = self.path.cruise_speed(None)
         if cruise is not None:  # the operator's airspeed, a ceiling the planner may slow below
-            lo = min(self.planner.config.speed_mps[0], cruise)
+            lo = min(self.seat.config.speed_mps[0], cruise)
             own = dataclasses.replace(own, speed_band=(lo, cruise))
         return own
 
@@ -259,7 +286,7 @@ class Episode:
         flight without being a deadline the ownship must beat: the planner counts its own."""
         if self.mission is None:
             return self.steps
-        return self.planner.config.max_steps - (self.max_steps - self.steps)
+        return self.seat.config.max_steps - (self.max_steps - self.steps)
 
     def advance(self, event: DecisionEvent | None) -> Outcome | None:
         """Fly one decision period sample by sample, judging each; the outcome or None.
@@ -340,7 +367,7 @@ class Episode:
             "goal": list(self.goal),
             "decision_ms": stats(self.decision_ms),
             "sim_realtime_factor": self.state.t / wall if wall > 0 else None,
-            "avoidance_planner": self.planner.name,
+            "avoidance_planner": self.seat.name,
             "intruders": self.state.n - 1,
         }
         # always present (README's summary fields): null and [] when nothing failed

@@ -48,7 +48,7 @@ class Quality:
 
     def row(self) -> dict[str, float]:
         """The ``episodes.csv`` cells (``COLUMNS``), rounded as the file keeps them."""
-        return {k: round(float(getattr(self, k)), 4) for k in COLUMNS}
+        return {k: round(float(getattr(self, k)), 4) for k in COLUMNS}  # its own fields
 
 
 class FlightQuality(Observer):

@@ -227,6 +227,10 @@ class KinematicWorld(ScheduledWorld):
             "alt_target_m": self._alt_target,
         }
 
+    def powered_ownship(self) -> None:
+        """A point mass has no motor: no power, no battery."""
+        return None
+
     # --------------------------------------------------------------------------- failure
     def failure(self) -> str | None:
         return None

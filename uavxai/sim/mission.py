@@ -62,14 +62,13 @@ class MissionConfig:
 
     @classmethod
     def from_scenario(cls, scenario: Scenario, station: Sequence[float]) -> MissionConfig:
-        m = getattr(scenario, "mission", None)
-        start = scenario.ownship.start
+        m, start = scenario.mission, scenario.ownship.start
         radius = scenario_orbit_radius(scenario)  # the radius service placement scores too
         return cls(
             station=tuple(float(v) for v in station),
             home=(float(start.x), float(start.y), float(start.h)),
-            service_s=float(getattr(m, "service_s", 300.0)),
-            return_home=bool(getattr(m, "return_home", True)),
+            service_s=float(m.service_s),
+            return_home=bool(m.return_home),
             radius_m=float(radius),
             speed_mps=float(start.speed_mps),
         )
@@ -152,7 +151,7 @@ class Mission(Observer):
             return
         c, p, t = self.config, state.pos[0], state.t
         self._own_xy = (float(p[0]), float(p[1]))
-        self._horizon_s = ep.planner.config.depth * ep.planner.config.action_hold_s
+        self._horizon_s = ep.seat.config.depth * ep.seat.config.action_hold_s
         if self.phase == Phase.TRANSIT:
             d = math.hypot(p[0] - c.station[0], p[1] - c.station[1])
             if d <= c.radius_m + ep.judge.goal_radius_m:
@@ -333,7 +332,7 @@ def orbit_step(
     the planner's horizon; clear, re-send the orbit (MAV_CMD_DO_ORBIT) and say so, else say
     what conflicts. Hysteresis: leave the orbit below 2 d_min, rejoin only above 3 d_min
     (``avoiding``), so that a pass near the threshold does not toggle every decision."""
-    horizon = ep.planner.config.depth * ep.planner.config.action_hold_s
+    horizon = ep.seat.config.depth * ep.seat.config.action_hold_s
     c = MissionConfig(orbit.centre, orbit.centre, 0.0, False, orbit.radius_m, orbit.speed_mps,
                       orbit.clockwise)  # fmt: skip
     sep, who, when = orbit_clearance(c, own, intruders, horizon)
@@ -343,7 +342,7 @@ def orbit_step(
         return OrbitStep(None, f"{who} would pass the orbit at {sep:.0f} m in {when:.0f} s")
     x, y, h = orbit.centre
     ep.path.orbit(x, y, h, orbit.radius_m, orbit.clockwise, orbit.speed_mps, ep.state.t)
-    period = ep.planner.config.decision_period_s  # the record's field is over one period
+    period = ep.seat.config.decision_period_s  # the record's field is over one period
     next_period = straight_clearance(own, intruders, period)[0]
     said = orbit_words(orbit, own, (sep, who, when), CONFLICT_FACTOR * d_min)
     decision = Decision(

@@ -328,10 +328,10 @@ class Energy(Observer):
     def on_start(self, ep: Episode) -> None:
         from uavxai.dynamics.energy import Battery
 
-        aircraft = getattr(ep.world, "aircraft", None)
-        if not aircraft:
+        own = ep.world.powered_ownship()
+        if own is None:
             return
-        self._own = aircraft[0]
+        self._own = own
         self.spec = self._own.battery_spec()
         self.battery = Battery.from_spec(self.spec)
         power = self._own.electric_power_w()
@@ -352,13 +352,13 @@ class Energy(Observer):
     def _report(self, ep: Episode, power: float) -> None:
         """What SYS_STATUS and VFR_HUD carry: the pack's voltage under this load at this
         charge, the current, the charge left, the throttle."""
-        bridge = getattr(ep.path, "bridge", None)
-        if bridge is not None:
+        shown = ep.path.power
+        if shown is not None:
             current = self.spec.current_a(power)
-            bridge.power.voltage_v = self.spec.terminal_voltage_v(self.battery.soc, current)
-            bridge.power.current_a = current
-            bridge.power.soc = self.battery.soc
-            bridge.power.throttle = self._own.throttle()
+            shown.voltage_v = self.spec.terminal_voltage_v(self.battery.soc, current)
+            shown.current_a = current
+            shown.soc = self.battery.soc
+            shown.throttle = self._own.throttle()
 
     def on_end(self, ep: Episode, summary: dict) -> None:
         if self.battery is None:
@@ -395,7 +395,7 @@ class Service(Observer):
         rng = np.random.default_rng([scenario.seed, 0x736572])  # the fading's own stream
         self.delivery = Delivery(channel, np.asarray(power_w, dtype=float), rng=rng)
         self.replan = replan  # (users (K,3)) -> (service point (3,), power (K,)), or None
-        self.replan_s = getattr(scenario.service, "replan_s", None)
+        self.replan_s = scenario.service.replan_s
         self.qos_bps = float(scenario.comms.qos_rate_bps)
         self._last_plan_t = 0.0
         self._break: tuple[float, float] | None = None  # (t, orbit bearing) when avoiding began

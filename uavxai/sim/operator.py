@@ -115,7 +115,7 @@ class Route(Observer):
     def on_sample(self, ep: Episode, state: TrafficState) -> None:
         leg, p, t = self.leg, state.pos[0], state.t
         self._own = (float(p[0]), float(p[1]))
-        cfg = ep.planner.config
+        cfg = ep.seat.config
         self._horizon_s = cfg.depth * cfg.action_hold_s
         if leg is None or self.outcome is not None:
             return

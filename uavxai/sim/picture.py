@@ -30,6 +30,7 @@ from uavxai.dynamics.state import TrafficState
 from uavxai.scenario import Scenario
 from uavxai.sim.clock import Clock
 from uavxai.sim.episode import Episode, Observer
+from uavxai.sim.seat import TrafficReceiver
 from uavxai.surveillance.adsb import (
     Report,
     Surveillance,
@@ -87,7 +88,7 @@ class Picture(Observer):
         self,
         scenario: Scenario,
         forward: Callable[[bytes], None] | None = None,
-        receiver: Receiver | None = None,
+        receiver: TrafficReceiver | None = None,
     ) -> None:
         self.config = SurveillanceConfig.from_scenario(scenario)
         seed = int(np.random.SeedSequence(scenario.seed, spawn_key=(_STREAM,)).generate_state(1)[0])
@@ -95,7 +96,7 @@ class Picture(Observer):
         self.frame = LocalFrame.from_origin(scenario.world.origin)
         self._packer = MessagePacker(scenario.bridge.system_id, mavlink.MAV_COMP_ID_ADSB)
         self._forward = forward
-        self.receiver = receiver if receiver is not None else Receiver(scenario)
+        self.receiver: TrafficReceiver = receiver if receiver is not None else Receiver(scenario)
 
     @property
     def truth(self) -> bool:

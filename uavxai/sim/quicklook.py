@@ -16,6 +16,7 @@ import numpy as np
 from uavxai.dynamics.state import TrafficState
 from uavxai.outputs import write_output
 from uavxai.sim.episode import DecisionEvent, Episode, Observer
+from uavxai.sim.observers import Energy
 
 PLOT = "run.png"
 
@@ -23,7 +24,7 @@ PLOT = "run.png"
 class QuickLook(Observer):
     """Collects the flight once per decision period and draws ``run.png`` at its end."""
 
-    def __init__(self, path: Path, channel, power_w, energy, d_min_m: float) -> None:
+    def __init__(self, path: Path, channel, power_w, energy: Energy, d_min_m: float) -> None:
         self.path = path
         self.channel, self.power_w = channel, np.asarray(power_w, dtype=float)
         self.energy = energy  # the Energy observer: its battery, where the world has one
@@ -55,7 +56,7 @@ class QuickLook(Observer):
         serving = ep.mission is not None and ep.mission.serving
         rate = ep.sample_metrics.get("delivered_rate_bps") if serving else None
         self.delivered.append(np.nan if rate is None else float(rate))
-        battery = getattr(self.energy, "battery", None)
+        battery = self.energy.battery
         self.soc.append(np.nan if battery is None else float(battery.soc))
         self.airspeed.append(float(state.airspeed[0]))
         if "users_xyz" in ep.sample_metrics and self.users is None:
