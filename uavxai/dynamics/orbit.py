@@ -26,10 +26,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 from uavxai.errors import UserError
 from uavxai.geometry import bank_of_turn_rate, wrap_angle
 from uavxai.units import G
+
+if TYPE_CHECKING:
+    from uavxai.scenario import Scenario
 
 # Fraction of the bank limit the steady orbit may use, so that the correction loop keeps
 # roll authority (and the wind's varying ground speed is absorbed) without hitting the limit.
@@ -70,17 +74,17 @@ def radius_for(
     return v * v / (G * math.tan(margin * bank_limit_rad))
 
 
-def scenario_orbit_radius(scenario: object) -> float:
+def scenario_orbit_radius(scenario: Scenario) -> float:
     """The loiter radius a scenario's mission flies about its service point (the one place
     it is decided: the mission flies it, orbit-aware service placement scores it):
     ``mission.orbit_radius_m`` if given, else :func:`radius_for` the ownship's start airspeed,
     ``avoidance.bank_limit_deg`` and the scenario's steady wind."""
     from uavxai.dynamics.environment import EnvironmentConfig  # imports jsbsim
 
-    given = getattr(getattr(scenario, "mission", None), "orbit_radius_m", None)
+    given = scenario.mission.orbit_radius_m
     if given:
         return float(given)
-    start, av = scenario.ownship.start, scenario.avoidance  # type: ignore[attr-defined]
+    start, av = scenario.ownship.start, scenario.avoidance
     wind = EnvironmentConfig.from_scenario(scenario).wind_speed_mps
     return radius_for(start.speed_mps, math.radians(av.bank_limit_deg), wind_mps=wind)
 
