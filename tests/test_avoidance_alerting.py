@@ -121,13 +121,14 @@ def test_an_alerted_tree_keeps_the_route_while_the_route_line_is_clear() -> None
 
 def test_an_alerted_tree_leaves_the_route_when_it_conflicts_and_avoids_the_nmac_radius() -> None:
     """Head on, 900 m (15 s): the route's line meets the intruder; the tree turns or climbs
-    away, and it works with the NMAC cylinder's radius (avoidance.nmac) as its conflict
-    distance."""
+    away, and its conflict distance is the smallest sphere holding the NMAC cylinder
+    (avoidance.nmac): the cylinder's rim, not its radius (a line at 150 m and 30 m is an NMAC
+    that a 152.4 m sphere lets through)."""
     config = PlannerConfig(x_bounds=(0, 2000), y_bounds=(-500, 4500), nmac_m=(200.0, 30.0))
     daa = make_planner("mcts_daa", config)
     route = make_planner("none", config).plan(OWN, [_head_on(900.0)], GOAL).action
     d = daa.plan(OWN, [_head_on(900.0)], GOAL)
-    assert d.d_min_m == 200.0
+    assert d.d_min_m == pytest.approx(math.hypot(200.0, 30.0))
     assert next(c for c in d.children if c.action == route).meets is not None
     assert d.action != route
 
@@ -143,7 +144,8 @@ def test_the_scenario_sets_the_nmac_and_well_clear_cylinders_of_the_planner() ->
     })  # fmt: skip
     config = PlannerConfig.from_scenario(sc.model_copy(update={"avoidance": a}))
     assert config.nmac_m == (180.0, 30.48) and config.alert_well_clear_m == (609.6, 90.0)
-    assert make_planner("mcts_daa", config).inner.config.d_min_m == 180.0
+    assert make_planner("mcts_daa", config).inner.config.d_min_m == pytest.approx(
+        math.hypot(180.0, 30.48))
 
 
 def test_after_a_route_conflict_the_route_is_held_again_only_once_clear_for_the_hold() -> None:

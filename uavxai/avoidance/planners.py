@@ -12,6 +12,7 @@ when asked for (it needs torch), through ``make_learned_planner(name, config, ch
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Callable
 from pathlib import Path
 
@@ -66,11 +67,13 @@ register("mcts_vertical")(
     )
 )
 # mcts_vertical behind an alerting stage: it searches only while traffic threatens well clear,
-# for lines clear of the NMAC cylinder's radius, and leaves its route only when the route's
-# line conflicts.
+# for lines clear of the NMAC cylinder, and leaves its route only when the route's line
+# conflicts. The tree's conflict volume is a sphere: the smallest that holds the cylinder
+# reaches its rim (152.4 m out, 30.48 m up: 155.4 m). A sphere of the cylinder's radius
+# alone let a line pass at 150 m and 30 m, inside the NMAC (kinematic encounter 1264).
 def _daa_config(config: PlannerConfig) -> PlannerConfig:
     return dataclasses.replace(
-        config, actions="vertical", d_min_m=max(config.d_min_m, config.nmac_m[0])
+        config, actions="vertical", d_min_m=max(config.d_min_m, math.hypot(*config.nmac_m))
     )
 
 
