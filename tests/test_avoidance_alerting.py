@@ -157,11 +157,29 @@ def test_after_a_route_conflict_the_route_is_held_again_only_once_clear_for_the_
     route = make_planner("none", config).plan(OWN, side, GOAL).action
     free_in_hold, after = [], []
     for seed in range(8):
-        tree = make_planner("mcts_daa", config).inner
-        tree.reset(seed)
-        tree.plan(OWN, [_head_on(900.0)], GOAL)  # the route's line conflicts
-        actions = [tree.plan(OWN, side, GOAL).action for _ in range(8)]
-        free_in_hold.append(any(a != route for a in actions[:5]))
-        after += actions[5:]
+        daa = make_planner("mcts_daa", config)
+        daa.reset(seed)
+        assert daa.plan(OWN, [_head_on(900.0)], GOAL).children  # the route's line conflicts
+        decisions = [daa.plan(OWN, side, GOAL) for _ in range(8)]
+        assert all(d.children for d in decisions), "alerted throughout: the tree decides"
+        free_in_hold.append(any(d.action != route for d in decisions[:5]))
+        after += [d.action for d in decisions[5:]]
     assert any(free_in_hold)
     assert all(a == route for a in after)
+
+
+def test_a_quiet_spell_ends_the_route_count() -> None:
+    """The route's conflict is forgotten once the alert goes quiet (the ownship flies its
+    route then): a new alert keeps the route from its first decision."""
+    config = PlannerConfig(x_bounds=(0, 2000), y_bounds=(-500, 4500))
+    side = [Intruder(id=7, x=1400.0, y=3000.0, h=120.0, vx=0.0, vy=-35.0)]
+    far = [_head_on(4500.0)]  # no threat: quiet
+    route = make_planner("none", config).plan(OWN, side, GOAL).action
+    for seed in range(8):
+        daa = make_planner("mcts_daa", config)
+        daa.reset(seed)
+        daa.plan(OWN, [_head_on(900.0)], GOAL)  # the route's line conflicts
+        quiet = [daa.plan(OWN, far, GOAL) for _ in range(int(config.alert_hold_s) + 2)]
+        assert not quiet[-1].children, "the alert has gone quiet"
+        d = daa.plan(OWN, side, GOAL)
+        assert d.children and d.action == route

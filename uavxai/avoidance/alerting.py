@@ -14,9 +14,15 @@ sampled every ``ALERT_STEP_S``, with the small-UAS well-clear cylinder (``alert_
 2000 ft / 250 ft) widened by ``uncertainty_k`` sigmas of the track's position error as it grows
 (``sigma_m + sigma_v t``). No intruder inside: the decision is the nominal one (the `none`
 planner's, steering for the goal at the leg's height), said as "clear of traffic". An intruder
-inside: the tree decides, as without the stage. An alert lasts at least ``alert_hold_s`` after
-its last threat, so that the ownship does not turn back into a conflict the moment the
-prediction clears.
+inside: the tree decides. An alert lasts at least ``alert_hold_s`` after its last threat, so
+that the ownship does not turn back into a conflict the moment the prediction clears.
+
+While alerted, the tree keeps the route's action whenever the route's line has no conflict and
+has had none for ``alert_hold_s``, whatever the visits prefer: a detect-and-avoid system leaves
+its route only to avoid, and the search's preferences among conflict-free lines are no reason to
+manoeuvre. The hold is hysteresis: a line that grazes the conflict distance, in conflict one
+second and clear the next, would otherwise rock the wings. A quiet spell ends the count (the
+ownship is back on its route by then).
 """
 
 from __future__ import annotations
@@ -28,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from uavxai.avoidance.direct import DirectPlanner
+from uavxai.avoidance.direct import DirectPlanner, route_action
 from uavxai.avoidance.mcts import height_command, intruder_arrays
 from uavxai.avoidance.types import Decision, Goal, Intruder, Ownship, check_plan_inputs
 
@@ -87,11 +93,13 @@ class AlertingPlanner:
         self.nominal = DirectPlanner(self.config, name=name)
         self._last_threat_t: float | None = None  # decision time of the last threat, s
         self._t = -math.inf  # this decision's time, s (counted here: ``step`` restarts per leg)
+        self._route_clear_s = math.inf  # how long the route's line has been clear, s
 
     def reset(self, seed: int) -> None:
         self.inner.reset(seed)
         self._last_threat_t = None
         self._t = -math.inf
+        self._route_clear_s = math.inf
 
     def plan(
         self, own: Ownship, intruders: Sequence[Intruder], goal: Goal, *, step: int = 0
@@ -107,15 +115,29 @@ class AlertingPlanner:
             self._last_threat_t = now
         held = self._last_threat_t is not None and now - self._last_threat_t < cfg.alert_hold_s
         if found or held:
-            decision = self.inner.plan(own, intruders, goal, step=step)
-            decision.planner = self.name
-            return decision
+            return self._avoid(own, intruders, goal, step)
+        self._route_clear_s = math.inf
         decision = self.nominal.plan(own, intruders, goal, step=step)
         decision.alt_target_m = height_command(
             self.inner.model, HOLD_SPEED_ACTION, own, np.asarray(goal, dtype=float)
         )
         decision.words = (_quiet_words(own, intruders, goal, cfg), "")
         decision.ms = 1000.0 * (time.perf_counter() - t0)
+        return decision
+
+    def _avoid(
+        self, own: Ownship, intruders: Sequence[Intruder], goal: Goal, step: int
+    ) -> Decision:
+        """The tree's decision, keeping the route while its line has been clear for the hold
+        (module docstring)."""
+        cfg = self.config
+        route = route_action(own, goal, cfg)
+        keep = route if self._route_clear_s >= cfg.alert_hold_s else None
+        decision = self.inner.plan(own, intruders, goal, step=step, keep=keep)
+        line = next((c for c in decision.children if c.action == route), None)
+        clear = line is not None and line.meets is None
+        self._route_clear_s = self._route_clear_s + cfg.decision_period_s if clear else 0.0
+        decision.planner = self.name
         return decision
 
 

@@ -25,15 +25,36 @@ from uavxai.avoidance.types import (
     check_plan_inputs,
 )
 from uavxai.geometry import bearing, wrap_angle
+from uavxai.vocabulary import CLIMB, DESCEND
 
 HEADING_GAIN = 1.0  # rad of bank per rad of heading error
 HOLD_SPEED = 1  # accel index of "hold speed"
+NAME = "none"  # the registered name: the floor the DAA columns are measured against
+
+
+def heading_action(own: Ownship, goal: Goal, cfg: PlannerConfig) -> int:
+    """The `none` planner's action: the bank step nearest a bank proportional to the heading
+    error to the goal, at constant speed."""
+    error = wrap_angle(bearing(goal[0] - own.x, goal[1] - own.y) - own.heading)
+    wanted = max(-cfg.bank_limit_rad, min(cfg.bank_limit_rad, HEADING_GAIN * error))
+    # Bank actions 0, 1, 2 (left, hold, right); ties go to holding.
+    options = [float(bank_command(own.bank, 3 * b + HOLD_SPEED, cfg)) for b in range(3)]
+    b = min((1, 0, 2), key=lambda i: abs(options[i] - wanted))
+    return 3 * b + HOLD_SPEED
+
+
+def route_action(own: Ownship, goal: Goal, cfg: PlannerConfig) -> int:
+    """The action that flies the route: back to the leg's height when a vertical command is
+    on (one step of it), else :func:`heading_action`."""
+    if own.vertical:
+        return CLIMB if own.vertical < 0 else DESCEND
+    return heading_action(own, goal, cfg)
 
 
 class DirectPlanner:
     """Fly at the goal, ignoring every intruder."""
 
-    def __init__(self, config: PlannerConfig | None = None, *, name: str = "none") -> None:
+    def __init__(self, config: PlannerConfig | None = None, *, name: str = NAME) -> None:
         self.config = config or PlannerConfig()
         self.name = name
         self.model = EncounterModel(self.config)
@@ -43,14 +64,8 @@ class DirectPlanner:
 
     def action(self, own: Ownship, goal: Goal) -> int:
         """The action this planner takes (what :meth:`plan` decides, without the prediction
-        that explains it): the bank step nearest a bank proportional to the heading error."""
-        cfg = self.config
-        error = wrap_angle(bearing(goal[0] - own.x, goal[1] - own.y) - own.heading)
-        wanted = max(-cfg.bank_limit_rad, min(cfg.bank_limit_rad, HEADING_GAIN * error))
-        # Bank actions 0, 1, 2 (left, hold, right); ties go to holding.
-        options = [float(bank_command(own.bank, 3 * b + HOLD_SPEED, cfg)) for b in range(3)]
-        b = min((1, 0, 2), key=lambda i: abs(options[i] - wanted))
-        return 3 * b + HOLD_SPEED
+        that explains it)."""
+        return heading_action(own, goal, self.config)
 
     def plan(
         self, own: Ownship, intruders: Sequence[Intruder], goal: Goal, *, step: int = 0

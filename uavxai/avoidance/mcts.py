@@ -64,7 +64,6 @@ from uavxai.avoidance.types import (
     check_plan_inputs,
 )
 from uavxai.geometry import turn_rate_of_bank
-from uavxai.vocabulary import CLIMB, DESCEND
 
 _VALUE_OF = np.array(TERMINAL_VALUE)
 
@@ -83,27 +82,13 @@ class TreePlanner:
 
     sampled = True  # visits count simulations (MCTS), not one per node (exhaustive)
 
-    def __init__(
-        self, config: PlannerConfig | None = None, *, name: str, hold_route: bool = False
-    ) -> None:
+    def __init__(self, config: PlannerConfig | None = None, *, name: str) -> None:
         self.config = config or PlannerConfig()
         self.name = name
         self.model = EncounterModel(self.config)
-        # hold_route: the route's action is taken whenever its line has no conflict and has
-        # had none for alert_hold_s, whatever the visits prefer (a detect-and-avoid system
-        # leaves its route only to avoid: the search's preferences among conflict-free lines
-        # are no reason to manoeuvre). The hold is hysteresis: a line that grazes the conflict
-        # distance, in conflict one second and clear the next, would otherwise rock the wings.
-        self.route = None
-        if hold_route:
-            from uavxai.avoidance.direct import DirectPlanner  # it imports this module
-
-            self.route = DirectPlanner(self.config)
-        self._route_clear_s = math.inf  # how long the route's line has been clear
 
     def reset(self, seed: int) -> None:
-        """Nothing random to re-seed; the route's hold starts anew."""
-        self._route_clear_s = math.inf
+        """Nothing random to re-seed."""
 
     def search(
         self, root: np.ndarray, goal: np.ndarray, tracks: list[Track], time_left_s: float
@@ -111,8 +96,16 @@ class TreePlanner:
         raise NotImplementedError
 
     def plan(
-        self, own: Ownship, intruders: Sequence[Intruder], goal: Goal, *, step: int = 0
+        self,
+        own: Ownship,
+        intruders: Sequence[Intruder],
+        goal: Goal,
+        *,
+        step: int = 0,
+        keep: int | None = None,
     ) -> Decision:
+        """The planner API's decision. ``keep``: an action taken whenever its line has no
+        conflict, whatever the search prefers (the alerting stage's route, `alerting.py`)."""
         t_start = time.perf_counter()
         check_plan_inputs(own, intruders, goal)
         cfg, model = self.config, self.model
@@ -124,8 +117,6 @@ class TreePlanner:
         root = ownship_state(own)
         model.motions(root.tolist(), cfg.action_hold_s, cfg.depth)  # memoised in batches
         tree = self.search(root, goal_xyz, tracks, time_left_s)
-        route = None if self.route is None else self.route_action(own, goal)
-        held = route is not None and self._route_clear_s >= cfg.alert_hold_s
         decision = decision_from_tree(
             tree,
             chosen_action(tree),
@@ -136,31 +127,17 @@ class TreePlanner:
             model,
             name=self.name,
             sampled=self.sampled,
-            route_action=route if held else None,
+            route_action=keep,
         )
-        if route is not None:
-            kept = next((c for c in decision.children if c.action == route), None)
-            clear = kept is not None and kept.meets is None
-            self._route_clear_s = self._route_clear_s + cfg.decision_period_s if clear else 0.0
         decision.ms = 1000.0 * (time.perf_counter() - t_start)
         return decision
-
-    def route_action(self, own: Ownship, goal: Goal) -> int:
-        """The action that flies the route: back to the leg's height when a vertical command
-        is on (one step of it), else the `none` planner's (steer for the goal, hold speed)."""
-        if own.vertical:
-            return CLIMB if own.vertical < 0 else DESCEND
-        assert self.route is not None
-        return self.route.action(own, goal)
 
 
 class MCTSPlanner(TreePlanner):
     """The MCTS avoidance planner. Same seed, same inputs: same decision."""
 
-    def __init__(
-        self, config: PlannerConfig | None = None, *, name: str = "mcts", hold_route: bool = False
-    ) -> None:
-        super().__init__(config, name=name, hold_route=hold_route)
+    def __init__(self, config: PlannerConfig | None = None, *, name: str = "mcts") -> None:
+        super().__init__(config, name=name)
         self._rng = np.random.default_rng(self.config.seed)
 
     def reset(self, seed: int) -> None:

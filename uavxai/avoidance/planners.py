@@ -16,6 +16,7 @@ import math
 from collections.abc import Callable
 from pathlib import Path
 
+from uavxai.avoidance import direct
 from uavxai.avoidance.alerting import AlertingPlanner
 from uavxai.avoidance.direct import DirectPlanner
 from uavxai.avoidance.exhaustive import ExhaustivePlanner
@@ -66,6 +67,8 @@ register("mcts_vertical")(
         dataclasses.replace(config, actions="vertical"), name="mcts_vertical"
     )
 )
+
+
 # mcts_vertical behind an alerting stage: it searches only while traffic threatens well clear,
 # for lines clear of the NMAC cylinder, and leaves its route only when the route's line
 # conflicts. The tree's conflict volume is a sphere: the smallest that holds the cylinder
@@ -79,7 +82,7 @@ def _daa_config(config: PlannerConfig) -> PlannerConfig:
 
 register("mcts_daa")(
     lambda config, checkpoint: AlertingPlanner(
-        MCTSPlanner(_daa_config(config), name="mcts_daa", hold_route=True), name="mcts_daa"
+        MCTSPlanner(_daa_config(config), name="mcts_daa"), name="mcts_daa"
     )
 )
 register("mvp")(lambda config, checkpoint: MVPPlanner(config))
@@ -104,7 +107,7 @@ def _learned(name: str) -> PlannerFactory:
 
 for _name in LEARNED:
     register(_name)(_learned(_name))
-register("none")(lambda config, checkpoint: DirectPlanner(config))
+register(direct.NAME)(lambda config, checkpoint: DirectPlanner(config))
 
 
 def make_planner(
@@ -158,6 +161,7 @@ def check_action_set(planner: str, actions: str) -> None:
     problem = action_set_problem(planner, actions)
     if problem:
         raise UserError(problem)
+
 
 # The registry provides every planner the vocabulary names, and nothing else.
 assert tuple(sorted(PLANNERS)) == tuple(sorted(AVOIDANCE_PLANNERS)), sorted(PLANNERS)

@@ -37,7 +37,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from uavxai.avoidance.direct import DirectPlanner
+from uavxai.avoidance import direct
 from uavxai.avoidance.model import accel_command, bank_command
 from uavxai.avoidance.types import Planner, PlannerConfig
 from uavxai.daa_metrics import hmd_vmd, loss_of_well_clear, reversals
@@ -165,7 +165,7 @@ class EncounterObserver(Observer):
     what ``none`` would have sent in that state."""
 
     def __init__(self, config: PlannerConfig) -> None:
-        self.none = DirectPlanner(config)
+        self.config = config
         self.intruder: list[np.ndarray] = []
         self.alert = False
         self.manoeuvre = False
@@ -181,15 +181,15 @@ class EncounterObserver(Observer):
 
     def on_decision(self, ep: Episode, event) -> None:
         d = event.decision
-        if d.planner == self.none.name:
+        if d.planner == direct.NAME:
             return  # the baseline neither alerts nor manoeuvres
         goal = ep.aim()
-        base = self.none.action(event.own, goal)
+        base = direct.heading_action(event.own, goal, self.config)
         if not self.alert:
             child = next((c for c in d.children if c.action == base), None)
             self.alert = child is not None and child.meets is not None
         if not self.manoeuvre:
-            cfg = self.none.config
+            cfg = self.config
             high = d.alt_target_m is not None and abs(d.alt_target_m - goal[2]) > HEIGHT_TOL_M
             accel = self._effective(event.own, d.accel_mps2)
             bank = float(bank_command(event.own.bank, base, cfg))
@@ -200,7 +200,7 @@ class EncounterObserver(Observer):
     def _effective(self, own, accel: float) -> float:
         """An acceleration command as flown: none beyond the speed limits (a speed-up at the
         top speed holds the speed, as the autopilot's speed limits make it)."""
-        lo, hi = own.speed_band or self.none.config.speed_mps
+        lo, hi = own.speed_band or self.config.speed_mps
         if (accel > 0 and own.speed >= hi - 1e-6) or (accel < 0 and own.speed <= lo + 1e-6):
             return 0.0
         return float(accel)
