@@ -42,8 +42,7 @@ def fleet_power(
 ) -> np.ndarray:
     """Watts ``(..., K)`` for levels ``(..., K)``: each UAV's ``levels_to_power`` over its own
     users, with its own ``p_max_w[n]``."""
-    levels = np.asarray(levels, dtype=float)
-    association = np.asarray(association)
+    levels, association = np.broadcast_arrays(np.asarray(levels, float), np.asarray(association))
     n = len(p_max_w)
     member = association[..., None, :] == np.arange(n)[:, None]  # (..., N, K)
     totals = (member * levels[..., None, :]).sum(axis=-1)  # S_n, (..., N)
@@ -101,8 +100,11 @@ class FleetChannel:
 
     def sinr(self, gains: np.ndarray, association: np.ndarray, power_w: np.ndarray) -> np.ndarray:
         """SINR ``(..., K)`` for gains ``(..., N, K)`` (module docstring)."""
-        association = np.asarray(association)
-        power_w = np.asarray(power_w, float)
+        power_w, association = np.broadcast_arrays(np.asarray(power_w, float), association)
+        lead = np.broadcast_shapes(np.shape(gains)[:-2], association.shape[:-1])
+        gains = np.broadcast_to(gains, lead + np.shape(gains)[-2:])
+        power_w = np.broadcast_to(power_w, lead + power_w.shape[-1:])
+        association = np.broadcast_to(association, lead + association.shape[-1:])
         served = np.take_along_axis(gains, association[..., None, :], axis=-2)[..., 0, :]
         if self.channel.access != "shared":
             return served * power_w / (self.channel.noise_w / self.k)

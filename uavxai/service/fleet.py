@@ -4,13 +4,13 @@ power, for the fleet's objective ``sum_k R_k / 2^lambda`` over all K users
 (``SearchSpace.axes``) and discrete power levels.
 
 - ``kmeans_baseline``: k-means of the users into N clusters (seeded), one UAV per cluster above
-  the cluster's centroid at the lattice height that is best for its own users alone at equal
-  power; association = cluster; equal power (levels all L-1).
-- ``plan_fleet`` (the ``fleet`` planner): the k-means start on the lattice, then a vectorised
-  best-improvement local search over the whole fleet (a UAV moves 1 or 4 lattice steps, a
-  user's level changes, a user changes UAV), then the exact one-UAV power DP for each UAV with
-  the others fixed (``grid.optimal_levels`` on ``FleetChannel.uav_channel``), and the local
-  search again.
+  the cluster's centroid (the nearest lattice column) at the lattice height that is best for
+  its own users alone at equal power; association = cluster; equal power (levels all L-1).
+- ``plan_fleet`` (the ``fleet`` planner): from the k-means baselines of seeds 0 and 1, a
+  vectorised best-improvement local search over the whole fleet (a UAV moves 1 or 4 lattice
+  steps, a user's level changes, a user changes UAV); the better of the two, in the shared band
+  with the exact one-UAV power DP for each UAV with the others fixed (``grid.optimal_levels``
+  on ``FleetChannel.uav_channel``) and the local search again.
 - ``reference_fleet``: exact by enumeration where the problem is tiny; otherwise the best of
   many starts (the planner's answer and k-means starts of several seeds) of a block-coordinate
   ascent: each UAV in turn re-placed by the exact one-UAV ``grid`` with the others fixed
@@ -32,6 +32,7 @@ from uavxai.service.grid import MAX_DP_COST, dp_cost, optimal_levels, solve_grid
 
 PLANNER_STEPS = (1, 4)  # lattice steps a UAV may move in one local-search candidate
 REFERENCE_STEPS = (1, 2, 4, 8)
+PLANNER_STARTS = 2  # k-means seeds the planner searches from
 EXACT_POWER_K = 12  # the planner's exact per-UAV power DP up to this many users (5-25 ms)
 REFERENCE_STARTS = 4  # k-means seeds the reference starts from, besides the planner's answer
 EXHAUSTIVE_LIMIT = 2_000_000  # fleets the reference enumerates before it searches instead
@@ -57,14 +58,18 @@ class FleetPlan:
     objective: float
 
 
-def make_plan(problem: FleetProblem, positions, association, levels) -> FleetPlan:
-    """A plan with its power and objective computed from the channel."""
+def make_plan(
+    problem: FleetProblem, positions, association, levels, gains: np.ndarray | None = None
+) -> FleetPlan:
+    """A plan with its power and objective computed from the channel (``gains``: the gains
+    of ``positions`` if the caller has them already)."""
     fleet, L = problem.fleet, problem.power_levels
     positions = np.asarray(positions, float)
     association = np.asarray(association, np.int64)
     levels = np.asarray(levels, np.int64)
     power = fleet.power(levels, association, L)
-    value = float(fleet.evaluate(positions, association, power).objective)
+    gains = fleet.gains(positions) if gains is None else gains
+    value = float(fleet.evaluate_gains(gains, association, power).objective)
     return FleetPlan(positions, association, levels, power, value)
 
 
@@ -114,11 +119,13 @@ def best_heights(problem: FleetProblem, xy: np.ndarray, labels: np.ndarray) -> n
 
 
 def kmeans_baseline(problem: FleetProblem, seed: int = 0) -> FleetPlan:
-    """The naive fleet: k-means clusters, each UAV above its centroid at the best height for
-    its own users at equal power, association = cluster, equal power."""
+    """The naive fleet: k-means clusters, each UAV above its centroid (the nearest lattice
+    column) at the best lattice height for its own users at equal power, association =
+    cluster, equal power."""
     xy = problem.fleet.channel.users[:, :2]
     labels, centres = kmeans(xy, problem.fleet.n, seed)
-    positions = best_heights(problem, centres, labels)
+    columns = snap(problem.space, np.column_stack([centres, np.zeros(len(centres))]))[:, :2]
+    positions = best_heights(problem, columns, labels)
     return make_plan(problem, positions, labels, np.full(len(xy), problem.power_levels - 1))
 
 
@@ -173,18 +180,17 @@ def local_search(
             assoc_b = np.broadcast_to(assoc, np.broadcast_shapes(assoc.shape, lev.shape))
             lev_b = np.broadcast_to(lev, assoc_b.shape)
             power = fleet.power(lev_b, assoc_b, L)
-            values = np.broadcast_to(fleet.evaluate_gains(g, assoc_b, power).objective, (
-                max(len(g), len(assoc_b)),))
+            values = np.atleast_1d(fleet.evaluate_gains(g, assoc_b, power).objective)
             i = int(np.argmax(values))
             if values[i] > best:
                 best = float(values[i])
-                choice = (pos[i] if pos is not None else plan.positions,
-                          g[min(i, len(g) - 1)], assoc_b[min(i, len(assoc_b) - 1)],
-                          lev_b[min(i, len(lev_b) - 1)])
+                one = np.minimum(i, [len(g) - 1, len(assoc_b) - 1])  # batches broadcast
+                choice = (plan.positions if pos is None else pos[i], g[one[0]],
+                          assoc_b[one[1]], lev_b[one[1]])
         if choice is None:
             return plan
         positions, gains, association, levels = choice
-        plan = make_plan(problem, positions, association, levels)
+        plan = make_plan(problem, positions, association, levels, gains)
     return plan
 
 
@@ -217,16 +223,13 @@ def snap(space: SearchSpace, positions: np.ndarray) -> np.ndarray:
     )
 
 
-def kmeans_start(problem: FleetProblem, seed: int) -> FleetPlan:
-    """The k-means baseline moved onto the lattice."""
-    base = kmeans_baseline(problem, seed)
-    return make_plan(problem, snap(problem.space, base.positions), base.association, base.levels)
-
-
-def plan_fleet(problem: FleetProblem, seed: int = 0) -> FleetPlan:
-    """The fleet planner (module docstring): k-means start, local search, exact per-UAV power,
-    local search."""
-    plan = local_search(problem, kmeans_start(problem, seed))
+def plan_fleet(problem: FleetProblem, starts: int = PLANNER_STARTS) -> FleetPlan:
+    """The fleet planner (module docstring): from each of ``starts`` k-means starts the local
+    search; the best, with (shared band) the exact per-UAV power and the local search again."""
+    plans = [local_search(problem, kmeans_baseline(problem, seed)) for seed in range(starts)]
+    plan = max(plans, key=lambda p: p.objective)
+    if problem.fleet.channel.access != "shared":
+        return plan
     polished = exact_power(problem, plan, EXACT_POWER_K)
     return local_search(problem, polished) if polished is not plan else plan
 
@@ -295,7 +298,7 @@ def reference_fleet(
     first = plan_fleet(problem) if hint is None else hint
     best = block_ascent(problem, first)
     for seed in range(1, starts + 1):
-        plan = block_ascent(problem, local_search(problem, kmeans_start(problem, seed)))
+        plan = block_ascent(problem, local_search(problem, kmeans_baseline(problem, seed)))
         if plan.objective > best.objective:
             best = plan
     return best
