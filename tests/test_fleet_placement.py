@@ -8,22 +8,19 @@ import itertools
 import numpy as np
 import pytest
 
-from uavxai.comms.channel import Channel
-from uavxai.comms.fleet import FleetChannel
 from uavxai.comms.service_env import SearchSpace, levels_to_power
 from uavxai.service import fleet as fl
-from uavxai.service.layouts import draw_layout, problem_scenario
+from uavxai.service.layouts import draw_layout
 
 
 def problem(n: int, k: int, access: str, model: str = "al_hourani", seed: int = 3,
             step_m: float | None = None) -> fl.FleetProblem:
     xy = draw_layout(np.random.default_rng([seed, n, k]), k, "uniform")
-    sc = problem_scenario(xy, access, "urban")
-    sc = sc.model_copy(update={"comms": sc.comms.model_copy(update={"channel": model})})
-    space = SearchSpace.from_scenario(sc)
-    if step_m is not None:
-        space = SearchSpace(space.lo, space.hi, space.start, step_m)
-    return fl.FleetProblem(FleetChannel.of(Channel.from_scenario(sc), n), space, 6)
+    p = fl.fleet_problem(xy, n, access, model)
+    if step_m is None:
+        return p
+    space = SearchSpace(p.space.lo, p.space.hi, p.space.start, step_m)
+    return fl.FleetProblem(p.fleet, space, p.power_levels)
 
 
 @pytest.mark.parametrize("access", ["shared", "ofdma"])

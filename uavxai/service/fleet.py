@@ -26,9 +26,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from uavxai.comms.channel import Channel
 from uavxai.comms.fleet import FleetChannel
 from uavxai.comms.service_env import MOVES, SearchSpace
 from uavxai.service.grid import MAX_DP_COST, dp_cost, optimal_levels, solve_grid
+from uavxai.service.layouts import problem_scenario
 
 PLANNER_STEPS = (1, 4)  # lattice steps a UAV may move in one local-search candidate
 REFERENCE_STEPS = (1, 2, 4, 8)
@@ -47,6 +49,17 @@ class FleetProblem:
     fleet: FleetChannel
     space: SearchSpace
     power_levels: int
+
+
+def fleet_problem(
+    users_xy: np.ndarray, n: int, access: str, model: str, environment: str = "urban"
+) -> FleetProblem:
+    """N UAVs over these users in the default scenario (fading-free, its lattice and levels)
+    with the access mode and path-loss model (``comms.channel``) given."""
+    sc = problem_scenario(users_xy, access, environment)
+    sc = sc.model_copy(update={"comms": sc.comms.model_copy(update={"channel": model})})
+    fleet = FleetChannel.of(Channel.from_scenario(sc), n)
+    return FleetProblem(fleet, SearchSpace.from_scenario(sc), sc.comms.power_levels)
 
 
 @dataclass(frozen=True)
