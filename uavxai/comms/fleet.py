@@ -34,7 +34,7 @@ from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
-from uavxai.comms.channel import Channel
+from uavxai.comms.channel import Channel, LinkReport
 
 
 def fleet_power(
@@ -49,19 +49,6 @@ def fleet_power(
     served_total = np.take_along_axis(totals, association, axis=-1)
     # p_max * l / max(S, L-1) in the order levels_to_power computes it (N = 1: equal bits)
     return np.asarray(p_max_w)[association] * levels / np.maximum(served_total, power_levels - 1)
-
-
-@dataclass(frozen=True)
-class FleetReport:
-    """Per-user arrays ``(..., K)`` and the objective ``(...)`` of one or many fleets."""
-
-    sinr: np.ndarray
-    rate_bps: np.ndarray
-    objective: np.ndarray
-
-    @property
-    def sum_rate_bps(self) -> np.ndarray:
-        return self.rate_bps.sum(axis=-1)
 
 
 @dataclass(frozen=True)
@@ -122,14 +109,18 @@ class FleetChannel:
 
     def evaluate_gains(
         self, gains: np.ndarray, association: np.ndarray, power_w: np.ndarray
-    ) -> FleetReport:
+    ) -> LinkReport:
+        """Per-user gain from the serving UAV, SINR, rate ``(..., K)`` and objective."""
         gamma = self.sinr(gains, association, power_w)
         rate = self.user_bandwidth_hz() * np.log2(1.0 + gamma)
-        return FleetReport(sinr=gamma, rate_bps=rate, objective=self.channel.objective(rate))
+        gains = np.broadcast_to(gains, gamma.shape[:-1] + np.shape(gains)[-2:])
+        which = np.broadcast_to(association, gamma.shape)[..., None, :]
+        served = np.take_along_axis(gains, which, axis=-2)[..., 0, :]
+        return LinkReport(served, gamma, rate, self.channel.objective(rate))
 
     def evaluate(
         self, positions: np.ndarray, association: np.ndarray, power_w: np.ndarray
-    ) -> FleetReport:
+    ) -> LinkReport:
         """Everything about the fleet at ``positions (..., N, 3)``, fading-free."""
         return self.evaluate_gains(self.gains(positions), association, power_w)
 

@@ -315,3 +315,8 @@ def reference_fleet(
         if plan.objective > best.objective:
             best = plan
     return best
+
+
+# The fleet's planners by name (the one-UAV planners of ``service.stage.PLANNERS`` place one
+# UAV; these place N).
+FLEET_PLANNERS = {"fleet": plan_fleet, "kmeans": kmeans_baseline, "reference": reference_fleet}
