@@ -1,0 +1,322 @@
+"""Fleet placement (issue 32): where N UAVs hover, which UAV serves each user, and with what
+power, for the fleet's objective ``sum_k R_k / 2^lambda`` over all K users
+(``uavxai.comms.fleet``, docs/service/fleet.md). Fading-free, on the one-UAV planners' lattice
+(``SearchSpace.axes``) and discrete power levels.
+
+- ``kmeans_baseline``: k-means of the users into N clusters (seeded), one UAV per cluster above
+  the cluster's centroid (the nearest lattice column) at the lattice height that is best for
+  its own users alone at equal power; association = cluster; equal power (levels all L-1).
+- ``plan_fleet`` (the ``fleet`` planner): from the k-means baselines of seeds 0 and 1, a
+  vectorised best-improvement local search over the whole fleet (a UAV moves 1 or 4 lattice
+  steps, a user's level changes, a user changes UAV); the better of the two, in the shared band
+  with the exact one-UAV power DP for each UAV with the others fixed (``grid.optimal_levels``
+  on ``FleetChannel.uav_channel``) and the local search again.
+- ``reference_fleet``: exact by enumeration where the problem is tiny; otherwise the best of
+  many starts (the planner's answer and k-means starts of several seeds) of a block-coordinate
+  ascent: each UAV in turn re-placed by the exact one-UAV ``grid`` with the others fixed
+  (their interference folded into its users' gains), then the fleet local search with a wider
+  neighbourhood (steps 1-8, level moves between users), until a round improves nothing. What
+  it certifies is in docs/service/fleet.md.
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+
+from uavxai.comms.channel import Channel
+from uavxai.comms.fleet import FleetChannel
+from uavxai.comms.service_env import MOVES, SearchSpace
+from uavxai.service.grid import MAX_DP_COST, dp_cost, optimal_levels, solve_grid
+from uavxai.service.layouts import problem_scenario
+
+PLANNER_STEPS = (1, 4)  # lattice steps a UAV may move in one local-search candidate
+REFERENCE_STEPS = (1, 2, 4, 8)
+PLANNER_STARTS = 2  # k-means seeds the planner searches from
+EXACT_POWER_K = 12  # the planner's exact per-UAV power DP up to this many users (5-25 ms)
+REFERENCE_STARTS = 4  # k-means seeds the reference starts from, besides the planner's answer
+EXHAUSTIVE_LIMIT = 2_000_000  # fleets the reference enumerates before it searches instead
+KMEANS_ITERATIONS = 50
+IMPROVES = 1.0 + 1e-12  # a candidate must beat the incumbent by more than rounding
+
+
+@dataclass(frozen=True)
+class FleetProblem:
+    """One placement problem: the fleet's channel, the lattice the UAVs hover on, levels L."""
+
+    fleet: FleetChannel
+    space: SearchSpace
+    power_levels: int
+
+
+def fleet_problem(
+    users_xy: np.ndarray, n: int, access: str, model: str, environment: str = "urban"
+) -> FleetProblem:
+    """N UAVs over these users in the default scenario (fading-free, its lattice and levels)
+    with the access mode and path-loss model (``comms.channel``) given."""
+    sc = problem_scenario(users_xy, access, environment)
+    sc = sc.model_copy(update={"comms": sc.comms.model_copy(update={"channel": model})})
+    fleet = FleetChannel.of(Channel.from_scenario(sc), n)
+    return FleetProblem(fleet, SearchSpace.from_scenario(sc), sc.comms.power_levels)
+
+
+@dataclass(frozen=True)
+class FleetPlan:
+    positions: np.ndarray  # (N, 3) m
+    association: np.ndarray  # (K,) serving UAV of each user
+    levels: np.ndarray  # (K,) 0..L-1
+    power_w: np.ndarray  # (K,)
+    objective: float
+
+
+def make_plan(
+    problem: FleetProblem, positions, association, levels, gains: np.ndarray | None = None
+) -> FleetPlan:
+    """A plan with its power and objective computed from the channel (``gains``: the gains
+    of ``positions`` if the caller has them already)."""
+    fleet, L = problem.fleet, problem.power_levels
+    positions = np.asarray(positions, float)
+    association = np.asarray(association, np.int64)
+    levels = np.asarray(levels, np.int64)
+    power = fleet.power(levels, association, L)
+    gains = fleet.gains(positions) if gains is None else gains
+    value = float(fleet.evaluate_gains(gains, association, power).objective)
+    return FleetPlan(positions, association, levels, power, value)
+
+
+# --------------------------------------------------------------------------- k-means baseline
+def kmeans(xy: np.ndarray, n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Lloyd's k-means with k-means++ seeding from ``default_rng(seed)``: labels ``(K,)`` and
+    centres ``(n, 2)``. No cluster is left empty while K >= n (an empty one takes the user
+    farthest from its centre)."""
+    rng = np.random.default_rng(seed)
+    centres = [xy[int(rng.integers(len(xy)))]]
+    for _ in range(1, n):
+        d2 = ((xy[:, None, :] - np.array(centres)[None]) ** 2).sum(-1).min(axis=1)
+        p = d2 / d2.sum() if d2.sum() > 0 else np.full(len(xy), 1.0 / len(xy))
+        centres.append(xy[int(rng.choice(len(xy), p=p))])
+    c = np.array(centres, dtype=float)
+    labels = np.zeros(len(xy), dtype=np.int64)
+    for _ in range(KMEANS_ITERATIONS):
+        d2 = ((xy[:, None, :] - c[None]) ** 2).sum(-1)
+        labels = d2.argmin(axis=1)
+        for j in range(n):
+            if not np.any(labels == j) and len(xy) >= n:
+                far = int(d2[np.arange(len(xy)), labels].argmax())
+                labels[far] = j
+        new = np.array([xy[labels == j].mean(axis=0) for j in range(n)])
+        if np.allclose(new, c):
+            break
+        c = new
+    return labels, c
+
+
+def best_heights(problem: FleetProblem, xy: np.ndarray, labels: np.ndarray) -> np.ndarray:
+    """Positions ``(N, 3)`` at ``xy`` each at the lattice height best for its own users alone
+    (no other UAV transmitting) at equal power."""
+    fleet = problem.fleet
+    hs = problem.space.axes()[2]
+    silent = np.zeros(fleet.k)
+    out = []
+    for n in range(fleet.n):
+        column = np.column_stack([np.repeat(xy[n : n + 1], len(hs), axis=0), hs])
+        if not np.any(labels == n):
+            out.append(column[0])
+            continue
+        own = fleet.uav_channel(n, fleet.gains(column[:1].repeat(fleet.n, 0)), labels, silent)
+        values = own.evaluate(column, own.equal_power()).objective
+        out.append(column[int(np.argmax(values))])
+    return np.array(out)
+
+
+def kmeans_baseline(problem: FleetProblem, seed: int = 0) -> FleetPlan:
+    """The naive fleet: k-means clusters, each UAV above its centroid (the nearest lattice
+    column) at the best lattice height for its own users at equal power, association =
+    cluster, equal power."""
+    xy = problem.fleet.channel.users[:, :2]
+    labels, centres = kmeans(xy, problem.fleet.n, seed)
+    columns = snap(problem.space, np.column_stack([centres, np.zeros(len(centres))]))[:, :2]
+    positions = best_heights(problem, columns, labels)
+    return make_plan(problem, positions, labels, np.full(len(xy), problem.power_levels - 1))
+
+
+# --------------------------------------------------------------------------- local search
+def _candidates(
+    problem: FleetProblem, plan: FleetPlan, gains: np.ndarray, steps: tuple[int, ...], pairs: bool
+):
+    """The neighbourhood of a plan as batches ``(positions, gains, association, levels)``."""
+    fleet, space, L = problem.fleet, problem.space, problem.power_levels
+    N, K = fleet.n, fleet.k
+    moves = (MOVES[:6, None, :] * np.array(steps)[None, :, None]).reshape(-1, 3) * space.step_m
+    pos = np.repeat(plan.positions[None], N * len(moves), axis=0)  # (C, N, 3)
+    who = np.repeat(np.arange(N), len(moves))
+    pos[np.arange(len(pos)), who] += np.tile(moves, (N, 1))
+    keep = space.contains(pos[np.arange(len(pos)), who])
+    pos, who = pos[keep], who[keep]
+    g = np.repeat(gains[None], len(pos), axis=0)
+    g[np.arange(len(pos)), who] = fleet.gains(pos[np.arange(len(pos)), who])
+    batches = [(pos, g, plan.association[None], plan.levels[None])]
+    lev = np.repeat(plan.levels[None], K * L, axis=0)
+    lev[np.arange(K * L), np.repeat(np.arange(K), L)] = np.tile(np.arange(L), K)
+    if pairs:
+        i, j = np.nonzero(~np.eye(K, dtype=bool))
+        moved = plan.levels[None] + 0
+        moved = np.repeat(moved, len(i), axis=0)
+        moved[np.arange(len(i)), i] -= 1
+        moved[np.arange(len(i)), j] += 1
+        lev = np.vstack([lev, moved[(moved >= 0).all(1) & (moved < L).all(1)]])
+    batches.append((None, gains[None], plan.association[None], lev))
+    if N > 1:
+        users, to = np.nonzero(plan.association[:, None] != np.arange(N)[None])
+        assoc = np.repeat(plan.association[None], len(users), axis=0)
+        assoc[np.arange(len(users)), users] = to
+        batches.append((None, gains[None], assoc, plan.levels[None]))
+    return batches
+
+
+def local_search(
+    problem: FleetProblem,
+    plan: FleetPlan,
+    steps: tuple[int, ...] = PLANNER_STEPS,
+    pairs: bool = False,
+    max_rounds: int = 500,
+) -> FleetPlan:
+    """Best-improvement local search on the fleet objective over one UAV's move, one user's
+    level, one user's UAV (and with ``pairs`` one level moved between two users)."""
+    fleet, L = problem.fleet, problem.power_levels
+    gains = fleet.gains(plan.positions)
+    for _ in range(max_rounds):
+        best, choice = plan.objective * IMPROVES, None
+        for pos, g, assoc, lev in _candidates(problem, plan, gains, steps, pairs):
+            assoc_b = np.broadcast_to(assoc, np.broadcast_shapes(assoc.shape, lev.shape))
+            lev_b = np.broadcast_to(lev, assoc_b.shape)
+            power = fleet.power(lev_b, assoc_b, L)
+            values = np.atleast_1d(fleet.evaluate_gains(g, assoc_b, power).objective)
+            i = int(np.argmax(values))
+            if values[i] > best:
+                best = float(values[i])
+                one = np.minimum(i, [len(g) - 1, len(assoc_b) - 1])  # batches broadcast
+                choice = (plan.positions if pos is None else pos[i], g[one[0]],
+                          assoc_b[one[1]], lev_b[one[1]])
+        if choice is None:
+            return plan
+        positions, gains, association, levels = choice
+        plan = make_plan(problem, positions, association, levels, gains)
+    return plan
+
+
+def exact_power(problem: FleetProblem, plan: FleetPlan, max_users: int) -> FleetPlan:
+    """Each UAV with at most ``max_users`` users in turn gets the exactly best levels for its
+    users with the other UAVs fixed (``grid.optimal_levels`` on its one-UAV channel), kept
+    where the fleet objective improves."""
+    fleet, L = problem.fleet, problem.power_levels
+    for n in range(fleet.n):
+        mine = plan.association == n
+        if not 0 < mine.sum() <= max_users:
+            continue
+        gains = fleet.gains(plan.positions)
+        own = fleet.uav_channel(n, gains, plan.association, plan.power_w)
+        levels, _ = optimal_levels(own, own.mean_gain(plan.positions[n]), L)
+        trial = plan.levels.copy()
+        trial[mine] = levels
+        candidate = make_plan(problem, plan.positions, plan.association, trial)
+        if candidate.objective > plan.objective * IMPROVES:
+            plan = candidate
+    return plan
+
+
+# --------------------------------------------------------------------------- the planner
+def snap(space: SearchSpace, positions: np.ndarray) -> np.ndarray:
+    """The nearest lattice points ``(N, 3)``."""
+    return np.column_stack(
+        [ax[np.abs(ax[None, :] - positions[:, i : i + 1]).argmin(axis=1)]
+         for i, ax in enumerate(space.axes())]
+    )
+
+
+def plan_fleet(problem: FleetProblem, starts: int = PLANNER_STARTS) -> FleetPlan:
+    """The fleet planner (module docstring): from each of ``starts`` k-means starts the local
+    search; the best, with (shared band) the exact per-UAV power and the local search again."""
+    plans = [local_search(problem, kmeans_baseline(problem, seed)) for seed in range(starts)]
+    plan = max(plans, key=lambda p: p.objective)
+    if problem.fleet.channel.access != "shared":
+        return plan
+    polished = exact_power(problem, plan, EXACT_POWER_K)
+    return local_search(problem, polished) if polished is not plan else plan
+
+
+# --------------------------------------------------------------------------- the reference
+def grid_block(problem: FleetProblem, plan: FleetPlan, n: int) -> FleetPlan:
+    """UAV ``n`` re-placed by the exact one-UAV grid for its users with the others fixed
+    (their power at its users folded into its users' gains); kept where the fleet improves."""
+    mine = plan.association == n
+    if not mine.any() or dp_cost(int(mine.sum()), problem.power_levels) > MAX_DP_COST:
+        return plan
+    fleet = problem.fleet
+    own = fleet.uav_channel(n, fleet.gains(plan.positions), plan.association, plan.power_w)
+    best = solve_grid(own, problem.space, problem.power_levels, hint=plan.positions[n])
+    positions, levels = plan.positions.copy(), plan.levels.copy()
+    positions[n], levels[mine] = best.position, best.levels
+    candidate = make_plan(problem, positions, plan.association, levels)
+    return candidate if candidate.objective > plan.objective * IMPROVES else plan
+
+
+def block_ascent(problem: FleetProblem, plan: FleetPlan, max_rounds: int = 20) -> FleetPlan:
+    """Block-coordinate ascent: every UAV by the exact grid, then the wide local search,
+    until a round improves nothing."""
+    for _ in range(max_rounds):
+        before = plan.objective
+        for n in range(problem.fleet.n):
+            plan = grid_block(problem, plan, n)
+        plan = local_search(problem, plan, REFERENCE_STEPS, pairs=True)
+        if plan.objective <= before * IMPROVES:
+            break
+    return plan
+
+
+def fleet_count(problem: FleetProblem) -> int:
+    """How many fleets (lattice positions per UAV, associations, levels) there are."""
+    points = int(np.prod([len(a) for a in problem.space.axes()]))
+    fleet = problem.fleet
+    return points**fleet.n * fleet.n**fleet.k * problem.power_levels**fleet.k
+
+
+def exhaustive(problem: FleetProblem) -> FleetPlan:
+    """The exact optimum by enumerating every fleet (tiny problems only)."""
+    fleet, L = problem.fleet, problem.power_levels
+    points = np.stack(np.meshgrid(*problem.space.axes(), indexing="ij"), -1).reshape(-1, 3)
+    choices = np.array(list(itertools.product(range(fleet.n), range(L), repeat=fleet.k)))
+    assoc, levels = choices[:, 0::2], choices[:, 1::2]
+    power = fleet.power(levels, assoc, L)
+    best: FleetPlan | None = None
+    for combo in itertools.product(range(len(points)), repeat=fleet.n):
+        g = fleet.gains(points[list(combo)])
+        values = fleet.evaluate_gains(g[None], assoc, power).objective
+        i = int(np.argmax(values))
+        if best is None or values[i] > best.objective:
+            best = make_plan(problem, points[list(combo)], assoc[i], levels[i])
+    assert best is not None
+    return best
+
+
+def reference_fleet(
+    problem: FleetProblem, starts: int = REFERENCE_STARTS, hint: FleetPlan | None = None
+) -> FleetPlan:
+    """The reference (module docstring): exact if tiny, else the best block-coordinate ascent
+    from the planner's answer (or ``hint``) and ``starts`` k-means starts."""
+    if fleet_count(problem) <= EXHAUSTIVE_LIMIT:
+        return exhaustive(problem)
+    first = plan_fleet(problem) if hint is None else hint
+    best = block_ascent(problem, first)
+    for seed in range(1, starts + 1):
+        plan = block_ascent(problem, local_search(problem, kmeans_baseline(problem, seed)))
+        if plan.objective > best.objective:
+            best = plan
+    return best
+
+
+# The fleet's planners by name (the one-UAV planners of ``service.stage.PLANNERS`` place one
+# UAV; these place N).
+FLEET_PLANNERS = {"fleet": plan_fleet, "kmeans": kmeans_baseline, "reference": reference_fleet}
