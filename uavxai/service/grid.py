@@ -21,7 +21,7 @@ What keeps it fast without giving up exactness: the DP runs over blocks of total
 on the level sums that can still end in the block (a third of the table for K = 20); the
 incumbent can be seeded by a ``hint`` (a planner's answer), so boxes are pruned from the
 start; and the DP drops allocations with so many users below QoS that, even at the lattice's
-per-user peak gains, ``sum rate / 2^lambda`` cannot reach the incumbent (``failure_cap``:
+per-user peak gains, ``sum rate / 2^lambda`` cannot reach the incumbent (``_failure_cap``:
 7 of 21 failure counts kept in the shared band with K = 20, 1 in OFDMA), and the level totals
 S whose best at those peak gains cannot reach it either (``useful_totals``: in the shared
 band, where the position hardly matters, a few of the hundred). One core: K = 5 under 1 s,
@@ -84,7 +84,7 @@ def _knapsack(
     (N = 1) also the best ``(S index, lambda)`` and the per-user choice tables to backtrack.
 
     With ``cap`` only allocations with fewer than ``cap`` users below QoS are considered (the
-    branch-and-bound caps where no allocation with more failures can matter, ``failure_cap``):
+    branch-and-bound caps where no allocation with more failures can matter, ``_failure_cap``):
     the DP's work is proportional to the number of failure counts it keeps. ``totals`` (the
     level totals S the tables were made for, ``level_rates(totals=...)``) restricts it to those.
     """
@@ -196,7 +196,7 @@ def optimal_levels(
 ) -> tuple[np.ndarray, float]:
     """The optimal integer levels ``(K,)`` for one position's gains ``(K,)`` and the objective
     (over the allocations with fewer than ``cap`` users below QoS, if given: exact whenever
-    ``cap`` comes from ``failure_cap`` for a feasible incumbent)."""
+    no allocation with ``cap`` or more failures can win, as ``_failure_cap`` ensures)."""
     rates, fails = level_rates(channel, np.asarray(gain, float)[None, :], power_levels)
     best, (s_index, lam), choices = _knapsack(rates, fails, keep_choices=True, cap=cap)
     levels = np.zeros(channel.k, dtype=np.int64)
@@ -300,7 +300,7 @@ def _failures(channel: Channel, gain: np.ndarray, levels: np.ndarray, power_leve
 Box = tuple[slice, slice, slice]
 
 
-def failure_cap(
+def _failure_cap(
     channel: Channel, peak: np.ndarray, power_levels: int, incumbent: float, failures: int
 ) -> int:
     """The fewest failures ``c`` (more than the incumbent's) from which on no allocation can
@@ -360,13 +360,13 @@ def _branch_and_bound(
 ) -> tuple[tuple[int, ...], int]:
     """The lattice index of the optimum and the number of DP solves.
 
-    The DP leaves out allocations with ``failure_cap`` or more users below QoS and level
+    The DP leaves out allocations with ``_failure_cap`` or more users below QoS and level
     totals other than ``useful_totals``: they cannot beat the incumbent, so every bound above
     it, and every position's value above it, is exactly what the full DP gives.
     """
     best_value, best_index = incumbent
     peak = gains.max(axis=(0, 1, 2))
-    cap = failure_cap(channel, peak, power_levels, best_value, failures)
+    cap = _failure_cap(channel, peak, power_levels, best_value, failures)
     totals = useful_totals(channel, peak, power_levels, best_value, cap)
     evaluations, frontier = 2, boxes if len(totals) else []
     total = int(np.prod(gains.shape[:3]))
