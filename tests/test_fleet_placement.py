@@ -151,7 +151,8 @@ def test_local_search_scores_are_the_fleet_objective(access: str, model: str) ->
     inc = fl.Incumbent.of(p, plan, p.fleet.gains(plan.positions))
     assoc, lev = fl.power_candidates(p, plan, pairs=True)
     got = fl.power_scores(p, inc, assoc, lev)
-    want = [fl.make_plan(p, plan.positions, a, v).objective for a, v in zip(assoc, lev, strict=True)]
+    want = [fl.make_plan(p, plan.positions, a, v).objective
+            for a, v in zip(assoc, lev, strict=True)]
     np.testing.assert_allclose(got, want, rtol=1e-12)
     who, where = fl.move_candidates(p, plan, (1, 4))
     got = fl.move_scores(p, inc, who, fl.GainCache(p)(where))
