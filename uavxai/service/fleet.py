@@ -6,11 +6,12 @@ power, for the fleet's objective ``sum_k R_k / 2^lambda`` over all K users
 - ``kmeans_baseline``: k-means of the users into N clusters (seeded), one UAV per cluster above
   the cluster's centroid (the nearest lattice column) at the lattice height that is best for
   its own users alone at equal power; association = cluster; equal power (levels all L-1).
-- ``plan_fleet`` (the ``fleet`` planner): from the k-means baselines of seeds 0 and 1, a
-  vectorised best-improvement local search over the whole fleet (a UAV moves 1 or 4 lattice
-  steps, a user's level changes, a user changes UAV); the better of the two, in the shared band
-  with the exact one-UAV power DP for each UAV with the others fixed (``grid.optimal_levels``
-  on ``FleetChannel.uav_channel``) and the local search again.
+- ``plan_fleet`` (the ``fleet`` planner): from the k-means baselines of seeds 0 and 1 a
+  descent: a vectorised best-improvement local search over the whole fleet (a UAV moves 1 or 4
+  lattice steps, a user's level changes, a user changes UAV; candidates scored from the
+  incumbent's received powers), in the shared band ``block_power`` (each UAV's best levels
+  with the others fixed, ``grid.optimal_levels``) and the local search again; the better
+  descent, then ``relocate`` (one UAV jumps on a coarse lattice) while it improves.
 - ``reference_fleet``: exact by enumeration where the problem is tiny; otherwise the best of
   many starts (the planner's answer and k-means starts of several seeds) of a block-coordinate
   ascent: each UAV in turn re-placed by the exact one-UAV ``grid`` with the others fixed
