@@ -136,3 +136,86 @@ def test_reference_is_at_least_every_other_planner(access: str) -> None:
     assert ref.objective >= fl.plan_fleet(p).objective
     assert ref.objective >= fl.kmeans_baseline(p).objective
     assert ref.objective >= fl.kmeans_baseline(p, 1).objective
+
+
+@pytest.mark.parametrize("access", ["shared", "ofdma"])
+@pytest.mark.parametrize("model", ["al_hourani", "uma_av"])
+def test_local_search_scores_are_the_fleet_objective(access: str, model: str) -> None:
+    """Every candidate's score (from the incumbent's received powers) is the objective the
+    channel gives that candidate fleet, for level, pair, reassignment and move candidates."""
+    p = problem(3, 9, access, model)
+    rng = np.random.default_rng(1)
+    plan = fl.make_plan(p, np.array([[900.0, 900.0, 80.0], [1100.0, 1000.0, 120.0],
+                                     [1000.0, 1200.0, 60.0]]),
+                        rng.integers(0, 3, 9), rng.integers(0, 6, 9))
+    inc = fl.Incumbent.of(p, plan, p.fleet.gains(plan.positions))
+    assoc, lev = fl.power_candidates(p, plan, pairs=True)
+    got = fl.power_scores(p, inc, assoc, lev)
+    want = [fl.make_plan(p, plan.positions, a, v).objective
+            for a, v in zip(assoc, lev, strict=True)]
+    np.testing.assert_allclose(got, want, rtol=1e-12)
+    who, where = fl.move_candidates(p, plan, (1, 4))
+    got = fl.move_scores(p, inc, who, fl.GainCache(p)(where))
+    want = []
+    for n, q in zip(who, where, strict=True):
+        pos = plan.positions.copy()
+        pos[n] = q
+        want.append(fl.make_plan(p, pos, plan.association, plan.levels).objective)
+    np.testing.assert_allclose(got, want, rtol=1e-12)
+
+
+@pytest.mark.parametrize("access", ["shared", "ofdma"])
+def test_capped_power_dp_is_the_best_with_fewer_failures(access: str) -> None:
+    """grid.optimal_levels with ``cap`` c: the best of all allocations with fewer than c users
+    below QoS, by enumeration."""
+    from uavxai.service.grid import optimal_levels
+
+    p = problem(1, 5, access, "uma_av")
+    ch = p.fleet.channel
+    g = ch.mean_gain(np.array([1000.0, 1000.0, 150.0]))
+    every = np.array(list(itertools.product(range(4), repeat=5)))
+    rates = ch.rate(g, levels_to_power(every, ch.p_max_w, 4))
+    failing = (rates < ch.qos_rate_bps).sum(axis=1)
+    value = ch.objective(rates)
+    for cap in range(1, 4):
+        if not np.any(failing < cap):
+            continue
+        levels, best = optimal_levels(ch, g, 4, cap=cap)
+        assert best == pytest.approx(value[failing < cap].max(), rel=1e-12)
+        assert ch.objective(ch.rate(g, levels_to_power(levels, ch.p_max_w, 4))) == (
+            pytest.approx(best, rel=1e-12))
+
+
+def test_relocation_and_block_power_never_lose() -> None:
+    p = problem(3, 12, "shared", "uma_av")
+    start = fl.local_search(p, fl.kmeans_baseline(p, 2))
+    cache = fl.GainCache(p)
+    for step in (fl.block_power(p, start, fl.EXACT_POWER_K), fl.relocate(p, start, cache)):
+        assert step.objective >= start.objective
+        again = fl.make_plan(p, step.positions, step.association, step.levels)
+        assert again.objective == step.objective
+
+
+def test_benchmark_shards_cover_the_jobs_once_and_skip_done_rows() -> None:
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).parents[1] / "benchmarks" / "bench_fleet_placement.py"
+    spec = importlib.util.spec_from_file_location("bench_fleet_placement", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    args = bench.argparse.Namespace(cells="0-3,30", n=[], k=[], quick=False, layouts=3,
+                                    shard="0/1")
+    every = bench.jobs(args, set())
+    assert len(every) == 15 and len(set(every)) == 15
+    shards = []
+    for i in range(3):
+        args.shard = f"{i}/3"
+        shards += bench.jobs(args, set())
+    assert sorted(shards) == sorted(every)
+    done = {(*bench.ALL_CELLS[30], 1), (*bench.ALL_CELLS[0], 0)}
+    args.shard = "0/1"
+    left = bench.jobs(args, done)
+    assert len(left) == 13 and (bench.ALL_CELLS[30], 1) not in left
+    with pytest.raises(SystemExit, match="0-35"):
+        bench.cell_indices("36")

@@ -6,11 +6,12 @@ power, for the fleet's objective ``sum_k R_k / 2^lambda`` over all K users
 - ``kmeans_baseline``: k-means of the users into N clusters (seeded), one UAV per cluster above
   the cluster's centroid (the nearest lattice column) at the lattice height that is best for
   its own users alone at equal power; association = cluster; equal power (levels all L-1).
-- ``plan_fleet`` (the ``fleet`` planner): from the k-means baselines of seeds 0 and 1, a
-  vectorised best-improvement local search over the whole fleet (a UAV moves 1 or 4 lattice
-  steps, a user's level changes, a user changes UAV); the better of the two, in the shared band
-  with the exact one-UAV power DP for each UAV with the others fixed (``grid.optimal_levels``
-  on ``FleetChannel.uav_channel``) and the local search again.
+- ``plan_fleet`` (the ``fleet`` planner): from the k-means baselines of seeds 0 and 1 a
+  descent: a vectorised best-improvement local search over the whole fleet (a UAV moves 1 or 4
+  lattice steps, a user's level changes, a user changes UAV; candidates scored from the
+  incumbent's received powers), in the shared band ``block_power`` (each UAV's best levels
+  with the others fixed, ``grid.optimal_levels``) and the local search again; the better
+  descent, then ``relocate`` (one UAV jumps on a coarse lattice) while it improves.
 - ``reference_fleet``: exact by enumeration where the problem is tiny; otherwise the best of
   many starts (the planner's answer and k-means starts of several seeds) of a block-coordinate
   ascent: each UAV in turn re-placed by the exact one-UAV ``grid`` with the others fixed
@@ -34,6 +35,9 @@ from uavxai.service.layouts import problem_scenario
 
 PLANNER_STEPS = (1, 4)  # lattice steps a UAV may move in one local-search candidate
 REFERENCE_STEPS = (1, 2, 4, 8)
+COARSE_EVERY = 5  # the relocation's coarse lattice: every 5th point per axis (50 m apart)
+RELOCATIONS = 3  # at most this many coarse jumps per plan
+POWER_ROUNDS = 1  # exact per-UAV power passes per descent
 PLANNER_STARTS = 2  # k-means seeds the planner searches from
 EXACT_POWER_K = 12  # the planner's exact per-UAV power DP up to this many users (5-25 ms)
 REFERENCE_STARTS = 4  # k-means seeds the reference starts from, besides the planner's answer
@@ -143,37 +147,116 @@ def kmeans_baseline(problem: FleetProblem, seed: int = 0) -> FleetPlan:
 
 
 # --------------------------------------------------------------------------- local search
-def _candidates(
-    problem: FleetProblem, plan: FleetPlan, gains: np.ndarray, steps: tuple[int, ...], pairs: bool
-):
-    """The neighbourhood of a plan as batches ``(positions, gains, association, levels)``."""
-    fleet, space, L = problem.fleet, problem.space, problem.power_levels
-    N, K = fleet.n, fleet.k
-    moves = (MOVES[:6, None, :] * np.array(steps)[None, :, None]).reshape(-1, 3) * space.step_m
-    pos = np.repeat(plan.positions[None], N * len(moves), axis=0)  # (C, N, 3)
-    who = np.repeat(np.arange(N), len(moves))
-    pos[np.arange(len(pos)), who] += np.tile(moves, (N, 1))
-    keep = space.contains(pos[np.arange(len(pos)), who])
-    pos, who = pos[keep], who[keep]
-    g = np.repeat(gains[None], len(pos), axis=0)
-    g[np.arange(len(pos)), who] = fleet.gains(pos[np.arange(len(pos)), who])
-    batches = [(pos, g, plan.association[None], plan.levels[None])]
+class GainCache:
+    """Gains ``(K,)`` of lattice points, computed once per problem: every UAV has the same
+    gain function, and the local search asks for the same neighbours round after round."""
+
+    def __init__(self, problem: FleetProblem) -> None:
+        self.channel = problem.fleet.channel
+        self.step = problem.space.step_m
+        self.rows: dict[tuple[int, int, int], np.ndarray] = {}
+
+    def __call__(self, positions: np.ndarray) -> np.ndarray:
+        """Gains ``(M, K)`` of lattice positions ``(M, 3)``."""
+        keys = [tuple(k) for k in np.rint(positions / self.step).astype(np.int64).tolist()]
+        missing = [i for i, key in enumerate(keys) if key not in self.rows]
+        if missing:
+            fresh = self.channel.mean_gain(positions[missing])
+            for i, row in zip(missing, fresh, strict=True):
+                self.rows[keys[i]] = row
+        return np.array([self.rows[key] for key in keys]).reshape(len(keys), self.channel.k)
+
+
+@dataclass(frozen=True)
+class Incumbent:
+    """What every candidate move of the local search is scored against (docs/service/fleet.md,
+    "Local search"): the plan, the gains ``G (N, K)`` of its positions, each UAV's watts per
+    level ``unit (N,)`` and power ``P (N,)``, and each user's total received power ``T (K,)``
+    from every UAV (its own UAV's included)."""
+
+    plan: FleetPlan
+    gains: np.ndarray
+    unit: np.ndarray
+    power: np.ndarray
+    received: np.ndarray
+
+    @classmethod
+    def of(cls, problem: FleetProblem, plan: FleetPlan, gains: np.ndarray) -> Incumbent:
+        fleet = problem.fleet
+        totals = np.bincount(plan.association, weights=plan.levels, minlength=fleet.n)
+        unit = fleet.p_max_w / np.maximum(totals, problem.power_levels - 1)
+        power = unit * totals
+        return cls(plan, gains, unit, power, power @ gains)
+
+
+def scores(problem: FleetProblem, served: np.ndarray, own: np.ndarray, received: np.ndarray):
+    """The objective ``(C,)`` of C candidates from each user's served gain, own power and
+    total received power ``(C, K)``: in the shared band everything user k receives but its
+    own signal interferes (``T_k - g_k p_k``, the fleet SINR of docs/service/fleet.md)."""
+    c = problem.fleet.channel
+    signal = served * own
+    if c.access == "shared":
+        sinr = signal / (received - signal + c.noise_w)
+    else:
+        sinr = signal / (c.noise_w / c.k)
+    rate = c.user_bandwidth_hz() * np.log2(1.0 + sinr)
+    return rate.sum(axis=-1) / 2.0 ** (rate < c.qos_rate_bps).sum(axis=-1)
+
+
+def power_scores(problem: FleetProblem, inc: Incumbent, assoc: np.ndarray, lev: np.ndarray):
+    """Candidates that change associations and levels ``(C, K)``, positions fixed: each UAV's
+    level total, power and the power every user receives, recomputed per candidate."""
+    N, L = problem.fleet.n, problem.power_levels
+    member = assoc[:, None, :] == np.arange(N)[:, None]  # (C, N, K)
+    totals = np.einsum("cnk,ck->cn", member, lev.astype(float))
+    unit = problem.fleet.p_max_w / np.maximum(totals, L - 1)
+    received = (unit * totals) @ inc.gains
+    own = np.take_along_axis(unit, assoc, axis=1) * lev
+    served = inc.gains[assoc, np.arange(assoc.shape[1])]
+    return scores(problem, served, own, received)
+
+
+def move_scores(problem: FleetProblem, inc: Incumbent, who: np.ndarray, moved: np.ndarray):
+    """Candidates that move UAV ``who[c]`` to gains ``moved (C, K)``: only that UAV's gains
+    change, so every user's received power changes by ``(G' - G) P`` of that UAV."""
+    plan = inc.plan
+    received = inc.received + (moved - inc.gains[who]) * inc.power[who, None]
+    mine = plan.association[None, :] == who[:, None]
+    served = np.where(mine, moved, inc.gains[plan.association, np.arange(len(plan.levels))])
+    own = inc.unit[plan.association] * plan.levels
+    return scores(problem, served, np.broadcast_to(own, served.shape), received)
+
+
+def power_candidates(problem: FleetProblem, plan: FleetPlan, pairs: bool):
+    """Associations and levels ``(C, K)`` one move away: one user's level set to any value,
+    one user moved to another UAV, and with ``pairs`` one level moved between two users."""
+    N, K, L = problem.fleet.n, problem.fleet.k, problem.power_levels
     lev = np.repeat(plan.levels[None], K * L, axis=0)
     lev[np.arange(K * L), np.repeat(np.arange(K), L)] = np.tile(np.arange(L), K)
+    levs = [lev]
     if pairs:
         i, j = np.nonzero(~np.eye(K, dtype=bool))
-        moved = plan.levels[None] + 0
-        moved = np.repeat(moved, len(i), axis=0)
+        moved = np.repeat(plan.levels[None], len(i), axis=0)
         moved[np.arange(len(i)), i] -= 1
         moved[np.arange(len(i)), j] += 1
-        lev = np.vstack([lev, moved[(moved >= 0).all(1) & (moved < L).all(1)]])
-    batches.append((None, gains[None], plan.association[None], lev))
-    if N > 1:
-        users, to = np.nonzero(plan.association[:, None] != np.arange(N)[None])
-        assoc = np.repeat(plan.association[None], len(users), axis=0)
-        assoc[np.arange(len(users)), users] = to
-        batches.append((None, gains[None], assoc, plan.levels[None]))
-    return batches
+        levs.append(moved[(moved >= 0).all(1) & (moved < L).all(1)])
+    lev = np.vstack(levs)
+    assoc = np.repeat(plan.association[None], len(lev), axis=0)
+    users, to = np.nonzero(plan.association[:, None] != np.arange(N)[None])
+    other = np.repeat(plan.association[None], len(users), axis=0)
+    other[np.arange(len(users)), users] = to
+    return np.vstack([assoc, other]), np.vstack([lev, np.repeat(plan.levels[None], len(users), 0)])
+
+
+def move_candidates(problem: FleetProblem, plan: FleetPlan, steps: tuple[int, ...]):
+    """Each UAV moved by each of ``steps`` lattice steps along each axis, inside the box:
+    which UAV ``(C,)`` and where ``(C, 3)``."""
+    N, space = problem.fleet.n, problem.space
+    moves = (MOVES[:6, None, :] * np.array(steps)[None, :, None]).reshape(-1, 3) * space.step_m
+    who = np.repeat(np.arange(N), len(moves))
+    where = plan.positions[who] + np.tile(moves, (N, 1))
+    keep = space.contains(where)
+    return who[keep], where[keep]
 
 
 def local_search(
@@ -182,46 +265,60 @@ def local_search(
     steps: tuple[int, ...] = PLANNER_STEPS,
     pairs: bool = False,
     max_rounds: int = 500,
+    cache: GainCache | None = None,
 ) -> FleetPlan:
     """Best-improvement local search on the fleet objective over one UAV's move, one user's
-    level, one user's UAV (and with ``pairs`` one level moved between two users)."""
+    level, one user's UAV (and with ``pairs`` one level moved between two users). Candidates
+    are scored from the incumbent's received powers (``Incumbent``, ``scores``); the answer's
+    objective is recomputed from the channel and returned only if it beats the start."""
+    cache = GainCache(problem) if cache is None else cache
+    gains = problem.fleet.gains(plan.positions)
+    current = plan
+    for _ in range(max_rounds):
+        inc = Incumbent.of(problem, current, gains)
+        assoc, lev = power_candidates(problem, current, pairs)
+        who, where = move_candidates(problem, current, steps)
+        moved = cache(where)
+        values = np.concatenate(
+            [power_scores(problem, inc, assoc, lev), move_scores(problem, inc, who, moved)]
+        )
+        i = int(np.argmax(values))
+        if not values[i] > current.objective * IMPROVES:
+            break
+        positions, association, levels = current.positions, current.association, current.levels
+        if i < len(assoc):
+            association, levels = assoc[i], lev[i]
+        else:
+            n, positions, gains = who[i - len(assoc)], positions.copy(), gains.copy()
+            positions[n], gains[n] = where[i - len(assoc)], moved[i - len(assoc)]
+        # the scored value stands in for the objective until the end (same SINR, summed in
+        # another order: equal to rounding, far below IMPROVES)
+        current = FleetPlan(positions, association, levels, levels, float(values[i]))
+    if current is plan:
+        return plan
+    final = make_plan(problem, current.positions, current.association, current.levels)
+    return final if final.objective > plan.objective * IMPROVES else plan
+
+
+def block_power(problem: FleetProblem, plan: FleetPlan, max_users: int) -> FleetPlan:
+    """Each UAV with at most ``max_users`` users in turn gets the best levels for its users,
+    the other UAVs fixed (``grid.optimal_levels`` on its one-UAV channel), among those that
+    leave no more of its users below QoS than now (each more one halves the objective; the DP's
+    work is proportional to the failure counts it keeps, so this is 5-10x cheaper than all of
+    them); kept where the fleet objective improves."""
     fleet, L = problem.fleet, problem.power_levels
     gains = fleet.gains(plan.positions)
-    for _ in range(max_rounds):
-        best, choice = plan.objective * IMPROVES, None
-        for pos, g, assoc, lev in _candidates(problem, plan, gains, steps, pairs):
-            assoc_b = np.broadcast_to(assoc, np.broadcast_shapes(assoc.shape, lev.shape))
-            lev_b = np.broadcast_to(lev, assoc_b.shape)
-            power = fleet.power(lev_b, assoc_b, L)
-            values = np.atleast_1d(fleet.evaluate_gains(g, assoc_b, power).objective)
-            i = int(np.argmax(values))
-            if values[i] > best:
-                best = float(values[i])
-                one = np.minimum(i, [len(g) - 1, len(assoc_b) - 1])  # batches broadcast
-                choice = (plan.positions if pos is None else pos[i], g[one[0]],
-                          assoc_b[one[1]], lev_b[one[1]])
-        if choice is None:
-            return plan
-        positions, gains, association, levels = choice
-        plan = make_plan(problem, positions, association, levels, gains)
-    return plan
-
-
-def exact_power(problem: FleetProblem, plan: FleetPlan, max_users: int) -> FleetPlan:
-    """Each UAV with at most ``max_users`` users in turn gets the exactly best levels for its
-    users with the other UAVs fixed (``grid.optimal_levels`` on its one-UAV channel), kept
-    where the fleet objective improves."""
-    fleet, L = problem.fleet, problem.power_levels
     for n in range(fleet.n):
         mine = plan.association == n
         if not 0 < mine.sum() <= max_users:
             continue
-        gains = fleet.gains(plan.positions)
         own = fleet.uav_channel(n, gains, plan.association, plan.power_w)
-        levels, _ = optimal_levels(own, own.mean_gain(plan.positions[n]), L)
+        g = own.mean_gain(plan.positions[n])
+        failing = int((own.rate(g, plan.power_w[mine]) < own.qos_rate_bps).sum())
+        levels, _ = optimal_levels(own, g, L, cap=failing + 1)
         trial = plan.levels.copy()
         trial[mine] = levels
-        candidate = make_plan(problem, plan.positions, plan.association, trial)
+        candidate = make_plan(problem, plan.positions, plan.association, trial, gains)
         if candidate.objective > plan.objective * IMPROVES:
             plan = candidate
     return plan
@@ -236,15 +333,56 @@ def snap(space: SearchSpace, positions: np.ndarray) -> np.ndarray:
     )
 
 
-def plan_fleet(problem: FleetProblem, starts: int = PLANNER_STARTS) -> FleetPlan:
-    """The fleet planner (module docstring): from each of ``starts`` k-means starts the local
-    search; the best, with (shared band) the exact per-UAV power and the local search again."""
-    plans = [local_search(problem, kmeans_baseline(problem, seed)) for seed in range(starts)]
-    plan = max(plans, key=lambda p: p.objective)
+def coarse_lattice(space: SearchSpace, every: int = COARSE_EVERY) -> np.ndarray:
+    """Every ``every``-th lattice point per axis ``(M, 3)``: where ``relocate`` looks."""
+    axes = [ax[::every] for ax in space.axes()]
+    return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+
+
+def relocate(problem: FleetProblem, plan: FleetPlan, cache: GainCache) -> FleetPlan:
+    """The move the local search cannot make: one UAV jumps anywhere on a coarse lattice
+    (associations and levels kept, the others fixed), the best such jump over all UAVs,
+    then the local search from there; repeated while it improves the fleet."""
+    points = coarse_lattice(problem.space)
+    table = cache(points)
+    N = problem.fleet.n
+    for _ in range(RELOCATIONS):
+        inc = Incumbent.of(problem, plan, problem.fleet.gains(plan.positions))
+        who = np.repeat(np.arange(N), len(points))
+        values = move_scores(problem, inc, who, np.tile(table, (N, 1)))
+        i = int(np.argmax(values))
+        if not values[i] > plan.objective * IMPROVES:
+            break
+        positions = plan.positions.copy()
+        positions[who[i]] = points[i % len(points)]
+        jumped = make_plan(problem, positions, plan.association, plan.levels)
+        if not jumped.objective > plan.objective * IMPROVES:
+            break
+        plan = descend(problem, jumped, cache)
+    return plan
+
+
+def descend(problem: FleetProblem, plan: FleetPlan, cache: GainCache) -> FleetPlan:
+    """The local search and, in the shared band, the exact per-UAV power (where the local
+    search's one-level moves stall) and the local search again while that improves."""
+    plan = local_search(problem, plan, cache=cache)
     if problem.fleet.channel.access != "shared":
         return plan
-    polished = exact_power(problem, plan, EXACT_POWER_K)
-    return local_search(problem, polished) if polished is not plan else plan
+    for _ in range(POWER_ROUNDS):
+        polished = block_power(problem, plan, EXACT_POWER_K)
+        if polished is plan:
+            break
+        plan = local_search(problem, polished, cache=cache)
+    return plan
+
+
+def plan_fleet(problem: FleetProblem, starts: int = PLANNER_STARTS) -> FleetPlan:
+    """The fleet planner (module docstring): from each of ``starts`` k-means starts the
+    descent (local search, exact per-UAV power in the shared band), the best of them, then
+    the coarse relocations."""
+    cache = GainCache(problem)
+    plans = [descend(problem, kmeans_baseline(problem, seed), cache) for seed in range(starts)]
+    return relocate(problem, max(plans, key=lambda p: p.objective), cache)
 
 
 # --------------------------------------------------------------------------- the reference

@@ -192,11 +192,13 @@ def dp_cost(k: int, power_levels: int) -> float:
 
 
 def optimal_levels(
-    channel: Channel, gain: np.ndarray, power_levels: int
+    channel: Channel, gain: np.ndarray, power_levels: int, cap: int | None = None
 ) -> tuple[np.ndarray, float]:
-    """The optimal integer levels ``(K,)`` for one position's gains ``(K,)`` and the objective."""
+    """The optimal integer levels ``(K,)`` for one position's gains ``(K,)`` and the objective
+    (over the allocations with fewer than ``cap`` users below QoS, if given: exact whenever
+    no allocation with ``cap`` or more failures can win, as ``_failure_cap`` ensures)."""
     rates, fails = level_rates(channel, np.asarray(gain, float)[None, :], power_levels)
-    best, (s_index, lam), choices = _knapsack(rates, fails, keep_choices=True)
+    best, (s_index, lam), choices = _knapsack(rates, fails, keep_choices=True, cap=cap)
     levels = np.zeros(channel.k, dtype=np.int64)
     s = s_index + 1
     for j in reversed(range(channel.k)):
