@@ -295,6 +295,23 @@ def test_a_jsbsim_encounter_with_a_cessna_flies_to_its_end_and_records_its_colum
     assert row["manoeuvre"] == 1 and row["alert"] == 1  # an NMAC ahead: it does something
 
 
+def test_a_track_limited_to_the_top_speed_flies_in_jsbsim() -> None:
+    """Encounter 216's Cessna is limited to its top speed, 60 m/s, and hypot(vx, vy) of the
+    limited track rounds to 60.00000000000001: the world took that for a speed out of the
+    aircraft's range and stopped the JSBSim campaign there. A rounding is inside the range;
+    a real excess is still refused."""
+    from uavxai.dynamics.world import JSBSimWorld
+    from uavxai.errors import UserError
+    from uavxai.sim.encounter import draw_encounter, intruder_spec
+
+    sc = load_scenario(scenarios_dir() / "encounters.yaml")
+    assert intruder_spec(draw_encounter(sc, 216)).speed_mps > 60.0  # the case, as sampled
+    r, *_ = _fly(sc, "none", 216, "jsbsim")
+    assert r.outcome.value in ("timeout", "collision") and r.steps > 0
+    with pytest.raises(UserError, match="flies between 35 and 60 m/s"):
+        JSBSimWorld._check_speed("intruder 1 speed_mps", 60.01, "ga_c172", (35.0, 60.0))
+
+
 # ------------------------------------------------------------ the intruder aircraft's limits
 def test_limit_track_bounds_speed_vertical_rate_and_turn_rate_and_keeps_flyable_tracks() -> None:
     import math

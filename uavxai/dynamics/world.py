@@ -40,6 +40,7 @@ GROUND_M = 1.0
 ENVELOPE_AIRSPEED_FACTORS = (0.5, 2.0)  # times the aircraft's (speed-min, speed-max)
 ENVELOPE_BANK_RAD = math.radians(80.0)
 ENVELOPE_PITCH_RAD = math.radians(60.0)
+SPEED_TOLERANCE_MPS = 1e-9  # float rounding of a speed computed from its components
 
 # JSBSim's local velocities come as (east, north, down) feet/s
 _NED_FT_TO_ENU_M = np.array([FT, FT, -FT])
@@ -143,8 +144,11 @@ class JSBSimWorld(ScheduledWorld):
 
     @staticmethod
     def _check_speed(field: str, speed: float, aircraft: str, flyable: tuple[float, float]) -> None:
-        """A UserError if ``speed`` is outside the aircraft's ``flyable`` range."""
-        if not flyable[0] <= speed <= flyable[1]:
+        """A UserError if ``speed`` is outside the aircraft's ``flyable`` range. A rounding's
+        worth over is inside: a sampled track limited to the top speed has a speed of
+        hypot(vx, vy), which may be 60.00000000000001 m/s against 60."""
+        tol = SPEED_TOLERANCE_MPS
+        if not flyable[0] - tol <= speed <= flyable[1] + tol:
             raise UserError(
                 f"{field} = {speed:g} m/s: aircraft '{aircraft}' flies between "
                 f"{flyable[0]:g} and {flyable[1]:g} m/s"
