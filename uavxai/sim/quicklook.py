@@ -16,7 +16,7 @@ import numpy as np
 from uavxai.dynamics.state import TrafficState
 from uavxai.outputs import write_output
 from uavxai.sim.episode import DecisionEvent, Episode, Observer
-from uavxai.sim.observers import Energy
+from uavxai.sim.steps import Energy
 
 PLOT = "run.png"
 
