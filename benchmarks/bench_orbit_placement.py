@@ -39,8 +39,8 @@ from uavxai.comms.channel import Channel
 from uavxai.scenario import Scenario, load_scenario
 from uavxai.service.stage import plan_service
 from uavxai.sim.build import fly
-from uavxai.sim.observers import Service
 from uavxai.sim.spec import episode_spec
+from uavxai.sim.steps import Service
 
 SEED0 = 9_100
 SETTINGS: dict[str, dict[str, Any]] = {
@@ -79,7 +79,7 @@ def fly_plan(sc: Scenario) -> dict[str, Any]:
     planner = make_planner("none", PlannerConfig.from_scenario(sc))
     t0 = time.perf_counter()
     spec = episode_spec(sc, goal=goal, dynamics="jsbsim", intruders=[], mission=True)
-    result = fly(spec, planner, observers=[service])
+    result = fly(spec, planner, engine_steps=[service])
     m = result.summary.get("mission", {})
     return {
         "outcome": result.outcome.value,

@@ -1,4 +1,4 @@
-"""A campaign's figures (uavxai.campaign_plots): an encounter campaign draws its detect-and-
+"""A campaign's figures (uavxai.campaign.plots): an encounter campaign draws its detect-and-
 avoid estimates with their intervals; a campaign without encounters does not."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ from pathlib import Path
 import matplotlib.image
 import pytest
 
-from uavxai.campaign_plots import DAA_FIGURE, DAA_PLOTTED, plot_campaign, plot_daa
+from uavxai.campaign.plots import DAA_FIGURE, DAA_PLOTTED, plot_campaign, plot_daa
 
 RESULTS = Path(__file__).resolve().parents[1] / "docs" / "results"
 

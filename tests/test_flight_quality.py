@@ -111,11 +111,12 @@ def test_campaign_rows_and_results_carry_the_flight_quality() -> None:
             float(np.mean([r["bank_over_25_s"] for r in mine])))
 
     enc = load_scenario(scenarios_dir() / "encounters.yaml")
-    from uavxai.campaign import _planner, run_campaign_episode
+    from uavxai.campaign import run_campaign_episode
+    from uavxai.campaign.episode import planner_for
 
     row = run_campaign_episode(enc, "mcts_fast", 1, 5)
     quality = FlightQuality(((-3000.0, 0.0, 120.0), enc.ownship.goal))  # the file's route
-    _, rec, _ = fly_encounter(enc, _planner(enc, "mcts_fast"), 5, quality=quality)
+    _, rec, _ = fly_encounter(enc, planner_for(enc, "mcts_fast"), 5, quality=quality)
     assert row["path_excess"] == pytest.approx(quality.result().path_excess, abs=1e-4)
     assert row["reversals"] == rec.reversals == reversals(quality.bank_cmd)
     assert len(quality.own) == len(quality.t) > 1

@@ -157,8 +157,8 @@ def test_mission_reports_the_prediction_of_the_placement_it_flew(platform):
     from uavxai.avoidance.planners import make_planner
     from uavxai.avoidance.types import PlannerConfig
     from uavxai.sim.build import fly
-    from uavxai.sim.observers import Service
     from uavxai.sim.spec import episode_spec
+    from uavxai.sim.steps import Service
 
     sc = default_scenario(
         seed=2, comms={"access": "ofdma", "fading": "none", "qos_rate_bps": 1.2e6},
@@ -171,7 +171,7 @@ def test_mission_reports_the_prediction_of_the_placement_it_flew(platform):
     service = Service(sc, Channel.from_scenario(sc, users=plan.users), plan.power_w, None)
     spec = episode_spec(sc, goal=goal, intruders=[], mission=True, dynamics="jsbsim")
     planner = make_planner("none", PlannerConfig.from_scenario(sc))
-    result = fly(spec, planner, observers=[service])
+    result = fly(spec, planner, engine_steps=[service])
     m = result.summary["mission"]
     assert result.outcome.value == "completed" and m["on_station_s"] >= 60 - 1e-6
     assert m["predicted_orbit_sum_rate_bps"] == pytest.approx(plan.extras["orbit_sum_rate_bps"])

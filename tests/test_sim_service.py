@@ -96,9 +96,9 @@ def test_walking_users_make_the_mission_replan_and_move_its_orbit() -> None:
     from uavxai.scenario import default_scenario
     from uavxai.service.stage import plan_service
     from uavxai.sim.build import fly
-    from uavxai.sim.observers import Service
     from uavxai.sim.run import _replanner
     from uavxai.sim.spec import episode_spec
+    from uavxai.sim.steps import Service
 
     sc = default_scenario(
         "walk",
@@ -117,7 +117,7 @@ def test_walking_users_make_the_mission_replan_and_move_its_orbit() -> None:
     r = fly(
         episode_spec(sc, goal=station, dynamics="kinematic", mission=True),
         planner,
-        observers=[service],
+        engine_steps=[service],
     )
     points = r.summary["mission"]["service_points"]
     assert r.outcome.value == "completed"

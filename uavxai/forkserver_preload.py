@@ -2,7 +2,7 @@
 dies with the uavxai process that started it, and leaves SIGINT and SIGTERM to that process.
 
 Its workers are forked from it and die with it in turn (``_init_pool_worker`` in
-:mod:`uavxai.campaign`); they find its pid in ``FORKSERVER_PID``.
+:mod:`uavxai.campaign.runner`); they find its pid in ``FORKSERVER_PID``.
 
 The owner's pid travels in ``STARTED_BY``, in the environment only while :func:`start` starts
 the forkserver, which takes it out of its own at once: a process that inherited it (a

@@ -17,7 +17,14 @@ from uavxai.dynamics.orbit import scenario_orbit_radius
 from uavxai.scenario import Scenario
 from uavxai.sim.clock import Clock
 from uavxai.sim.command import CommandPath, DirectPath, Dynamics
-from uavxai.sim.episode import TRUTH, Episode, EpisodeResult, Observer, TrafficPicture
+from uavxai.sim.episode import (
+    TRUTH,
+    EngineStep,
+    Episode,
+    EpisodeResult,
+    Observer,
+    TrafficPicture,
+)
 from uavxai.sim.judge import Judge
 from uavxai.sim.kinematic import KinematicWorld
 from uavxai.sim.mission import Mission
@@ -58,12 +65,15 @@ def fly(
     *,
     path: Callable[[Dynamics], CommandPath] = DirectPath,
     observers: Sequence[Observer] = (),
+    engine_steps: Sequence[EngineStep] = (),
 ) -> EpisodeResult:
     """Fly the episode ``spec`` (:func:`uavxai.sim.spec.episode_spec`) and return its result;
     the world is closed and every observer closed whatever happens. With a mission the
     episode flies it (transit, on station, return; the goal is then the service point)
     instead of ending at the goal. ``planner``: a planner (in-process) or the seat it sits in
-    (:class:`uavxai.sim.companion.Companion`)."""
+    (:class:`uavxai.sim.companion.Companion`). ``engine_steps``: what acts beside the
+    planner, after the episode's own steps, in this order: the engine's steps are the picture,
+    the scripted operator, the operator and the mission (:class:`EngineStep`)."""
     scenario, seed = spec.scenario, spec.seed
     seat = seat_of(planner)
     world = command = None
@@ -87,14 +97,18 @@ def fly(
             command,
             spec.goal,
             max_steps=spec.max_steps,
-            observers=[picture, *script, operator, *([flying] if flying else []), *observers],
+            observers=observers,
+            # the declared order of what acts: surveillance, the operators' aims, the
+            # mission's phases, then the caller's (a run's battery, then its service)
+            engine_steps=[picture, *script, operator, *([flying] if flying else []),
+                          *engine_steps],  # fmt: skip
             picture=picture,
             mission=flying,
             label={"scenario": scenario.name, "seed": seed, "dynamics": spec.dynamics},
         )
         return episode.run()
     finally:
-        for o in observers:
+        for o in [*engine_steps, *observers]:
             o.close()
         if command is not None:
             command.close()
@@ -114,6 +128,7 @@ def start_episode(
     picture: TrafficPicture = TRUTH,
     mission: Mission | None = None,
     label: dict | None = None,
+    engine_steps: Sequence[EngineStep] = (),
 ) -> Episode:
     """An episode of ``world`` as every episode starts: the autopilot given the goal's
     height, judged by the scenario's rules (:meth:`Judge.from_scenario`; a ``mission`` ends
@@ -132,6 +147,7 @@ def start_episode(
         picture=picture,
         mission=mission,
         label=label,
+        engine_steps=engine_steps,
     )
 
 

@@ -1,10 +1,13 @@
 """One episode: decide -> advance (sample by sample, judged) -> ... -> finish.
 
-The engine knows nothing of files, recordings or ground stations: everything that watches an
-episode is an :class:`~uavxai.sim.observers.Observer` subscribed to its events (start,
-decision, sample, period, end). The dynamics (JSBSim or kinematic) and the command path
-(MAVLink bytes or direct) are arguments, so ``uavxai run`` and ``uavxai evaluate`` fly the
-same loop, and the same scenario and seed give the same flight through either path.
+The engine knows nothing of files, recordings or ground stations: what acts on an episode
+beside the planner (the picture, the operator, the mission, the battery, the service) is an
+:class:`EngineStep` with a declared place in the loop, and everything that only watches is an
+:class:`Observer`; both are subscribed to its events (start, decision, sample, period, end),
+the steps first, in their order, then the observers, whose order changes nothing. The dynamics
+(JSBSim or kinematic) and the command path (MAVLink bytes or direct) are arguments, so ``uavxai
+run`` and ``uavxai evaluate`` fly the same loop, and the same scenario and seed give the same
+flight through either path.
 """
 
 from __future__ import annotations
@@ -107,7 +110,12 @@ class EpisodeResult:
 
 class Observer:
     """Subscribe to an episode's events; every method is optional. ``close`` is always
-    called, also when the episode is interrupted, so files end whole."""
+    called, also when the episode is interrupted, so files end whole.
+
+    An observer only observes: it reads the episode (and what its steps hold) and writes its
+    own outputs and its own summary section; it commands nothing, changes nothing another
+    reads, and reads no other observer's section, so the observers' order changes nothing
+    (``tests/test_sim_observer_order.py``). What acts is an :class:`EngineStep`."""
 
     def on_start(self, ep: Episode) -> None: ...
     def on_decision(self, ep: Episode, event: DecisionEvent) -> None: ...
@@ -115,6 +123,17 @@ class Observer:
     def on_period(self, ep: Episode, event: DecisionEvent, flown_min_m: float) -> None: ...
     def on_end(self, ep: Episode, summary: dict) -> None: ...
     def close(self) -> None: ...
+
+
+class EngineStep(Observer):
+    """A step of the engine that acts on the episode beside the planner: it commands the path,
+    changes the mission, moves the station, ends the mission. The episode calls its steps at
+    every event before any observer, in the order it was given them; that order is declared
+    once, by :func:`uavxai.sim.build.fly`: the picture (surveillance), the scripted and the
+    live operator, the mission's phases, then the run's own steps in their order (``uavxai
+    run``: the battery, which turns the mission home at its reserve and ends it empty, then
+    the service, which re-plans and moves the station). A step may read an earlier step's
+    summary section (the service adds to the mission's)."""
 
 
 class Episode:
@@ -135,6 +154,7 @@ class Episode:
         picture: TrafficPicture = TRUTH,
         label: dict | None = None,
         mission=None,
+        engine_steps: Sequence[EngineStep] = (),
     ) -> None:
         self.world = world
         self.seat = seat
@@ -143,7 +163,15 @@ class Episode:
         self.clock = clock
         self.goal = tuple(float(g) for g in goal)
         self.max_steps = max_steps
+        acting = [type(o).__name__ for o in observers if isinstance(o, EngineStep)]
+        if acting:  # a step among the observers would act at a place nobody declared
+            raise TypeError(
+                f"{', '.join(acting)} act on the episode: give them as engine_steps, in their "
+                "order, not as observers"
+            )
+        self.engine_steps = list(engine_steps)
         self.observers = list(observers)
+        self._subscribers = [*self.engine_steps, *self.observers]  # the steps first, in order
         self.picture = picture
         self.mission = mission  # uavxai.sim.mission.Mission, or None: transit to `goal` only
         self.label = dict(label or {})  # scenario, seed, ...: the head of the summary
@@ -246,7 +274,7 @@ class Episode:
         if self.operator is not None and event.decision.words is None:
             event.decision.aim = self.operator.aim_words(self, event.t)
         self.decision_ms.append(event.decision.ms)
-        for o in self.observers:
+        for o in self._subscribers:
             o.on_decision(self, event)
         return event
 
@@ -304,7 +332,7 @@ class Episode:
             self.nmac = self.nmac or self.judge.nmac(prev, self.state, sep)
             flown_min = min(flown_min, sep)
             self.min_separation_m = min(self.min_separation_m, sep)
-            for o in self.observers:
+            for o in self._subscribers:
                 o.on_sample(self, self.state)
             outcome = self.judge.judge(self.state, sep, self.world.failure())
             if outcome is None:
@@ -316,7 +344,7 @@ class Episode:
                 break
         if self._pending is not None:
             event = self._arrive(send=False)
-        for o in self.observers:
+        for o in self._subscribers:
             o.on_period(self, event, flown_min)
         return outcome
 
@@ -328,7 +356,7 @@ class Episode:
         interrupted."""
         outcome: Outcome = Outcome.TIMEOUT
         try:
-            for o in self.observers:
+            for o in self._subscribers:
                 o.on_start(self)
             self.wall0 = time.perf_counter()  # the flight starts now: set-up is not counted
             try:
@@ -350,7 +378,7 @@ class Episode:
                 self._close_observers()
 
     def _close_observers(self) -> None:
-        for o in self.observers:
+        for o in self._subscribers:
             o.close()
 
     def finish(self, outcome: Outcome) -> EpisodeResult:
@@ -376,7 +404,7 @@ class Episode:
         counters = self.path.close()
         if counters is not None:
             summary["bridge"] = counters
-        for o in self.observers:
+        for o in self._subscribers:
             o.on_end(self, summary)
         return EpisodeResult(
             outcome=outcome,

@@ -34,7 +34,7 @@ from uavxai.dynamics.orbit import scenario_orbit_radius
 from uavxai.dynamics.state import TrafficState
 from uavxai.geometry import turn_positions
 from uavxai.scenario import Scenario
-from uavxai.sim.episode import Episode, Observer
+from uavxai.sim.episode import EngineStep, Episode
 from uavxai.vocabulary import HOLD, Outcome
 
 CONFLICT_FACTOR = 2.0  # the orbit ahead must keep 2 d_min from every believed intruder
@@ -82,8 +82,8 @@ def mission_of(scenario: Scenario, station: Sequence[float]) -> MissionConfig | 
     return cfg
 
 
-class Mission(Observer):
-    """Decides, phase by phase, who flies; an observer of the episode it runs in."""
+class Mission(EngineStep):
+    """Decides, phase by phase, who flies; an engine step of the episode it runs in."""
 
     def __init__(self, config: MissionConfig, announce: Callable[..., None]) -> None:
         self.config = config

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 from uavxai.avoidance.types import Decision, Intruder, Ownship
 from uavxai.bridges.operator import Kind, Mode, OperatorCommand
 from uavxai.dynamics.state import TrafficState
-from uavxai.sim.episode import Episode, Observer
+from uavxai.sim.episode import EngineStep, Episode
 from uavxai.vocabulary import Outcome
 
 # MAV_CMD numbers of the mission items a Route flies (MAVLink common.xml).
@@ -55,7 +55,7 @@ class Leg:
     speed_mps: float | None = None  # DO_CHANGE_SPEED before it
 
 
-class Route(Observer):
+class Route(EngineStep):
     """Legs flown in order, the avoidance planner flying every one of them. Has the
     interface the episode asks of a mission: ``goal``, ``decide``, ``outcome``,
     ``serving``."""
@@ -152,7 +152,7 @@ def _with(leg: Leg, **changes) -> Leg:
     return dataclasses.replace(leg, **changes)
 
 
-class Operator(Observer):
+class Operator(EngineStep):
     """The flight mode and the operator's aims, between the ground station and the planner.
 
     ``radius_m`` and ``loiter_speed_mps``: the loiter a mode flies when the command names
@@ -372,7 +372,7 @@ def _turns_to_time(leg: Leg, radius_m: float, speed_mps: float) -> Leg:
     return _with(leg, loiter_s=-leg.loiter_s * 2 * math.pi * r / speed_mps)
 
 
-class ScriptedOperator(Observer):
+class ScriptedOperator(EngineStep):
     """The scenario's ``operator.commands``: each sent at its time as a ground station's
     MAVLink frames (system ``operator.system_id``) through the command path's operator input,
     which decodes them with the bridge's own decoder."""

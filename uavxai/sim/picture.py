@@ -29,7 +29,7 @@ from uavxai.dynamics.geodesy import LocalFrame
 from uavxai.dynamics.state import TrafficState
 from uavxai.scenario import Scenario
 from uavxai.sim.clock import Clock
-from uavxai.sim.episode import Episode, Observer
+from uavxai.sim.episode import EngineStep, Episode
 from uavxai.sim.seat import TrafficReceiver
 from uavxai.surveillance.adsb import (
     Report,
@@ -74,7 +74,7 @@ class Receiver:
         return self.tracker.beliefs(t)
 
 
-class Picture(Observer):
+class Picture(EngineStep):
     """The planner's picture of the traffic (an episode's ``picture``), fed every sample.
 
     The simulation's side measures (ADS-B from the cooperative intruders, the onboard

@@ -16,7 +16,7 @@ import numpy as np
 from uavxai.dynamics.state import TrafficState
 from uavxai.outputs import write_output
 from uavxai.sim.episode import DecisionEvent, Episode, Observer
-from uavxai.sim.observers import Energy
+from uavxai.sim.steps import Energy
 
 PLOT = "run.png"
 
@@ -27,7 +27,7 @@ class QuickLook(Observer):
     def __init__(self, path: Path, channel, power_w, energy: Energy, d_min_m: float) -> None:
         self.path = path
         self.channel, self.power_w = channel, np.asarray(power_w, dtype=float)
-        self.energy = energy  # the Energy observer: its battery, where the world has one
+        self.energy = energy  # the Energy step: its battery, where the world has one
         self.d_min_m = d_min_m
         self.t: list[float] = []
         self.own: list[np.ndarray] = []

@@ -23,19 +23,19 @@ from uavxai.processes import interrupts_deferred
 from uavxai.scenario import Scenario
 from uavxai.sim.build import fly
 from uavxai.sim.command import MavlinkPath
+from uavxai.sim.episode import EngineStep, Observer
 from uavxai.sim.observers import (
     DecisionsJSONL,
-    Energy,
     Pacing,
     ProgressBar,
     Rerun,
-    Service,
     SummaryJSON,
     Throughput,
     Trust,
 )
 from uavxai.sim.quicklook import PLOT, QuickLook
 from uavxai.sim.spec import EpisodeSpec, episode_spec
+from uavxai.sim.steps import Energy, Service
 
 console = Console(stderr=True, soft_wrap=True)
 
@@ -116,7 +116,6 @@ def run_episode(
     from uavxai.avoidance.types import PlannerConfig
     from uavxai.comms.channel import Channel
     from uavxai.sim.companion import Companion
-    from uavxai.sim.observers import TrajectoryCSV
 
     sc = scenario
     spec = run_spec(sc, service)
@@ -125,17 +124,7 @@ def run_episode(
     # (the intruders, with an instant decision; everyone, with a latency).
     planner = Companion(sc.avoidance.planner, config, checkpoint, scenario=sc)
     channel = Channel.from_scenario(sc, users=service.users)
-    energy = Energy()
-    observers = [
-        Throughput(channel, service.power_w),
-        energy,
-        Trust(),
-        TrajectoryCSV(out / "trajectory.csv"),
-        DecisionsJSONL(out / "decisions.jsonl"),
-        QuickLook(out / PLOT, channel, service.power_w, energy, sc.avoidance.d_min_m),
-    ]
-    if spec.mission is not None:
-        observers.append(Service(sc, channel, service.power_w, out, replan=_replanner(sc)))
+    steps, observers = run_parts(spec, channel, service.power_w, out)
     record = sc.log.rerun if record is None else record
     if record or spawn or rerun_file is not None:
         # --spawn records to the file too: a viewer problem never loses the run's recording
@@ -161,11 +150,36 @@ def run_episode(
                 out / "link.tlog" if sc.bridge.tlog else None,
             ),
             observers=observers,
+            engine_steps=steps,
         )
     finally:
         with interrupts_deferred():  # the planner's process is closed in order, not cut off
             planner.close()
     return result.summary
+
+
+def run_parts(
+    spec: EpisodeSpec, channel, power_w: np.ndarray, out: Path
+) -> tuple[list[EngineStep], list[Observer]]:
+    """What a run adds to its episode: its engine steps, in their order after the picture,
+    the operators and the mission (the battery: home at its reserve, the end when empty; then,
+    with a mission, the service: users walk, it re-plans and moves the station), and the
+    observers of its files in ``out`` (any order: they only observe)."""
+    from uavxai.sim.observers import TrajectoryCSV
+
+    sc = spec.scenario
+    energy = Energy()
+    steps: list[EngineStep] = [energy]
+    if spec.mission is not None:
+        steps.append(Service(sc, channel, power_w, out, replan=_replanner(sc), energy=energy))
+    observers: list[Observer] = [
+        Throughput(channel, power_w),
+        Trust(),
+        TrajectoryCSV(out / "trajectory.csv"),
+        DecisionsJSONL(out / "decisions.jsonl"),
+        QuickLook(out / PLOT, channel, power_w, energy, sc.avoidance.d_min_m),
+    ]
+    return steps, observers
 
 
 def _replanner(sc: Scenario):

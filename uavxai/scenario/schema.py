@@ -1,42 +1,32 @@
-"""Scenario files: the typed schema, its defaults, and friendly validation errors.
+"""The scenario schema: every section's typed model with its defaults and bounds, the checks
+across fields (world bounds, airspeeds, timing, channel ranges), and the clock's timing rule.
 
 The reference of every key (default, unit, allowed values) is docs/scenario.md; a test checks
-that it names every key of these models. Every model forbids unknown keys; a misspelt key is
-reported with the nearest valid one. Units are SI; only fields ending in ``_deg`` are degrees.
-
-Scenario files are untrusted input: the YAML loader bounds the file size, the nesting depth and
-the node count with aliases expanded (a few hundred bytes of nested anchors would otherwise
-expand to gigabytes), refuses duplicate keys, and every number the schema accepts is finite and
-bounded, so that a bad file ends in :class:`ScenarioError` within milliseconds.
+that it names every key of these models. Every model forbids unknown keys, and no value is
+coerced from another type (text is never a number).
 """
 
 from __future__ import annotations
 
-import contextlib
-import difflib
 import math
-import os
 import re
-import stat
 import typing
-import xml.etree.ElementTree as ET
-from functools import cache
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-import yaml
 from pydantic import (
     BaseModel,
     ConfigDict,
     Field,
-    ValidationError,
     ValidationInfo,
     field_validator,
     model_validator,
 )
 
-from uavxai.errors import ScenarioError, UserError, short_repr
-from uavxai.paths import aircraft_dir, resolve_scenario
+from uavxai.errors import UserError, short_repr
+from uavxai.paths import aircraft_dir
+from uavxai.scenario.aircraft import aircraft_speed_range
+from uavxai.scenario.messages import printable, short_value
 from uavxai.vocabulary import (
     ACTION_SETS,
     CHANNEL_MODEL_NAMES,
@@ -46,7 +36,6 @@ from uavxai.vocabulary import (
     avoidance_planners,
 )
 
-REFERENCE = "docs/scenario.md"
 # Distances are bounded so that no arithmetic downstream overflows or loses every digit of a
 # metre (1e6 m = 1000 km, far beyond any flight area of this simulator).
 MAX_M = 1.0e6
@@ -160,7 +149,6 @@ class World(_Model):
     def contains(self, x: float, y: float, h: float | None = None) -> bool:
         ok = self.x[0] <= x <= self.x[1] and self.y[0] <= y <= self.y[1]
         return ok and (h is None or self.h[0] <= h <= self.h[1])
-
 
 
 # --------------------------------------------------------------------------------------- comms
@@ -285,10 +273,10 @@ def _checkpoint_exists(value: str | None, what: str) -> str | None:
     try:
         exists = Path(value).is_file()
     except OSError as exc:  # e.g. a name longer than the file system allows
-        raise ValueError(f"cannot look up {_short(value)} ({exc.strerror})") from None
+        raise ValueError(f"cannot look up {short_value(value)} ({exc.strerror})") from None
     if not exists:
         raise ValueError(
-            f"{_printable(value, 200)}: no such file; give the model.pt written by `uavxai "
+            f"{printable(value, 200)}: no such file; give the model.pt written by `uavxai "
             "train` (relative paths are taken from the scenario file's folder), or null for the "
             "shipped model"
         )
@@ -902,59 +890,6 @@ def clock_ticks(dynamics: DynamicsConfig, avoidance: Avoidance) -> tuple[int, in
     return sample, decision, lag
 
 
-@cache
-def _autopilot(name: str) -> tuple[dict[str, float], dict[str, float]]:
-    """The aircraft's autopilot as its XML declares it, read without starting JSBSim (so that
-    validation stays cheap): the initial values of its ``<property value=...>`` and the gains
-    of its ``<pure_gain>`` components, by name."""
-    values: dict[str, float] = {}
-    gains: dict[str, float] = {}
-    for xml in sorted((aircraft_dir() / name).rglob("*.xml")):
-        try:
-            root = ET.parse(xml).getroot()
-        except (ET.ParseError, OSError):
-            continue
-        for prop in root.iter("property"):
-            if "value" in prop.attrib:
-                values[(prop.text or "").strip()] = float(prop.attrib["value"])
-        for el in root.iter("pure_gain"):
-            gain = el.find("gain")
-            text = "" if gain is None else (gain.text or "").strip()
-            with contextlib.suppress(ValueError):  # a gain may be a property: not a constant
-                gains[el.get("name", "")] = float(text)
-    return values, gains
-
-
-def aircraft_speed_range(name: str) -> tuple[float, float]:
-    """The airspeeds (m/s) the aircraft's autopilot accepts: the initial values of
-    ``ap/speed-min-mps`` and ``ap/speed-max-mps`` in its XML, which JSBSim loads and
-    :attr:`uavxai.dynamics.aircraft.Aircraft.speed_range` reads back (a test checks both
-    agree). An aircraft without them: no limit known beyond the schema."""
-    values, _ = _autopilot(name)
-    if "ap/speed-min-mps" not in values or "ap/speed-max-mps" not in values:
-        return 0.0, math.inf
-    return values["ap/speed-min-mps"], values["ap/speed-max-mps"]
-
-
-def aircraft_height_loop(name: str) -> tuple[float, float]:
-    """(gain 1/s, climb-rate limit m/s) of the aircraft autopilot's height loop: the climb-rate
-    demand is gain x (height target - height), clipped to +-limit (the gain of its
-    ``ap/climb-rate-cmd-mps`` and the initial value of ``ap/climb-rate-limit-mps`` in its XML).
-    An aircraft without them: (0.2, 2.5), the values of ours."""
-    values, gains = _autopilot(name)
-    return gains.get("ap/climb-rate-cmd-mps", 0.2), values.get("ap/climb-rate-limit-mps", 2.5)
-
-
-def aircraft_roll_rate_deg_s(name: str) -> float:
-    """The roll-rate limit (deg/s) of the aircraft's autopilot, ``ap/roll-rate-limit-rad_sec``
-    in its XML, to a thousandth of a degree (the XML writes 30 deg/s as 0.5236 rad/s). An
-    aircraft without it: 30, the value of ours."""
-    values, _ = _autopilot(name)
-    rate = values.get("ap/roll-rate-limit-rad_sec")
-    return 30.0 if rate is None else round(math.degrees(rate), 3)
-
-
-# ----------------------------------------------------------------------------------- loading
 def check_mavlink_url(url: str) -> str:
     """Check the form of a pymavlink connection string (the bridge's rule, one place)."""
     from uavxai.link_url import check_link
@@ -964,307 +899,3 @@ def check_mavlink_url(url: str) -> str:
     except UserError as exc:
         raise ValueError(str(exc)) from None
     return url
-
-
-def _allowed_keys(model: type[BaseModel], loc: tuple[Any, ...]) -> list[str]:
-    """The valid keys of the sub-model addressed by a validation error's location."""
-    current: Any = model
-    for part in loc[:-1]:
-        if isinstance(part, int):
-            continue
-        field = getattr(current, "model_fields", {}).get(part)
-        if field is None:
-            return []
-        ann = field.annotation
-        current = _first_model(ann)
-        if current is None:
-            return []
-    return list(getattr(current, "model_fields", {}))
-
-
-def _first_model(ann: Any) -> type[BaseModel] | None:
-    if isinstance(ann, type) and issubclass(ann, BaseModel):
-        return ann
-    for arg in getattr(ann, "__args__", ()) or ():
-        found = _first_model(arg)
-        if found is not None:
-            return found
-    return None
-
-
-def _short(value: Any) -> str:
-    """A bounded repr (:func:`uavxai.errors.short_repr`); a mapping is named, not shown."""
-    if isinstance(value, dict):
-        return "a mapping"
-    shown = short_repr(value)
-    return shown if len(shown) <= 80 else shown[:77] + "..."
-
-
-def _printable(text: str, limit: int = 120) -> str:
-    """``text`` with control characters escaped (no raw ANSI escapes reach the terminal),
-    cut to ``limit`` characters."""
-    text = text[: limit * 4]
-    clean = "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
-    return clean if len(clean) <= limit else clean[: limit - 3] + "..."
-
-
-def _describe(err: dict[str, Any]) -> str:
-    loc = _printable(".".join(str(p) for p in err["loc"]))
-    kind = err["type"]
-    value = err.get("input")
-    if kind == "extra_forbidden":
-        key = str(err["loc"][-1])
-        allowed = _allowed_keys(Scenario, err["loc"])
-        near = difflib.get_close_matches(key[:100], allowed, n=1, cutoff=0.5)
-        hint = f" Did you mean '{near[0]}'?" if near else ""
-        return f"'{loc}': unknown key.{hint} Allowed here: {', '.join(allowed)}."
-    if kind == "missing":
-        return f"'{loc}': required but missing."
-    msg = _printable(err["msg"].removeprefix("Value error, "), 400)
-    if not loc:
-        return f"{msg}."
-    return f"'{loc}' = {_short(value)}: {msg}."
-
-
-def parse_scenario(data: Any, source: str = "<scenario>") -> Scenario:
-    """Validate already-parsed YAML data."""
-    if not isinstance(data, dict):
-        kind = type(data).__name__ if data is not None else "an empty document"
-        raise ScenarioError(
-            f"{source}: a scenario must be a YAML mapping of keys (name, world, comms, ...), "
-            f"got {kind}. See {REFERENCE}."
-        )
-    try:
-        return Scenario.model_validate(data)
-    except ValidationError as exc:
-        errors = exc.errors()
-        lines = [_describe(e) for e in errors[:10]]
-        if len(errors) > 10:
-            lines.append(f"... and {len(errors) - 10} more")
-        n = len(errors)
-        cross = [e for e in errors if e.get("type") == "value_error" and not e.get("loc")]
-        later = (
-            "" if cross or n == 0 else
-            "\nThe checks across fields (world bounds, airspeeds, timing, wind, orbit, sensors) "
-            "run once these are fixed and may find more."
-        )  # fmt: skip
-        raise ScenarioError(
-            f"{source}: invalid scenario ({n} problem{'s' if n > 1 else ''}):\n  "
-            + "\n  ".join(lines)
-            + later
-            + f"\nSee the scenario reference {REFERENCE} (units: m, s; *_deg in degrees)."
-        ) from None
-    except RecursionError:  # data built in Python, not by load_scenario's bounded loader
-        raise ScenarioError(f"{source}: the scenario is nested too deeply.") from None
-
-
-# ------------------------------------------------------------------------------ bounded YAML
-MAX_FILE_BYTES = 256_000  # a scenario with 500 listed intruders is about 40 kB
-MAX_DEPTH = 32  # the schema nests 4 deep; lists of lists add 2
-MAX_NODES = 20_000  # with aliases expanded; 500 listed intruders are about 6,600
-
-
-class _BoundedLoader(yaml.SafeLoader):
-    """PyYAML's safe loader, bounded: nesting depth, node count with every alias expanded,
-    integer length; duplicate keys are an error (PyYAML keeps the last one silently)."""
-
-    def __init__(self, stream: str) -> None:
-        super().__init__(stream)
-        self._depth = 0
-        self._nodes = 0
-
-    def compose_node(self, parent: Any, index: Any) -> Any:  # noqa: D102
-        self._depth += 1
-        self._nodes += 1
-        if self._depth > MAX_DEPTH:
-            raise yaml.constructor.ConstructorError(
-                None, None, f"nested deeper than {MAX_DEPTH} levels", self.peek_event().start_mark
-            )
-        if self._nodes > MAX_NODES:
-            raise yaml.constructor.ConstructorError(
-                None, None, f"more than {MAX_NODES} values", self.peek_event().start_mark
-            )
-        try:
-            return super().compose_node(parent, index)
-        finally:
-            self._depth -= 1
-
-    def construct_mapping(self, node: Any, deep: bool = False) -> Any:  # noqa: D102
-        if isinstance(node, yaml.MappingNode):
-            seen: set[Any] = set()
-            for key_node, _ in node.value:
-                if key_node.tag == "tag:yaml.org,2002:merge" or not isinstance(
-                    key_node, yaml.ScalarNode
-                ):
-                    continue
-                key = key_node.value
-                if key in seen:
-                    raise yaml.constructor.ConstructorError(
-                        "while reading a mapping",
-                        node.start_mark,
-                        f"duplicate key '{_short(key)[1:-1]}' (YAML keeps only one: give it once)",
-                        key_node.start_mark,
-                    )
-                seen.add(key)
-        return super().construct_mapping(node, deep=deep)
-
-    def construct_yaml_int(self, node: Any) -> int:  # noqa: D102
-        if len(node.value) > 40:
-            raise yaml.constructor.ConstructorError(
-                None, None, f"an integer of {len(node.value)} characters is too large",
-                node.start_mark,
-            )
-        return super().construct_yaml_int(node)
-
-
-_BoundedLoader.add_constructor("tag:yaml.org,2002:int", _BoundedLoader.construct_yaml_int)
-
-
-# YAML 1.2 reads 1e3 and 2.5E-4 as numbers; PyYAML (YAML 1.1) wants a dot and a signed
-# exponent (1.0e+3) and otherwise gives text, which the strict schema refuses. Read them as
-# numbers here, as a user means them; quoted ('1e3') they stay text.
-_BoundedLoader.add_implicit_resolver(
-    "tag:yaml.org,2002:float",
-    re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9_]+)[eE][-+]?[0-9]+$"),
-    list("-+0123456789."),
-)
-
-
-class _CycleError(Exception):
-    def __init__(self, mark: Any) -> None:
-        self.mark = mark
-
-
-def _expanded_size(root: Any) -> int:
-    """Number of nodes of the composed document with every alias expanded, stopping as soon as
-    it passes MAX_NODES (the "billion laughs" file: 400 bytes, 10^9 nodes once expanded)."""
-    memo: dict[int, int] = {}
-
-    def size(node: Any) -> int:
-        key = id(node)
-        if key in memo:
-            if memo[key] < 0:
-                raise _CycleError(node.start_mark)
-            return memo[key]
-        memo[key] = -1  # being counted: meeting it again inside itself is a cycle
-        total = 1
-        if isinstance(node, yaml.SequenceNode):
-            for child in node.value:
-                total += size(child)
-                if total > MAX_NODES:
-                    break
-        elif isinstance(node, yaml.MappingNode):
-            for k, v in node.value:
-                total += size(k) + size(v)
-                if total > MAX_NODES:
-                    break
-        memo[key] = total
-        return total
-
-    return size(root)
-
-
-def safe_yaml(text: str, source: str) -> Any:
-    """Parse untrusted YAML text within bounded time and memory; :class:`ScenarioError`
-    naming ``source`` and the line on any problem."""
-    if len(text) > MAX_FILE_BYTES:
-        raise ScenarioError(
-            f"{source}: {len(text)} characters is too large for a scenario file (at most "
-            f"{MAX_FILE_BYTES}); see {REFERENCE}."
-        )
-    loader = None
-    try:
-        loader = _BoundedLoader(text)  # its reader checks the characters already
-        root = loader.get_single_node()
-        if root is None:
-            return None
-        if _expanded_size(root) > MAX_NODES:
-            raise ScenarioError(
-                f"{source}: with its aliases (*name) expanded the file holds more than "
-                f"{MAX_NODES} values; a scenario needs far fewer. Write the values out or "
-                "use fewer nested aliases."
-            )
-        return loader.construct_document(root)
-    except _CycleError as cycle:
-        raise ScenarioError(
-            f"{source}: not valid YAML at line {cycle.mark.line + 1}: an alias (*name) refers to "
-            "the mapping or list that contains it, which never ends."
-        ) from None
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
-        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
-        raise ScenarioError(f"{source}: not valid YAML{where}: {problem}.") from None
-    except (ValueError, OverflowError, RecursionError) as exc:  # e.g. int('1' * 5000)
-        raise ScenarioError(
-            f"{source}: not a readable scenario ({type(exc).__name__}: {_short(str(exc))})."
-        ) from None
-    finally:
-        if loader is not None:
-            loader.dispose()
-
-
-def _absolute_paths(data: Any, folder: Path) -> Any:
-    """Relative checkpoint paths resolve against the scenario file's folder, here, once, so
-    that every process (local workers, Ray workers) sees the same absolute path."""
-    if not isinstance(data, dict):
-        return data
-    for section in ("service", "avoidance"):
-        sub = data.get(section)
-        if isinstance(sub, dict):
-            ckpt = sub.get("checkpoint")
-            if isinstance(ckpt, str) and ckpt and "\x00" not in ckpt:
-                try:
-                    path = Path(ckpt).expanduser()
-                except RuntimeError:  # ~user that does not exist: reported as no such file
-                    path = Path(ckpt)
-                if not path.is_absolute():
-                    path = folder / path
-                data = {**data, section: {**sub, "checkpoint": str(path)}}
-    return data
-
-
-# UTF-8 takes at most 4 bytes a character: a file of more bytes has too many characters.
-MAX_READ_BYTES = 4 * MAX_FILE_BYTES
-
-
-def _too_large(p: Path, size: str) -> ScenarioError:
-    return ScenarioError(
-        f"{p}: {size} is too large for a scenario file (at most {MAX_FILE_BYTES} characters); "
-        f"see {REFERENCE}."
-    )
-
-
-def read_scenario_text(p: Path) -> str:
-    """A scenario file's text, never reading more than :data:`MAX_READ_BYTES` + 1 bytes: a
-    file is refused by its size (stat) before a byte is read, and the read itself is bounded
-    (a file that grows meanwhile)."""
-    try:
-        with p.open("rb") as f:
-            st = os.fstat(f.fileno())
-            if stat.S_ISREG(st.st_mode) and st.st_size > MAX_READ_BYTES:
-                raise _too_large(p, f"{st.st_size} bytes")
-            raw = f.read(MAX_READ_BYTES + 1)
-    except OSError as exc:
-        raise ScenarioError(f"{p}: cannot read the scenario file ({exc}).") from None
-    if len(raw) > MAX_READ_BYTES:
-        raise _too_large(p, f"more than {MAX_READ_BYTES} bytes")
-    try:
-        return raw.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise ScenarioError(f"{p}: cannot read the scenario file ({exc}).") from None
-
-
-def load_scenario(path: str | Path) -> Scenario:
-    """Read and validate a scenario YAML file; raises :class:`ScenarioError` on any problem.
-
-    ``path`` may also be the name of a shipped scenario (``demo``, ``head_on``, ...)."""
-    p = resolve_scenario(path)
-    text = read_scenario_text(p)
-    data = safe_yaml(text, str(p))
-    return parse_scenario(_absolute_paths(data, p.resolve().parent), str(p))
-
-
-def default_scenario(name: str = "demo", **overrides: Any) -> Scenario:
-    """A scenario with every default, for tests and library users."""
-    return parse_scenario({"name": name, **overrides})

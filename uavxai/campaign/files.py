@@ -1,0 +1,181 @@
+"""A campaign's files: the columns of ``episodes.csv`` and ``results.csv``, a CSV written whole,
+and a source campaign's rows read back and checked (for ``uavxai merge``).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+
+from uavxai.errors import UserError
+from uavxai.outputs import csv_cell, write_output
+from uavxai.vocabulary import OUTCOMES, avoidance_planners
+
+RESULT_COLUMNS = (
+    "method",
+    "intruders",
+    "episodes",
+    "goal_rate",
+    "collision_rate",
+    "timeout_rate",
+    "mean_steps",
+    "mean_min_separation_m",
+    "decision_ms_p50",
+    "out_of_bounds_rate",
+    "fdm_failure_rate",
+    "nmac_rate",
+    "nmac_rate_lo",
+    "nmac_rate_hi",
+    "collision_rate_lo",
+    "collision_rate_hi",
+    "risk_ratio",
+    "risk_ratio_lo",
+    "risk_ratio_hi",
+    "collision_risk_ratio",
+    "collision_risk_ratio_lo",
+    "collision_risk_ratio_hi",
+)
+EPISODE_COLUMNS = (
+    "method",
+    "intruders",
+    "episode",
+    "seed",
+    "outcome",
+    "steps",
+    "min_separation_m",
+    "flight_time_s",
+    "decision_ms_p50",
+    "nmac",
+    # The campaign's goal: one per campaign, written on every row so that pooled campaigns
+    # (merge_campaigns) can check they flew the same encounters.
+    "goal_x",
+    "goal_y",
+    "goal_h",
+)
+GOAL_COLUMNS = EPISODE_COLUMNS[-3:]
+# Encounter campaigns (a scenario with `encounters`; docs/daa-metrics.md) add these:
+# per episode (uavxai.sim.encounter), and per method the weighted DAA estimates of
+# uavxai.daa_metrics.daa_summary against `none` on the same encounters.
+ENCOUNTER_COLUMNS = ("weight", "hmd_m", "vmd_m", "lowc", "alert", "manoeuvre", "reversals")
+# How each episode was flown (uavxai.sim.flight_quality), after the goal's columns; results
+# gain their median / means. Files written before they existed are merged with them empty.
+FLIGHT_COLUMNS = ("path_excess", "reversals_per_min", "bank_over_25_s")
+FLIGHT_RESULTS = ("median_path_excess", "mean_reversals_per_min", "mean_bank_over_25_s")
+DAA_RATES = (
+    "nmac_prob", "nmac_risk_ratio", "induced_risk_ratio", "lowc_prob", "lowc_ratio",
+    "alert_rate", "unnecessary_manoeuvre_rate",
+)
+DAA_COLUMNS = (
+    *(f"{k}{end}" for k in DAA_RATES for end in ("", "_lo", "_hi")),
+    "ci_check", "mean_reversals", "mean_path_excess",
+)
+# The columns whose values depend on the machine, not on the seed.
+TIMING_COLUMNS = ("decision_ms_p50",)
+
+
+def is_encounter_row(r: dict) -> bool:
+    """A row of an encounter campaign (it has a weight)."""
+    return str(r.get("weight", "")) != ""
+
+
+def columns_of(rows: Sequence[dict]) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """The (episodes.csv, results.csv) columns of a campaign's rows: with the encounter
+    columns when every row is an encounter's."""
+    if rows and all(is_encounter_row(r) for r in rows):
+        return (EPISODE_COLUMNS + FLIGHT_COLUMNS + ENCOUNTER_COLUMNS,
+                RESULT_COLUMNS + FLIGHT_RESULTS + DAA_COLUMNS)  # fmt: skip
+    return EPISODE_COLUMNS + FLIGHT_COLUMNS, RESULT_COLUMNS + FLIGHT_RESULTS
+
+
+def write_csv(path: Path, columns: Sequence[str], rows: Iterable[dict]) -> None:
+    """A CSV file written whole (temporary file + rename, never through a link); text cells a
+    spreadsheet would run as a formula are made inert (:func:`uavxai.outputs.csv_cell`)."""
+    buf = io.StringIO(newline="")
+    w = csv.writer(buf)
+    w.writerow(columns)
+    for r in rows:
+        w.writerow([csv_cell(_cell(r[c])) for c in columns])
+    write_output(path, buf.getvalue())
+
+
+def _cell(v):
+    if isinstance(v, float):
+        if math.isnan(v):
+            return ""  # not defined (e.g. a risk ratio without `none` flown)
+        return f"{v:.6g}" if math.isfinite(v) else ("inf" if v > 0 else "-inf")
+    return v
+
+
+MAX_STEPS = 10**7  # decisions in one episode: far beyond any scenario's max_steps
+MAX_SEED = 2**31 - 1
+MAX_INTRUDERS = 10_000
+
+
+def checked_row(r: dict, path: Path, line: int) -> dict:
+    """One ``episodes.csv`` row of a source campaign, every value within what a campaign
+    writes, typed (so that the merged files hold numbers, not the source's text)."""
+
+    def bad(column: str, allowed: str) -> UserError:
+        value = str(r.get(column))
+        shown = value if len(value) <= 40 else value[:37] + "..."
+        return UserError(
+            f"{path} line {line}: {column} {shown!r} is not allowed; {column} must be {allowed}. "
+            "The file was not written by `uavxai evaluate` as it stands."
+        )
+
+    def number(column: str, lo: float, hi: float, allowed: str, empty=None, whole=False):
+        text = (r.get(column) or "").strip()
+        if text == "" and empty is not None:
+            return empty
+        try:
+            v = float(text)
+        except ValueError:
+            raise bad(column, allowed) from None
+        if math.isnan(v) or not lo <= v <= hi or (whole and v != int(v)):
+            raise bad(column, allowed)
+        return int(v) if whole else v
+
+    out = dict(r)
+    if r.get("method") not in avoidance_planners():
+        raise bad("method", f"a planner name, one of {', '.join(avoidance_planners())}")
+    if r.get("outcome") not in OUTCOMES:
+        raise bad("outcome", f"one of {', '.join(OUTCOMES)}")
+    out["intruders"] = number("intruders", 0, MAX_INTRUDERS,
+                              f"a whole number from 0 to {MAX_INTRUDERS}", whole=True)  # fmt: skip
+    out["episode"] = number("episode", 0, MAX_SEED, "a whole number >= 0", whole=True)
+    out["seed"] = number("seed", 0, MAX_SEED, f"a whole number from 0 to {MAX_SEED}", whole=True)
+    out["steps"] = number("steps", 0, MAX_STEPS, f"a whole number from 0 to {MAX_STEPS}",
+                          whole=True)  # fmt: skip
+    out["min_separation_m"] = number(
+        "min_separation_m", 0, math.inf, "a distance >= 0 in metres ('inf': no intruder)"
+    )
+    out["flight_time_s"] = number("flight_time_s", 0, 1e9, "a time >= 0 in seconds")
+    out["nmac"] = number("nmac", 0, 1, "0 or 1", whole=True)
+    out["decision_ms_p50"] = number(
+        "decision_ms_p50", 0, 1e9, "a time >= 0 in milliseconds, or empty", empty=math.nan
+    )
+    for column in GOAL_COLUMNS:  # files written before the goal was recorded lack it
+        out[column] = number(column, -1e7, 1e7, "a coordinate in metres, or empty", empty="")
+    return out
+
+
+def read_rows(path: Path, columns: Sequence[str]) -> list[dict]:
+    """A campaign file's rows, refused with a clear message if it is not one."""
+    if not path.is_file():
+        raise UserError(f"{path}: no such file; is {path.parent} a campaign folder?")
+    try:
+        with path.open(newline="") as f:
+            reader = csv.DictReader(f)
+            rows = list(reader)
+            missing = [c for c in columns if c not in (reader.fieldnames or ())]
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise UserError(f"{path}: cannot read it as a campaign file ({exc}).") from None
+    if missing:
+        raise UserError(
+            f"{path}: not a campaign file of this uavxai, it lacks the columns "
+            f"{', '.join(missing)}."
+        )
+    return rows

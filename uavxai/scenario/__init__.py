@@ -1,0 +1,148 @@
+"""Scenario files: the typed schema, its defaults, and friendly validation errors.
+
+The reference of every key (default, unit, allowed values) is docs/scenario.md; a test checks
+that it names every key of these models. Every model forbids unknown keys; a misspelt key is
+reported with the nearest valid one. Units are SI; only fields ending in ``_deg`` are degrees.
+
+Scenario files are untrusted input: the YAML loader bounds the file size, the nesting depth and
+the node count with aliases expanded (a few hundred bytes of nested anchors would otherwise
+expand to gigabytes), refuses duplicate keys, and every number the schema accepts is finite and
+bounded, so that a bad file ends in :class:`ScenarioError` within milliseconds.
+
+The package, one job a module (the layers, top first, are checked by import-linter):
+
+- ``loader``: a file read as untrusted input (bounded size, bounded YAML) and validated;
+- ``schema``: the typed models, their checks across fields, the clock's timing rule;
+- ``messages``: what a user reads about a bad scenario (validation errors as sentences);
+- ``aircraft``: the aircraft's limits read from its JSBSim XML.
+"""
+
+from uavxai.errors import ScenarioError
+from uavxai.scenario.aircraft import (
+    aircraft_height_loop,
+    aircraft_roll_rate_deg_s,
+    aircraft_speed_range,
+)
+from uavxai.scenario.loader import (
+    MAX_DEPTH,
+    MAX_FILE_BYTES,
+    MAX_NODES,
+    MAX_READ_BYTES,
+    default_scenario,
+    load_scenario,
+    parse_scenario,
+    read_scenario_text,
+    safe_yaml,
+)
+from uavxai.scenario.messages import (
+    REFERENCE,
+)
+from uavxai.scenario.schema import (
+    ENCOUNTER_AIRCRAFT,
+    MAX_HEIGHT_M,
+    MAX_INTRUDERS,
+    MAX_M,
+    MAX_USERS,
+    NMAC,
+    OPERATOR_MODES,
+    AircraftName,
+    Avoidance,
+    Bridge,
+    Comms,
+    DynamicsConfig,
+    Encounters,
+    Environment,
+    Finite,
+    GroundStation,
+    IntruderList,
+    Intruders,
+    IntruderSpec,
+    Log,
+    MCTSConfig,
+    Mission,
+    Mobility,
+    Operator,
+    OperatorCommandSpec,
+    OrbitAim,
+    Origin,
+    Ownship,
+    PauseS,
+    PositiveFloat,
+    Probability,
+    Region,
+    Scenario,
+    Sensor,
+    Service,
+    Start,
+    Surveillance,
+    Users,
+    WalkSpeed,
+    WellClear,
+    Wind,
+    World,
+    check_mavlink_url,
+    check_slug,
+    clock_ticks,
+)
+
+__all__ = [
+    "AircraftName",
+    "Avoidance",
+    "Bridge",
+    "Comms",
+    "DynamicsConfig",
+    "ENCOUNTER_AIRCRAFT",
+    "Encounters",
+    "Environment",
+    "Finite",
+    "GroundStation",
+    "IntruderList",
+    "IntruderSpec",
+    "Intruders",
+    "Log",
+    "MAX_DEPTH",
+    "MAX_FILE_BYTES",
+    "MAX_HEIGHT_M",
+    "MAX_INTRUDERS",
+    "MAX_M",
+    "MAX_NODES",
+    "MAX_READ_BYTES",
+    "MAX_USERS",
+    "MCTSConfig",
+    "Mission",
+    "Mobility",
+    "NMAC",
+    "OPERATOR_MODES",
+    "Operator",
+    "OperatorCommandSpec",
+    "OrbitAim",
+    "Origin",
+    "Ownship",
+    "PauseS",
+    "PositiveFloat",
+    "Probability",
+    "REFERENCE",
+    "Region",
+    "Scenario",
+    "ScenarioError",
+    "Sensor",
+    "Service",
+    "Start",
+    "Surveillance",
+    "Users",
+    "WalkSpeed",
+    "WellClear",
+    "Wind",
+    "World",
+    "aircraft_height_loop",
+    "aircraft_roll_rate_deg_s",
+    "aircraft_speed_range",
+    "check_mavlink_url",
+    "check_slug",
+    "clock_ticks",
+    "default_scenario",
+    "load_scenario",
+    "parse_scenario",
+    "read_scenario_text",
+    "safe_yaml",
+]
