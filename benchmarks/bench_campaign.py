@@ -13,8 +13,9 @@ import time
 
 import torch
 
-from uavxai.campaign import METHODS, run_campaign, run_campaign_episode
+from uavxai.campaign import run_campaign, run_campaign_episode
 from uavxai.scenario import default_scenario
+from uavxai.vocabulary import avoidance_planners
 
 
 def main() -> None:
@@ -26,7 +27,7 @@ def main() -> None:
     sc = default_scenario("bench-campaign")
     print(f"kinematic episodes at {args.intruders} intruders, seeds 0..{args.episodes - 1}")
     print(f"{'method':>11} {'s/episode':>10} {'steps':>7} {'ms/decision p50':>16}")
-    for method in METHODS:
+    for method in avoidance_planners():
         run_campaign_episode(sc, method, args.intruders, 0)  # load and warm up
         t0 = time.perf_counter()
         rows = [run_campaign_episode(sc, method, args.intruders, s) for s in range(args.episodes)]
