@@ -241,6 +241,8 @@ def test_fly_end_and_the_batch_memo_give_flys_bits():
         again = warm.fly_commanded(states, cmd, 1.0)
         for a, b in zip(again, once, strict=True):
             np.testing.assert_array_equal(a, b)
+        np.testing.assert_array_equal(warm.fly_commanded(states, cmd, 1.0, samples=False)[1],
+                                      once[1])  # fmt: skip
     # a different speed band is a different motion: the memo must not answer for it
     warm.hold_speed_band((23.5, 30.0))
     banded = EncounterModel(cfg)

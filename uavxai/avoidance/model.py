@@ -750,12 +750,13 @@ class EncounterModel:
         return self._memo[key]
 
     def fly_commanded(
-        self, states: np.ndarray, bank_cmd: np.ndarray, duration: float
-    ) -> tuple[np.ndarray, np.ndarray]:
+        self, states: np.ndarray, bank_cmd: np.ndarray, duration: float, *, samples: bool = True
+    ) -> tuple[np.ndarray | None, np.ndarray]:
         """Fly ``states`` (B, 7) for ``duration`` with the bank commanded straight to
         ``bank_cmd`` (B,) (clamped to the limit), speed and altitude held, in the wind: how
         the other aircraft fly. Returns the (n+1, B, 3) positions at the sub-step instants
-        (a Track's layout) and the (B, 7) end states. No event checks."""
+        (a Track's layout; None with ``samples=False``, for a caller that only moves the
+        aircraft on) and the (B, 7) end states. No event checks."""
         n = self.substeps(duration)
         hold = np.full(len(states), 4)  # hold bank, hold speed: the command is bank_cmd itself
         body = self._body(states[:, V], states[:, PHI], bank_cmd, hold, duration, n)
@@ -765,6 +766,8 @@ class EncounterModel:
             + self.drift(duration, n)
         )
         end = self._end(xy[:, -1], states[:, H], states[:, PSI], body)
+        if not samples:
+            return None, end
         pos = np.stack([xy.real.T, xy.imag.T, np.broadcast_to(states[:, H], xy.T.shape)], axis=-1)
         return pos, end
 

@@ -129,7 +129,7 @@ class KinematicWorld(ScheduledWorld):
         self._vh = (float(self._own[2]) - h0) / duration
         if len(self._traffic):
             _, self._traffic = model.fly_commanded(
-                self._traffic, self._traffic[:, PHI_CMD], duration
+                self._traffic, self._traffic[:, PHI_CMD], duration, samples=False
             )
             climbing = np.isfinite(self._intruder_alt)
             if climbing.any():
