@@ -906,23 +906,16 @@ class EncounterModel:
         np.cumsum(climb_rate(v_m, cfg) * dt, axis=1, out=rise[:, 1:])
         template = np.zeros((len(v0), STATE_DIM))
         template[:, V], template[:, PHI], template[:, PHI_CMD] = v_end, phi_end, phi_cmd
-        rows = list(zip(z[:, -1].tolist(), psi[:, -1].tolist(), v_end.tolist(),
-                        phi_end.tolist(), phi_cmd.tolist(), strict=True))  # fmt: skip
-        rise_end = rise[:, -1].tolist()
-        table, kids = None, [()] * len(v0)
-        if memo:
-            table = np.stack([z[:, -1].real, z[:, -1].imag, psi[:, -1], v_end, phi_end, phi_cmd,
-                              rise[:, -1]], axis=1)  # fmt: skip
-            kids = motion_keys(v_end, phi_end, phi_cmd, duration)
-        # Per group: the circle holding its paths, the longest chord.
+        # What only a search asks of a memoised motion is left out of a world's step.
+        rows, rise_end, table, kids = [()] * len(v0), [()] * len(v0), None, [()] * len(v0)
+        ball, ball_r = [0j] * groups, [0.0] * groups
         size = len(v0) // groups
-        zg = z.reshape(groups, -1)
-        lo = zg.real.min(axis=1) + 1j * zg.imag.min(axis=1)
-        hi = zg.real.max(axis=1) + 1j * zg.imag.max(axis=1)
-        ball = 0.5 * (lo + hi)
-        ball_r = np.abs(zg - ball[:, None]).max(axis=1).tolist()
-        step_max = chord.reshape(groups, -1).max(axis=1).tolist()
-        ball, z_end = ball.tolist(), z[:, -1].copy()
+        if memo:
+            rows, rise_end, table, kids, ball, ball_r = _search_extras(
+                z, psi[:, -1], rise[:, -1], v_end, phi_end, phi_cmd, groups, duration
+            )
+        step_max = chord.reshape(groups, -1).max(axis=1).tolist()  # the longest chord
+        z_end = z[:, -1].copy()
         out = []
         for g in range(groups):
             part = slice(g * size, (g + 1) * size)
@@ -1071,6 +1064,23 @@ class EncounterModel:
             xy=xy,
             hs=hs,
         )
+
+
+def _search_extras(z, dpsi, rise_end, v_end, phi_end, phi_cmd, groups: int, duration: float):
+    """What a tree search asks of memoised body motions (rows ``z`` (B, n+1), the others
+    (B,)): per row its end in plain Python numbers, its rise, its table row (the compiled
+    search's) and its children's memo keys; per group of rows the circle holding its paths."""
+    rows = list(zip(z[:, -1].tolist(), dpsi.tolist(), v_end.tolist(), phi_end.tolist(),
+                    phi_cmd.tolist(), strict=True))  # fmt: skip
+    table = np.stack([z[:, -1].real, z[:, -1].imag, dpsi, v_end, phi_end, phi_cmd, rise_end],
+                     axis=1)  # fmt: skip
+    kids = motion_keys(v_end, phi_end, phi_cmd, duration)
+    zg = z.reshape(groups, -1)
+    lo = zg.real.min(axis=1) + 1j * zg.imag.min(axis=1)
+    hi = zg.real.max(axis=1) + 1j * zg.imag.max(axis=1)
+    centre = 0.5 * (lo + hi)
+    ball_r = np.abs(zg - centre[:, None]).max(axis=1).tolist()
+    return rows, rise_end.tolist(), table, kids, centre.tolist(), ball_r
 
 
 def _closest_approach(
