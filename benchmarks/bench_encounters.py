@@ -16,7 +16,8 @@ warm-up); ``--no-scaling`` measures the encounters only (the campaigns of the se
 Measured (issues 27 and 31, before / after the throughput work: fly_end, the batch memo,
 geometry.clip, the sampler's column; the same numbers to the bit), kinematic, seeds 1-10,
 the two trees interleaved at load 8-11 on 2 CPUs: CPU s per encounter `none` 0.728 / 0.480,
-`mcts_daa` 1.189 / 0.868, `mvp` 1.303 / 0.975.
+`mcts_daa` 1.189 / 0.868, `mvp` 1.303 / 0.975; JSBSim (4 encounters) `none` 1.179 / 1.250,
+`mcts_daa` 2.244 / 2.316 (unchanged within the noise: JSBSim's integration dominates).
 
 Prints numbers only; nothing is asserted. On a machine shared with other work the CPU times
 hold better than the wall times: the load is printed beside them.
