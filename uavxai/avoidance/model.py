@@ -248,7 +248,7 @@ class Track:
 
 
 _BATCH_MEMO = 4096  # EncounterModel._body's entries before it starts afresh ...
-_BATCH_CELLS = 1024  # ... each of at most this many rows x sample instants (bounded memory)
+_BATCH_CELLS = 256  # ... each of at most this many rows x sample instants: at most ~25 MB
 _INDEX_MIN = 6  # below this many intruders a plain distance test is as fast as the grid
 _NO_INTRUDERS = np.zeros(0, dtype=int)
 _NO_INTRUDERS.flags.writeable = False
