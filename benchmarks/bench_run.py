@@ -19,6 +19,10 @@ the period meanwhile) and with one (`--latency`, default 0.5 s: the search overl
 everyone's flight, as on a UAV whose companion computer plans beside the
 autopilot). `--profile FILE` writes a cProfile of one run for `python -m pstats FILE`.
 
+Measured (issue 31): 20 intruders, 30 s simulated, no latency, median of 5 at load 6 on 2
+CPUs (two campaigns running): run / plain JSBSim 1.00, run / bare world 0.94 (plain JSBSim
+itself at 0.6x real time: the machine was oversubscribed; measure again on a quiet one).
+
     .venv/bin/python benchmarks/bench_run.py [--intruders 20] [--steps 60] [--repeats 5] \
         [--latency 0.5]
 """
