@@ -63,7 +63,7 @@ from uavxai.avoidance.types import (
     SearchTree,
     check_plan_inputs,
 )
-from uavxai.geometry import clip, turn_rate_of_bank
+from uavxai.geometry import turn_rate_of_bank
 from uavxai.vocabulary import CLIMB, DESCEND
 
 _VALUE_OF = np.array(TERMINAL_VALUE)
@@ -201,7 +201,7 @@ def intruder_turn_rates(intruders: Sequence[Intruder], config: PlannerConfig) ->
     speed = np.maximum(np.hypot([i.vx for i in intruders], [i.vy for i in intruders]), 1.0)
     # a noisy estimate must not predict a turn tighter than a coordinated turn can be
     limit = turn_rate_of_bank(math.radians(config.intruder_bank_limit_deg), speed)
-    return clip(rate, -limit, limit)
+    return np.clip(rate, -limit, limit)
 
 
 def predict_levels(
