@@ -7,7 +7,17 @@ against 1 worker, measured in the same process. From these, the hours a campaign
 `--target` encounters per method takes on this machine.
 
     .venv/bin/python benchmarks/bench_encounters.py [--encounters 8] [--methods none,mcts_daa]
-        [--target 10000] [--ray]
+        [--dynamics kinematic,jsbsim] [--target 10000] [--ray] [--no-scaling]
+
+``--dynamics`` takes one or both (each measured in turn, in this process, after the other's
+warm-up); ``--no-scaling`` measures the encounters only (the campaigns of the second part fly
+2 x ``--encounters`` more of the first method and dynamics).
+
+Measured (issues 27 and 31, before / after the throughput work: fly_end, the batch memo,
+geometry.clip, the sampler's column; the same numbers to the bit), kinematic, seeds 1-10,
+the two trees interleaved at load 8-11 on 2 CPUs: CPU s per encounter `none` 0.728 / 0.480,
+`mcts_daa` 1.189 / 0.868, `mvp` 1.303 / 0.975; JSBSim (4 encounters) `none` 1.179 / 1.250,
+`mcts_daa` 2.244 / 2.316 (unchanged within the noise: JSBSim's integration dominates).
 
 Prints numbers only; nothing is asserted. On a machine shared with other work the CPU times
 hold better than the wall times: the load is printed beside them.
@@ -23,7 +33,7 @@ import torch
 
 from uavxai.campaign import run_campaign, run_campaign_episode
 from uavxai.paths import scenarios_dir
-from uavxai.scenario import load_scenario
+from uavxai.scenario import Scenario, load_scenario
 
 
 def per_encounter(scenario, method: str, seeds: range, dynamics: str) -> tuple[float, float]:
@@ -39,34 +49,44 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--encounters", type=int, default=8)
     ap.add_argument("--methods", default="none,mcts_daa,mcts_vertical,mvp")
-    ap.add_argument("--dynamics", default="kinematic", choices=("kinematic", "jsbsim"))
+    ap.add_argument("--dynamics", default="kinematic", help="kinematic, jsbsim or both, comma")
     ap.add_argument("--target", type=int, default=10_000)
     ap.add_argument("--ray", action="store_true", help="also a private Ray of 2 CPUs")
+    ap.add_argument("--no-scaling", action="store_true", help="no 1 / 2 worker campaigns")
     args = ap.parse_args()
+    dynamics = args.dynamics.split(",")
+    if any(d not in ("kinematic", "jsbsim") for d in dynamics):
+        ap.error(f"--dynamics {args.dynamics}: allowed kinematic, jsbsim or kinematic,jsbsim")
     torch.set_num_threads(1)
     sc = load_scenario(scenarios_dir() / "encounters.yaml")
     methods = args.methods.split(",")
     seeds = range(1, args.encounters + 1)
-    print(f"{args.dynamics} encounters of {sc.name}, seeds {seeds.start}..{seeds.stop - 1}; "
-          f"load {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs")  # fmt: skip
-    print(f"{'method':>14} {'CPU s/enc':>10} {'wall s/enc':>11} {'enc/core-h':>11} "
-          f"{'core-h for target':>18}")  # fmt: skip
-    for m in methods:
-        cpu, wall = per_encounter(sc, m, seeds, args.dynamics)
-        print(f"{m:>14} {cpu:10.3f} {wall:11.3f} {3600 / cpu:11.0f} "
-              f"{args.target * cpu / 3600:18.1f}")  # fmt: skip
+    for dyn in dynamics:
+        print(f"{dyn} encounters of {sc.name}, seeds {seeds.start}..{seeds.stop - 1}; "
+              f"load {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs")  # fmt: skip
+        print(f"{'method':>14} {'CPU s/enc':>10} {'wall s/enc':>11} {'enc/core-h':>11} "
+              f"{'core-h for target':>18}")  # fmt: skip
+        for m in methods:
+            cpu, wall = per_encounter(sc, m, seeds, dyn)
+            print(f"{m:>14} {cpu:10.3f} {wall:11.3f} {3600 / cpu:11.0f} "
+                  f"{args.target * cpu / 3600:18.1f}")  # fmt: skip
+    if not args.no_scaling:
+        scaling(sc, methods[0], dynamics[0], args.encounters * 2, args.ray)
 
+
+def scaling(sc: Scenario, method: str, dynamics: str, encounters: int, ray: bool) -> None:
+    """Wall time of one campaign on 1 and 2 local workers (and a private Ray)."""
     runs = [("1 worker", 1, None), ("2 workers", 2, None)]
-    if args.ray:
+    if ray:
         runs.append(("Ray, 2 CPUs", 2, "local"))
     base = None
-    for label, workers, ray in runs:
+    for label, workers, address in runs:
         t0 = time.perf_counter()
-        run_campaign(sc, methods[:1], [1], args.encounters * 2, dynamics=args.dynamics,
-                     workers=workers, ray_address=ray)  # fmt: skip
+        run_campaign(sc, [method], [1], encounters, dynamics=dynamics, workers=workers,
+                     ray_address=address)  # fmt: skip
         wall = time.perf_counter() - t0
         base = base or wall
-        print(f"campaign of {args.encounters * 2} {methods[0]} encounters, {label}: "
+        print(f"campaign of {encounters} {method} encounters, {label}: "
               f"{wall:.1f} s wall, speed-up {base / wall:.2f}; load "
               f"{os.getloadavg()[0]:.2f}")  # fmt: skip
 

@@ -3,18 +3,27 @@
 In one process, alternating so both see the same machine load:
 - `uavxai run` of a scenario with N intruders (default 20), MAVLink telemetry to a loopback
   UDP port and the rerun recording on, as the CLI flies it (service point given);
-- the bare world: a JSBSimWorld of the same aircraft (same seed) stepped for the same
-  simulated time, nothing else.
-Prints both real-time factors (the run's as it reports it: the episode loop, set-up not
-counted) and their ratio (goal: run >= 0.8 of the bare world), and the time spent in the
-planner's search. `uavxai run` always plans on a companion process (its own core). The run is
-measured twice: without a decision latency (`avoidance.decision_latency_s: 0`, the default
-and the paper's instant decision: the ownship waits for every search, while the world flies
-the intruders through the period meanwhile) and with one (`--latency`, default 0.5 s: the
-search overlaps everyone's flight, as on a UAV whose companion computer plans beside the
+- plain JSBSim (issue 31's baseline): the same aircraft (a JSBSimWorld's executives, same
+  seed, loaded and trimmed as the run loads them) stepped for the same simulated time by a
+  loop of ``FGFDMExec.run()`` calls, nothing else;
+- our bare world: that JSBSimWorld stepped (its intruders' pilots, its checks), no planner,
+  no surveillance, no files.
+Runs are interleaved (run, run with latency, plain, world; again) so all see the same machine
+load; each figure is the median of ``--repeats`` (5). Prints the real-time factors (the run's
+as it reports it: the episode loop, set-up not counted), the ratio run / plain JSBSim (goal
+>= 0.8) and run / bare world, and the time spent in the planner's search. `uavxai run`
+always plans on a companion process (its own core). The run is measured twice: without a
+decision latency (`avoidance.decision_latency_s: 0`, the default and the paper's instant
+decision: the ownship waits for every search, while the world flies the intruders through
+the period meanwhile) and with one (`--latency`, default 0.5 s: the search overlaps
+everyone's flight, as on a UAV whose companion computer plans beside the
 autopilot). `--profile FILE` writes a cProfile of one run for `python -m pstats FILE`.
 
-    .venv/bin/python benchmarks/bench_run.py [--intruders 20] [--steps 60] [--repeats 3] \
+Measured (issue 31): 20 intruders, 30 s simulated, no latency, median of 5 at load 6 on 2
+CPUs (two campaigns running): run / plain JSBSim 1.00, run / bare world 0.94 (plain JSBSim
+itself at 0.6x real time: the machine was oversubscribed; measure again on a quiet one).
+
+    .venv/bin/python benchmarks/bench_run.py [--intruders 20] [--steps 60] [--repeats 5] \
         [--latency 0.5]
 """
 
@@ -22,7 +31,9 @@ from __future__ import annotations
 
 import argparse
 import cProfile
+import os
 import socket
+import statistics
 import tempfile
 import time
 from pathlib import Path
@@ -42,12 +53,20 @@ def timed_run(sc, service, port: int) -> tuple[float, dict]:
         return time.perf_counter() - t0, summary
 
 
-def timed_bare(sc, sim_s: float) -> float:
+def timed_bare(sc, sim_s: float, plain: bool) -> float:
+    """Seconds to fly ``sim_s`` of the scenario's aircraft: ``plain``, a loop of their
+    executives' ``FGFDMExec.run()`` and nothing else; otherwise our world's ``step``."""
     world = JSBSimWorld(sc, seed=sc.seed)
     try:
         n = round(sim_s / world.dt)
+        runs = [a.fdm.run for a in world.aircraft]
         t0 = time.perf_counter()
-        world.step(n)
+        if plain:
+            for _ in range(n):
+                for run in runs:
+                    run()
+        else:
+            world.step(n)
         return time.perf_counter() - t0
     finally:
         world.close()
@@ -57,7 +76,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--intruders", type=int, default=20)
     ap.add_argument("--steps", type=int, default=60, help="decisions per run")
-    ap.add_argument("--repeats", type=int, default=3, help="best of this many")
+    ap.add_argument("--repeats", type=int, default=5, help="median of this many")
     ap.add_argument("--latency", type=float, default=0.5, help="the companion run's latency, s")
     ap.add_argument("--profile", type=Path, help="write a cProfile of one run here")
     args = ap.parse_args()
@@ -81,31 +100,37 @@ def main() -> None:
     sink.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 22)
     sink.bind(("127.0.0.1", 0))
     port = sink.getsockname()[1]
-    best = dict.fromkeys(runs, (float("inf"), 0.0, 0.0))  # loop s, planner s, set-up s
-    best_bare, sim_s = float("inf"), 0.0
+    # per run: (episode loop, planner, set-up) seconds of every repeat
+    loops: dict[str, list[tuple[float, float, float]]] = {k: [] for k in runs}
+    bare: dict[str, list[float]] = {"plain JSBSim (FGFDMExec.run loop)": [], "our bare world": []}
+    sim_s = 0.0
     for _ in range(args.repeats):
         for label, sc in runs.items():
             wall, summary = timed_run(sc, service, port)
             sim_s = summary["flight_time_s"]
             loop = sim_s / summary["sim_realtime_factor"]  # the episode loop, set-up excluded
             planner = summary["decision_ms"]["mean"] * summary["steps"] / 1000.0
-            best[label] = min(best[label], (loop, planner, wall - loop))
-        best_bare = min(best_bare, timed_bare(runs["no latency (default)"], sim_s))
+            loops[label].append((loop, planner, wall - loop))
+        for plain, label in zip((True, False), bare, strict=True):
+            bare[label].append(timed_bare(runs["no latency (default)"], sim_s, plain))
     if args.profile:
         sc = runs["no latency (default)"]
         cProfile.runctx(
             "timed_run(sc, service, port)", globals(), locals(), filename=str(args.profile)
         )
-    rtf_bare = sim_s / best_bare
-    print(
-        f"{args.intruders} intruders, {sim_s:.0f} s simulated, best of {args.repeats}\n"
-        f"  bare JSBSim world                      {best_bare:6.2f} s  {rtf_bare:6.1f}x real time"
-    )
-    for label, (loop, planner, setup) in best.items():
-        rtf = sim_s / loop
+    rtf = {label: sim_s / statistics.median(t) for label, t in bare.items()}
+    plain_rtf, world_rtf = rtf.values()
+    print(f"{args.intruders} intruders, {sim_s:.0f} s simulated, median of {args.repeats} "
+          f"interleaved; load {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs")  # fmt: skip
+    for label, t in bare.items():
+        print(f"  {label:<38} {statistics.median(t):6.2f} s  {rtf[label]:6.1f}x real time")
+    for label, rows in loops.items():
+        loop, planner, setup = (statistics.median(c) for c in zip(*rows, strict=True))
+        run_rtf = sim_s / loop
         print(
-            f"  uavxai run, {label:<28}{loop:6.2f} s  {rtf:6.1f}x real time  "
-            f"ratio run / bare {rtf / rtf_bare:.2f} (goal >= 0.8)\n"
+            f"  uavxai run, {label:<26} {loop:6.2f} s  {run_rtf:6.1f}x real time  ratio run / "
+            f"plain JSBSim {run_rtf / plain_rtf:.2f} (goal >= 0.8), run / bare world "
+            f"{run_rtf / world_rtf:.2f}\n"
             f"      planner {planner:.2f} s of search (on the companion's core); "
             f"set-up (aircraft loading, trim, files) {setup:.2f} s, not counted"
         )

@@ -218,6 +218,40 @@ def test_memo_does_not_change_results():
     np.testing.assert_array_equal(cold.end, warm.end)
 
 
+def test_fly_end_and_the_batch_memo_give_flys_bits():
+    """The kinematic world moves the ownship with fly_end and the traffic with
+    fly_commanded, asking the same batches again and again: the memoised answers and the
+    event-free end must be fly's own numbers, to the bit, whatever was asked before."""
+    cfg = PlannerConfig()
+    goal = np.array([1500.0, 1500.0, 140.0])
+    states = np.array([
+        ownship_state(Ownship(500.3, 700.1, 120.0, 19.37, 0.4, bank=0.1745, phi=0.05)),
+        ownship_state(Ownship(900.0, 100.0, 130.0, 24.0, 2.0, bank=-0.3, phi=-0.1)),
+    ])
+    actions = np.array([RIGHT_HOLD, SLOWER])
+    track = Track.of(np.zeros((3, 0, 3)))
+    fresh = EncounterModel(cfg).fly(states, actions, goal, 1.0, track, cull=False).end
+    warm = EncounterModel(cfg)
+    for _ in range(3):  # the second and third come from the memo
+        np.testing.assert_array_equal(warm.fly_end(states, actions, goal, 1.0), fresh)
+        np.testing.assert_array_equal(warm.fly(states, actions, goal, 1.0, track).end, fresh)
+    cmd = np.array([0.2, -0.4])
+    once = EncounterModel(cfg).fly_commanded(states, cmd, 1.0)
+    for _ in range(2):
+        again = warm.fly_commanded(states, cmd, 1.0)
+        for a, b in zip(again, once, strict=True):
+            np.testing.assert_array_equal(a, b)
+        np.testing.assert_array_equal(warm.fly_commanded(states, cmd, 1.0, samples=False)[1],
+                                      once[1])  # fmt: skip
+    # a different speed band is a different motion: the memo must not answer for it
+    warm.hold_speed_band((23.5, 30.0))
+    banded = EncounterModel(cfg)
+    banded.hold_speed_band((23.5, 30.0))
+    slowed = banded.fly_end(states, actions, goal, 1.0)
+    assert fresh[1, 3] < slowed[1, 3] == 23.5  # the band's floor stops the slowing
+    np.testing.assert_array_equal(warm.fly_end(states, actions, goal, 1.0), slowed)
+
+
 def test_children_placed_one_at_a_time_match_the_vectorised_placement():
     """The tree search places a child it goes on from in plain Python, and all of them at
     once when the tree is finished: both must be the state ``fly`` computes."""

@@ -55,7 +55,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from uavxai.avoidance.types import Ownship, PlannerConfig
-from uavxai.geometry import turn_positions, turn_rate_of_bank
+from uavxai.geometry import clip, turn_positions, turn_rate_of_bank
 from uavxai.vocabulary import ACTIONS, Outcome
 
 # Columns of a state row. VCMD: the vertical command of the vertical action set (+1 climb,
@@ -125,7 +125,7 @@ def ownship_air(own: Ownship, config: PlannerConfig) -> tuple[float, float]:
 def bank_command(current_cmd, action, cfg: PlannerConfig):
     """The bank command after ``action``: one step left/right of the current one, clamped."""
     lim = cfg.bank_limit_rad
-    return np.clip(current_cmd + _BANK_SIGN[action] * cfg.bank_step_rad, -lim, lim)
+    return clip(current_cmd + _BANK_SIGN[action] * cfg.bank_step_rad, -lim, lim)
 
 
 def accel_command(action, cfg: PlannerConfig):
@@ -136,14 +136,14 @@ def climb_rate(speed, cfg: PlannerConfig):
     """The fastest the ownship climbs at airspeed ``speed`` (array or number): the climb-rate
     limit, cut by the autopilot's speed priority (``PlannerConfig.climb_speed_band_mps``)."""
     lo, hi = (cfg.speed_mps[0] + b for b in cfg.climb_speed_band_mps)
-    return cfg.climb_rate_mps * np.clip((np.asarray(speed) - lo) / (hi - lo), 0.0, 1.0)
+    return cfg.climb_rate_mps * clip((np.asarray(speed) - lo) / (hi - lo), 0.0, 1.0)
 
 
 def vertical_command(current, action):
     """The vertical command after ``action``: climb and descend step it one place along
     (descend, the leg's height, climb), the paper's nine keep it, as bank actions step the
     bank command and hold keeps it."""
-    return np.clip(current + _CLIMB_SIGN[action], -1, 1)
+    return clip(current + _CLIMB_SIGN[action], -1, 1)
 
 
 # ---------------------------------------------------------------------------------- intruders
@@ -247,6 +247,8 @@ class Track:
         return np.flatnonzero(np.einsum("ij,ij->i", d, d) <= (distance + self.radius) ** 2)
 
 
+_BATCH_MEMO = 4096  # EncounterModel._body's entries before it starts afresh ...
+_BATCH_CELLS = 256  # ... each of at most this many rows x sample instants: at most ~25 MB
 _INDEX_MIN = 6  # below this many intruders a plain distance test is as fast as the grid
 _NO_INTRUDERS = np.zeros(0, dtype=int)
 _NO_INTRUDERS.flags.writeable = False
@@ -263,7 +265,7 @@ def manoeuvre_spread(
     several runs of times at once, (..., T, N), each kept non-decreasing on its own."""
     speed = np.maximum(np.hypot(vel[:, 0], vel[:, 1]), 1.0)
     w_max = turn_rate_of_bank(bank_limit_rad, speed)
-    w = np.clip(np.asarray(turn_rate, dtype=float), -w_max, w_max)
+    w = clip(np.asarray(turn_rate, dtype=float), -w_max, w_max)
     flat = np.ravel(t)
     nominal = turn_positions(np.zeros_like(vel), vel, flat, w)
     spread = np.zeros((flat.size, vel.shape[0]))
@@ -473,6 +475,7 @@ class EncounterModel:
         self.config = config
         self._roll = math.radians(config.roll_rate_limit_deg_s)
         self._memo: dict[tuple[float, float, float, float], _BodyMotion] = {}
+        self._batches: dict[tuple, _BodyMotion] = {}  # _body's memo, by its inputs' bits
         self._band: tuple[float, float] | None = None  # hold_speed_band
         self._substeps: dict[float, int] = {}
         # ground drift of the air the ownship flies in, x + iy m/s (see carry_ownship); the
@@ -503,6 +506,7 @@ class EncounterModel:
         if band != self._band:
             self._band = band
             self._memo.clear()
+            self._batches.clear()
 
     def carry_ownship(self, air: tuple[float, float]) -> None:
         """From now on the ownship's paths drift with ``air`` (east, north) m/s, the motion
@@ -693,7 +697,7 @@ class EncounterModel:
         if h_lo == h_hi:
             hs = np.full((1, n + 1), h)
         else:
-            hs = h + np.clip(np.array(heights)[:, None] - h, self._sink(duration, n), body.rise)
+            hs = h + clip(np.array(heights)[:, None] - h, self._sink(duration, n), body.rise)
         own_step = self._own_step(body, duration / n)
         seen = _Intruders.of(track, near)
         return placed, self._events(None, xy, hs, goal, seen, box, duration / n, own_step, False)
@@ -746,12 +750,13 @@ class EncounterModel:
         return self._memo[key]
 
     def fly_commanded(
-        self, states: np.ndarray, bank_cmd: np.ndarray, duration: float
-    ) -> tuple[np.ndarray, np.ndarray]:
+        self, states: np.ndarray, bank_cmd: np.ndarray, duration: float, *, samples: bool = True
+    ) -> tuple[np.ndarray | None, np.ndarray]:
         """Fly ``states`` (B, 7) for ``duration`` with the bank commanded straight to
         ``bank_cmd`` (B,) (clamped to the limit), speed and altitude held, in the wind: how
         the other aircraft fly. Returns the (n+1, B, 3) positions at the sub-step instants
-        (a Track's layout) and the (B, 7) end states. No event checks."""
+        (a Track's layout; None with ``samples=False``, for a caller that only moves the
+        aircraft on) and the (B, 7) end states. No event checks."""
         n = self.substeps(duration)
         hold = np.full(len(states), 4)  # hold bank, hold speed: the command is bank_cmd itself
         body = self._body(states[:, V], states[:, PHI], bank_cmd, hold, duration, n)
@@ -761,11 +766,32 @@ class EncounterModel:
             + self.drift(duration, n)
         )
         end = self._end(xy[:, -1], states[:, H], states[:, PSI], body)
+        if not samples:
+            return None, end
         pos = np.stack([xy.real.T, xy.imag.T, np.broadcast_to(states[:, H], xy.T.shape)], axis=-1)
         return pos, end
 
+    def fly_end(
+        self, states: np.ndarray, actions: np.ndarray, goal: np.ndarray, duration: float
+    ) -> np.ndarray:
+        """The (B, 8) end states of ``fly(states, actions, goal, duration, ...)``, the same to
+        the bit, without the sub-step samples' events: how the kinematic world moves the
+        ownship, which needs nothing else of the segment."""
+        return self._sampled(states, actions, goal, duration, self.substeps(duration))[3]
+
     def _place(self, states, actions, goal, duration: float, n: int):
         """Body motion, sub-step positions, end states and a bounding cylinder of a batch."""
+        body, xy, hs, end = self._sampled(states, actions, goal, duration, n)
+        # The cylinder: centred on the samples' box, radius to the farthest, half-height.
+        lo = np.array([xy.real.min(), xy.imag.min(), hs.min()])
+        hi = np.array([xy.real.max(), xy.imag.max(), hs.max()])
+        cx, cy, ch = (0.5 * (lo + hi)).tolist()
+        r_xy = float(np.abs(xy - complex(cx, cy)).max())
+        box: _Cylinder = (cx, cy, ch, r_xy, 0.5 * float(hi[2] - lo[2]))
+        return body, xy, hs, end, box
+
+    def _sampled(self, states, actions, goal, duration: float, n: int):
+        """Body motion, sub-step positions and end states of a batch."""
         states = np.asarray(states, dtype=float)
         body = self._body(states[:, V], states[:, PHI], states[:, PHI_CMD], actions, duration, n)
         p = states[:, X, None] + 1j * states[:, Y, None]
@@ -776,16 +802,10 @@ class EncounterModel:
             vc = states[:, VCMD] if states.shape[1] > VCMD else 0
             vcmd = vertical_command(vc, actions)
             target = self.height_targets(vcmd, goal[2])[:, None]
-        hs = h0 + np.clip(target - h0, self._sink(duration, n), body.rise)
+        hs = h0 + clip(target - h0, self._sink(duration, n), body.rise)
         end = self._end(xy[:, -1], hs[:, -1], states[:, PSI], body)
         end[:, VCMD] = vcmd
-        # The cylinder: centred on the samples' box, radius to the farthest, half-height.
-        lo = np.array([xy.real.min(), xy.imag.min(), hs.min()])
-        hi = np.array([xy.real.max(), xy.imag.max(), hs.max()])
-        cx, cy, ch = (0.5 * (lo + hi)).tolist()
-        r_xy = float(np.abs(xy - complex(cx, cy)).max())
-        box: _Cylinder = (cx, cy, ch, r_xy, 0.5 * float(hi[2] - lo[2]))
-        return body, xy, hs, end, box
+        return body, xy, hs, end
 
     def height_targets(self, vcmd: np.ndarray, goal_h: float) -> np.ndarray:
         """(B,) the height targets of vertical commands ``vcmd`` (B,):
@@ -828,8 +848,23 @@ class EncounterModel:
         )
 
     def _body(self, v0, phi0, cmd0, actions, duration: float, n: int) -> _BodyMotion:
-        """The body motion of a batch of rows (one circle bounds them all)."""
-        return self._bodies(v0, phi0, cmd0, actions, duration, n, 1, memo=False)[0]
+        """The body motion of a batch of rows (one circle bounds them all), memoised by the
+        exact bits of its inputs: a world that flies the same aircraft step after step asks
+        the same batch again and again (straight and level at a steady speed), and gets the
+        very numbers it computed the first time."""
+        args = [np.asarray(a, dtype=float) for a in (v0, phi0, cmd0)]
+        actions = np.asarray(actions)
+        if args[0].size * (n + 1) > _BATCH_CELLS:  # a search's batch: seldom asked again
+            return self._bodies(*args, actions, duration, n, 1, memo=False)[0]
+        key = (*(a.tobytes() for a in args), actions.tobytes(), actions.dtype.str, duration, n)
+        body = self._batches.get(key)
+        if body is None:
+            if len(self._batches) >= _BATCH_MEMO:
+                self._batches.clear()
+            body = self._batches[key] = self._bodies(
+                *args, actions, duration, n, 1, memo=False
+            )[0]
+        return body
 
     def _bodies(
         self, v0, phi0, cmd0, actions, duration: float, n: int, groups: int, memo: bool = True
@@ -849,8 +884,8 @@ class EncounterModel:
         vmax = np.maximum(band[1], v0)
 
         dphi = (phi_cmd - phi0)[:, None]
-        phi_m = phi0[:, None] + np.clip(dphi, -roll * tm, roll * tm)
-        v_m = np.clip(v0[:, None] + accel[:, None] * tm, vmin[:, None], vmax[:, None])
+        phi_m = phi0[:, None] + clip(dphi, -roll * tm, roll * tm)
+        v_m = clip(v0[:, None] + accel[:, None] * tm, vmin[:, None], vmax[:, None])
         # Coordinated turn: on each sub-step the rate is taken at its midpoint and the
         # displacement is the exact chord of that constant-rate arc.
         dpsi = turn_rate_of_bank(phi_m, v_m) * dt
@@ -866,28 +901,21 @@ class EncounterModel:
         phi_end = np.where(
             np.abs(dphi[:, 0]) <= roll_reach, phi_cmd, phi0 + np.sign(dphi[:, 0]) * roll_reach
         )
-        v_end = np.clip(v0 + accel * duration, vmin, vmax)
+        v_end = clip(v0 + accel * duration, vmin, vmax)
         rise = np.zeros((len(v0), n + 1))  # the climb at each sub-step's midpoint speed
         np.cumsum(climb_rate(v_m, cfg) * dt, axis=1, out=rise[:, 1:])
         template = np.zeros((len(v0), STATE_DIM))
         template[:, V], template[:, PHI], template[:, PHI_CMD] = v_end, phi_end, phi_cmd
-        rows = list(zip(z[:, -1].tolist(), psi[:, -1].tolist(), v_end.tolist(),
-                        phi_end.tolist(), phi_cmd.tolist(), strict=True))  # fmt: skip
-        rise_end = rise[:, -1].tolist()
-        table, kids = None, [()] * len(v0)
-        if memo:
-            table = np.stack([z[:, -1].real, z[:, -1].imag, psi[:, -1], v_end, phi_end, phi_cmd,
-                              rise[:, -1]], axis=1)  # fmt: skip
-            kids = motion_keys(v_end, phi_end, phi_cmd, duration)
-        # Per group: the circle holding its paths, the longest chord.
+        # What only a search asks of a memoised motion is left out of a world's step.
+        rows, rise_end, table, kids = [()] * len(v0), [()] * len(v0), None, [()] * len(v0)
+        ball, ball_r = [0j] * groups, [0.0] * groups
         size = len(v0) // groups
-        zg = z.reshape(groups, -1)
-        lo = zg.real.min(axis=1) + 1j * zg.imag.min(axis=1)
-        hi = zg.real.max(axis=1) + 1j * zg.imag.max(axis=1)
-        ball = 0.5 * (lo + hi)
-        ball_r = np.abs(zg - ball[:, None]).max(axis=1).tolist()
-        step_max = chord.reshape(groups, -1).max(axis=1).tolist()
-        ball, z_end = ball.tolist(), z[:, -1].copy()
+        if memo:
+            rows, rise_end, table, kids, ball, ball_r = _search_extras(
+                z, psi[:, -1], rise[:, -1], v_end, phi_end, phi_cmd, groups, duration
+            )
+        step_max = chord.reshape(groups, -1).max(axis=1).tolist()  # the longest chord
+        z_end = z[:, -1].copy()
         out = []
         for g in range(groups):
             part = slice(g * size, (g + 1) * size)
@@ -1038,6 +1066,23 @@ class EncounterModel:
         )
 
 
+def _search_extras(z, dpsi, rise_end, v_end, phi_end, phi_cmd, groups: int, duration: float):
+    """What a tree search asks of memoised body motions (rows ``z`` (B, n+1), the others
+    (B,)): per row its end in plain Python numbers, its rise, its table row (the compiled
+    search's) and its children's memo keys; per group of rows the circle holding its paths."""
+    rows = list(zip(z[:, -1].tolist(), dpsi.tolist(), v_end.tolist(), phi_end.tolist(),
+                    phi_cmd.tolist(), strict=True))  # fmt: skip
+    table = np.stack([z[:, -1].real, z[:, -1].imag, dpsi, v_end, phi_end, phi_cmd, rise_end],
+                     axis=1)  # fmt: skip
+    kids = motion_keys(v_end, phi_end, phi_cmd, duration)
+    zg = z.reshape(groups, -1)
+    lo = zg.real.min(axis=1) + 1j * zg.imag.min(axis=1)
+    hi = zg.real.max(axis=1) + 1j * zg.imag.max(axis=1)
+    centre = 0.5 * (lo + hi)
+    ball_r = np.abs(zg - centre[:, None]).max(axis=1).tolist()
+    return rows, rise_end.tolist(), table, kids, centre.tolist(), ball_r
+
+
 def _closest_approach(
     sep2: np.ndarray,
     frac: np.ndarray | None,
@@ -1088,7 +1133,7 @@ def _closest_on_chords(
     dh = np.diff(rel_h, axis=1)
     a = dxy.real**2 + dxy.imag**2 + dh**2
     b = (rel_xy[:, :-1].conj() * dxy).real + rel_h[:, :-1] * dh
-    s = np.clip(-b / np.maximum(a, 1e-12), 0.0, 1.0)
+    s = clip(-b / np.maximum(a, 1e-12), 0.0, 1.0)
     # |r0 + s dr|^2 = |r0|^2 + s (2 b + s a), never below 0 despite rounding
     return np.maximum(d2[:, :-1] + s * (2.0 * b + s * a), 0.0), s
 

@@ -51,15 +51,19 @@ class Network:
     bins: tuple[int, ...]
     counts: tuple[np.ndarray | None, ...]
     order: tuple[int, ...]  # a topological order (MATLAB bn_sort: stable, lowest first)
+    # per variable: its parents' columns and their strides (column's, computed once)
+    _strides: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def column(self, i: int, state: np.ndarray) -> np.ndarray:
-        """Parent configuration of variable i (asub2ind) for each row of ``state`` (n, vars)."""
-        j = np.zeros(state.shape[0], dtype=np.int64)
-        stride = 1
-        for p in self.parents[i]:
-            j += state[:, p] * stride
-            stride *= self.bins[p]
-        return j
+        """Parent configuration of variable i (asub2ind) for each row of ``state`` (n, vars):
+        sum over its parents of bin x the product of the earlier parents' bin counts, as one
+        integer product (exact), since a sampler asks it every second of every track."""
+        if i not in self._strides:
+            parents = list(self.parents[i])
+            strides = np.cumprod([1] + [self.bins[p] for p in parents[:-1]], dtype=np.int64)
+            self._strides[i] = (parents, strides[: len(parents)])
+        parents, strides = self._strides[i]
+        return state[:, parents].astype(np.int64, copy=False) @ strides
 
 
 @dataclass(frozen=True)

@@ -16,7 +16,7 @@ import numpy as np
 
 from uavxai.encounters.model import EncounterModel, InitialSample, Transitions
 from uavxai.errors import UserError
-from uavxai.geometry import turn_rate_of_bank
+from uavxai.geometry import clip, turn_rate_of_bank
 from uavxai.units import FT, KT
 
 FOOT_PER_MINUTE = FT / 60.0  # m/s
@@ -123,9 +123,9 @@ def limit_track(track: Trajectory, max_speed: float = float("inf"),
     over = (np.abs(track.vh) > max_vertical_rate).any() or (track.speed > max_speed).any()
     if not (over or (np.abs(rate) > top).any()):
         return track
-    psi = psi[0] + np.concatenate(([0.0], np.cumsum(np.clip(rate, -top, top) * dt)))
+    psi = psi[0] + np.concatenate(([0.0], np.cumsum(clip(rate, -top, top) * dt)))
     vx, vy = speed * np.sin(psi), speed * np.cos(psi)
-    vh = np.clip(track.vh, -max_vertical_rate, max_vertical_rate)
+    vh = clip(track.vh, -max_vertical_rate, max_vertical_rate)
 
     def integral(start: float, v: np.ndarray) -> np.ndarray:
         return start + np.concatenate(([0.0], np.cumsum(v[:-1] * dt)))

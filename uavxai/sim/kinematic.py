@@ -24,7 +24,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from uavxai.avoidance.model import PHI, PHI_CMD, PSI, STATE_DIM, EncounterModel, Track, V
+from uavxai.avoidance.model import PHI, PHI_CMD, PSI, STATE_DIM, EncounterModel, V
 from uavxai.avoidance.types import PlannerConfig
 from uavxai.dynamics.behaviours import make_pilots, newcomer_pilot
 from uavxai.dynamics.environment import EnvironmentConfig
@@ -33,6 +33,7 @@ from uavxai.dynamics.loiter import ScheduledWorld
 from uavxai.dynamics.state import OWNSHIP_ID, TrafficState, intruder_id
 from uavxai.dynamics.track_pilot import TrackLike
 from uavxai.dynamics.traffic import draw_intruders
+from uavxai.geometry import clip
 from uavxai.scenario import IntruderSpec, Scenario, aircraft_height_loop
 from uavxai.vocabulary import HOLD
 
@@ -121,15 +122,14 @@ class KinematicWorld(ScheduledWorld):
         model = self._model(accel)
         # The bank command is written straight into the state; "hold bank" then flies it.
         action = HOLD + (0 if accel == 0 else (-1 if accel > 0 else 1))
-        empty = Track.of(np.zeros((model.substeps(duration) + 1, 0, 3)))
         h0 = float(self._own[2])
         goal = np.array([_FAR, _FAR, self._alt_target])
-        seg = model.fly(self._own[None], np.array([action]), goal, duration, empty, cull=False)
-        self._own = seg.end[0].copy()  # the model flies in the wind (config.wind_mps)
+        # the model flies in the wind (config.wind_mps)
+        self._own = model.fly_end(self._own[None], np.array([action]), goal, duration)[0]
         self._vh = (float(self._own[2]) - h0) / duration
         if len(self._traffic):
             _, self._traffic = model.fly_commanded(
-                self._traffic, self._traffic[:, PHI_CMD], duration
+                self._traffic, self._traffic[:, PHI_CMD], duration, samples=False
             )
             climbing = np.isfinite(self._intruder_alt)
             if climbing.any():
@@ -256,6 +256,6 @@ def height_step(h0, target, gain: float, limit: float, duration: float) -> np.nd
     h0, target = np.asarray(h0, dtype=float), np.asarray(target, dtype=float)
     gap = target - h0
     knee = limit / gain  # below this gap the climb rate is proportional
-    t_lim = np.clip((np.abs(gap) - knee) / limit, 0.0, duration)  # time spent at the limit
+    t_lim = clip((np.abs(gap) - knee) / limit, 0.0, duration)  # time spent at the limit
     gap_after = gap - np.sign(gap) * limit * t_lim
     return target - gap_after * np.exp(-gain * (duration - t_lim))
