@@ -42,10 +42,10 @@ import numpy as np
 import torch
 
 from uavxai.comms.channel import ENVIRONMENTS
-from uavxai.comms.service_env import HOVER, ServiceEnv, levels_to_power
 from uavxai.service import universal
 from uavxai.service.grid import solve_grid
 from uavxai.service.layouts import ACCESS, KINDS, draw_layout, problem_scenario
+from uavxai.service.service_env import HOVER, ServiceEnv, levels_to_power
 
 BENCH_SEED = 13_000  # training uses default_rng([seed < 1000, episode]): disjoint
 KS = (5, 10, 20)

@@ -32,10 +32,10 @@ import numpy as np
 import torch
 
 from uavxai.comms.channel import ENVIRONMENTS
-from uavxai.comms.service_env import ServiceEnv
 from uavxai.scenario import default_scenario
 from uavxai.service import d3qn, dqn
 from uavxai.service.grid import solve_grid
+from uavxai.service.service_env import ServiceEnv
 from uavxai.service.stage import plan_service
 from uavxai.service.train import episodes_to_converge
 

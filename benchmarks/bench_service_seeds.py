@@ -33,10 +33,10 @@ import numpy as np
 import torch
 from scipy import stats
 
-from uavxai.comms.service_env import ServiceEnv
 from uavxai.scenario import Scenario, load_scenario
 from uavxai.service import d3qn, dqn
 from uavxai.service.grid import solve_grid
+from uavxai.service.service_env import ServiceEnv
 from uavxai.service.train import SMOOTHING_EPISODES, episodes_to_converge, running_mean
 
 CONFIGS = {"d3qn": d3qn.D3QNConfig, "dqn": dqn.DQNConfig}

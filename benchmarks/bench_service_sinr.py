@@ -20,9 +20,9 @@ from pathlib import Path
 import numpy as np
 
 from uavxai.comms.channel import Channel
-from uavxai.comms.service_env import SearchSpace
 from uavxai.paths import scenarios_dir
 from uavxai.scenario import load_scenario
+from uavxai.service.service_env import SearchSpace
 
 
 def sinr_db(channel: Channel, positions: np.ndarray) -> np.ndarray:

@@ -8,9 +8,9 @@ import itertools
 import numpy as np
 import pytest
 
-from uavxai.comms.service_env import SearchSpace, levels_to_power
 from uavxai.service import fleet as fl
 from uavxai.service.layouts import draw_layout
+from uavxai.service.service_env import SearchSpace, levels_to_power
 
 
 def problem(n: int, k: int, access: str, model: str = "al_hourani", seed: int = 3,

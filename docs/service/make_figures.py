@@ -18,10 +18,10 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from uavxai.comms.service_env import ServiceEnv, naive_placement  # noqa: E402
 from uavxai.paths import scenarios_dir  # noqa: E402
 from uavxai.scenario import load_scenario  # noqa: E402
 from uavxai.service.grid import optimal_objective, solve_grid  # noqa: E402
+from uavxai.service.service_env import ServiceEnv, naive_placement  # noqa: E402
 from uavxai.service.stage import plan_service  # noqa: E402
 
 HERE = Path(__file__).parent

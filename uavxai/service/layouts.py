@@ -17,8 +17,8 @@ from typing import Literal
 import numpy as np
 
 from uavxai.comms.channel import ENVIRONMENTS
-from uavxai.comms.service_env import ServiceEnv
 from uavxai.scenario import Scenario, default_scenario
+from uavxai.service.service_env import ServiceEnv
 
 Kind = Literal["uniform", "clustered"]
 KINDS: tuple[str, ...] = ("uniform", "clustered")
