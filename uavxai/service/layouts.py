@@ -1,6 +1,6 @@
 """Random service problems: user layouts, K, access mode and environment.
 
-The universal D3QN (``universal.py``) trains on these and ``benchmarks/bench_placement.py``
+The universal D3QN (``universal.py``) trains on these and ``benchmarks/studies/bench_placement.py``
 evaluates on them, with disjoint seeds (training draws from ``default_rng([seed, episode])``
 with small seeds; the benchmark from ``default_rng([BENCH_SEED, ...])``).
 

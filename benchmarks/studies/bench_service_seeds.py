@@ -17,9 +17,9 @@ the mean and a 95 % confidence interval over seeds, and the paired difference D3
 
 With ``--plot PNG`` it draws the mean greedy curves with their 95 % bands.
 
-    python benchmarks/bench_service_seeds.py                         # 8 seeds, ~10 min
-    python benchmarks/bench_service_seeds.py --seeds 3 --episodes 100  # ~1 min
-    python benchmarks/bench_service_seeds.py --access ofdma --plot curves.png
+    python benchmarks/studies/bench_service_seeds.py                         # 8 seeds, ~10 min
+    python benchmarks/studies/bench_service_seeds.py --seeds 3 --episodes 100  # ~1 min
+    python benchmarks/studies/bench_service_seeds.py --access ofdma --plot curves.png
 """
 
 from __future__ import annotations

@@ -6,7 +6,8 @@ method) on 1 and 2 local workers and on a private Ray (`--ray`), wall time and s
 against 1 worker, measured in the same process. From these, the hours a campaign of
 `--target` encounters per method takes on this machine.
 
-    .venv/bin/python benchmarks/bench_encounters.py [--encounters 8] [--methods none,mcts_daa]
+    .venv/bin/python benchmarks/performance/bench_encounters.py [--encounters 8]
+        [--methods none,mcts_daa]
         [--target 10000] [--ray]
 
 Prints numbers only; nothing is asserted. On a machine shared with other work the CPU times

@@ -14,8 +14,8 @@ the intruders through the period meanwhile) and with one (`--latency`, default 0
 search overlaps everyone's flight, as on a UAV whose companion computer plans beside the
 autopilot). `--profile FILE` writes a cProfile of one run for `python -m pstats FILE`.
 
-    .venv/bin/python benchmarks/bench_run.py [--intruders 20] [--steps 60] [--repeats 3] \
-        [--latency 0.5]
+    .venv/bin/python benchmarks/performance/bench_run.py [--intruders 20] [--steps 60] \
+        [--repeats 3] [--latency 0.5]
 """
 
 from __future__ import annotations
