@@ -8,7 +8,7 @@ export JSBSIM_DEBUG := 0
 export RAY_USAGE_STATS_ENABLED := 0
 export MPLBACKEND := Agg
 
-.PHONY: venv demo test test-slow test-bluesky lint bench clean
+.PHONY: venv demo test test-slow test-bluesky lint bench bench-performance bench-studies clean
 venv: $(STAMP)
 
 # The constraints file pins torch to the CPU wheel (torch==2.13.0) for our own installs.
@@ -45,8 +45,15 @@ lint: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/lint-imports
 
-bench: $(STAMP)
-	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done
+# Speed against a baseline run in the same process (minutes), then the studies: what a method
+# buys in quality or safety (some fly campaigns for hours; see each script's --help).
+bench: bench-performance bench-studies
+
+bench-performance: $(STAMP)
+	@for b in benchmarks/performance/bench_*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done
+
+bench-studies: $(STAMP)
+	@for b in benchmarks/studies/bench_*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done
 
 clean:
 	rm -rf $(VENV) $(BLUESKY) build dist *.egg-info .pytest_cache .ruff_cache

@@ -3,8 +3,8 @@
 The ownship flies to a station, orbits it serving walking users, avoids once, moves its orbit
 to a new service point as the users drift, and heads home. Rates follow a free-space link
 (Shannon over distance), so users far from the orbit fall below the QoS rate and colours
-change. Intruders come from :func:`synthetic.traffic`; the planner's tracks are the truth
-plus a noise whose sigma grows with the age of the last report.
+change. Intruders come from :func:`uavxai.recording.synthetic.traffic`; the planner's tracks
+are the truth plus a noise whose sigma grows with the age of the last report.
 """
 
 from __future__ import annotations
@@ -14,10 +14,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import synthetic
 
 from uavxai.dynamics.geodesy import LocalFrame
 from uavxai.dynamics.state import TrafficState
+from uavxai.recording import synthetic
 
 ORIGIN = LocalFrame(47.3977, 8.5456, 400.0)  # any place: the map view needs a real one
 QOS_BPS = 2.0e6

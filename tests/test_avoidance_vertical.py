@@ -7,7 +7,6 @@ import os
 
 os.environ.setdefault("MAVLINK20", "1")
 
-import manoeuvres
 import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
@@ -31,6 +30,7 @@ from uavxai.dynamics.environment import EnvironmentConfig
 from uavxai.errors import UserError
 from uavxai.recording.tree_graph import tree_graph
 from uavxai.scenario import default_scenario
+from uavxai.sim import manoeuvres
 from uavxai.sim.command import DirectPath
 from uavxai.sim.kinematic import KinematicWorld
 from uavxai.vocabulary import ACTION_SETS, ACTIONS, HOLD, N_ACTIONS

@@ -8,14 +8,22 @@ from pathlib import Path
 
 import pytest
 
-BENCHMARKS = sorted((Path(__file__).resolve().parents[1] / "benchmarks").glob("bench_*.py"))
+ROOT = Path(__file__).resolve().parents[1] / "benchmarks"
+KINDS = ("performance", "studies")  # speed against a baseline; what a method buys
+BENCHMARKS = sorted(path for kind in KINDS for path in (ROOT / kind).glob("bench_*.py"))
 
 
 def test_there_are_benchmarks() -> None:
     assert len(BENCHMARKS) >= 10
 
 
-@pytest.mark.parametrize("path", BENCHMARKS, ids=lambda p: p.stem)
+def test_every_benchmark_is_filed_by_kind() -> None:
+    """A script left at the top or in another folder would escape this test and `make bench`."""
+    stray = sorted(p.relative_to(ROOT) for p in ROOT.rglob("bench_*.py") if p not in BENCHMARKS)
+    assert not stray, f"benchmarks outside {KINDS}: {stray}"
+
+
+@pytest.mark.parametrize("path", BENCHMARKS, ids=lambda p: f"{p.parent.name}/{p.stem}")
 def test_a_benchmark_script_loads(path: Path) -> None:
     spec = importlib.util.spec_from_file_location(f"_bench_{path.stem}", path)
     assert spec is not None and spec.loader is not None

@@ -9,13 +9,13 @@ import math
 import numpy as np
 import pytest
 
-from uavxai.comms import orbit_rate
 from uavxai.comms.channel import ENVIRONMENTS, Channel, draw_users
 from uavxai.comms.delivery import SERVICE_COLUMNS, USERS_COLUMNS, Delivery, rates_at
 from uavxai.comms.mobility import UserMobility
-from uavxai.comms.orbit_rate import orbit_average, orbit_points, orbit_position
 from uavxai.errors import UserError
 from uavxai.scenario import default_scenario
+from uavxai.service import orbit_rate
+from uavxai.service.orbit_rate import orbit_average, orbit_points, orbit_position
 
 C = 299_792_458.0
 

@@ -9,11 +9,11 @@ from __future__ import annotations
 
 import math
 
-import manoeuvres as m
 import numpy as np
 import pytest
 
 from uavxai.avoidance.types import PlannerConfig
+from uavxai.sim import manoeuvres as m
 
 SPEEDS = (12.0, 20.0, 30.0)
 

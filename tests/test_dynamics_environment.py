@@ -21,37 +21,8 @@ from uavxai.dynamics.aircraft import (
 from uavxai.dynamics.environment import EnvironmentConfig
 from uavxai.dynamics.geodesy import LocalFrame
 from uavxai.errors import UserError
+from uavxai.sim.manoeuvres import DT, FRAME, flown
 from uavxai.units import FT, KT
-
-FRAME = LocalFrame(34.1230, 108.8370, 400.0)
-DT = 1.0 / 120.0
-
-
-def flown(
-    heading_deg: float,
-    wind: tuple[float, float],
-    turbulence: str = "none",
-    seed: int = 1,
-    seconds: float = 60.0,
-    speed: float = 20.0,
-    banks: list[tuple[float, float]] | None = None,
-) -> np.ndarray:
-    """Rows of raw_state() at 10 Hz (lat, lon, h ft, v east/north/down fps, phi, theta, psi,
-    vt fps) of an aircraft started level in this weather; ``banks`` [(t, bank_rad)]."""
-    a = Aircraft("uav_fw", FRAME, DT, seed=7)
-    a.set_environment(wind, turbulence, seed)
-    assert a.start(1000.0, 1000.0, 120.0, math.radians(heading_deg), speed)
-    banks = sorted(banks or [])
-    rows = []
-    for k in range(round(seconds / DT)):
-        t = k * DT
-        while banks and banks[0][0] <= t:
-            a.command(bank_cmd_rad=banks.pop(0)[1])
-        a.run()
-        if k % 12 == 11:
-            rows.append(a.raw_state())
-    a.close()
-    return np.array(rows)
 
 
 def test_wind_from_direction_convention():
@@ -294,7 +265,7 @@ def _drift_sigma_8s(dynamics: str, turbulence: str) -> float:
 
 
 # docs/results's measured value of avoidance.mcts.own_error_10s_m in moderate turbulence
-# (benchmarks/bench_own_model.py, seeds 1000-1003)
+# (benchmarks/studies/bench_own_model.py, seeds 1000-1003)
 MODERATE_OWN_ERROR_10S_M = 20.2
 
 

@@ -8,9 +8,9 @@ import itertools
 import numpy as np
 import pytest
 
-from uavxai.comms.service_env import SearchSpace, levels_to_power
 from uavxai.service import fleet as fl
 from uavxai.service.layouts import draw_layout
+from uavxai.service.service_env import SearchSpace, levels_to_power
 
 
 def problem(n: int, k: int, access: str, model: str = "al_hourani", seed: int = 3,
@@ -200,7 +200,7 @@ def test_benchmark_shards_cover_the_jobs_once_and_skip_done_rows() -> None:
     import importlib.util
     from pathlib import Path
 
-    path = Path(__file__).parents[1] / "benchmarks" / "bench_fleet_placement.py"
+    path = Path(__file__).parents[1] / "benchmarks" / "studies" / "bench_fleet_placement.py"
     spec = importlib.util.spec_from_file_location("bench_fleet_placement", path)
     bench = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench)

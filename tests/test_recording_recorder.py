@@ -11,10 +11,10 @@ import numpy as np
 import pyarrow as pa
 import pytest
 import rerun_cli
-import synthetic
 from rerun.chunk import RrdReader
 
 from uavxai.recording import entities as ent
+from uavxai.recording import synthetic
 from uavxai.recording.aircraft_model import attitude_quaternions
 from uavxai.recording.recorder import FILE_FLUSH_S, RecorderProcess, RunRecorder
 

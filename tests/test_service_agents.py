@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 import torch
 
-from uavxai.comms.service_env import ServiceEnv
 from uavxai.errors import CheckpointError
 from uavxai.scenario import default_scenario
 from uavxai.service import d3qn, dqn
 from uavxai.service.grid import solve_grid
+from uavxai.service.service_env import ServiceEnv
 from uavxai.service.train import episodes_to_converge
 
 

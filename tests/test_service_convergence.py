@@ -10,11 +10,11 @@ import pytest
 import torch
 from scipy import stats
 
-from uavxai.comms.service_env import ServiceEnv
 from uavxai.paths import scenarios_dir
 from uavxai.scenario import default_scenario, load_scenario
 from uavxai.service import d3qn, dqn
 from uavxai.service.grid import solve_grid
+from uavxai.service.service_env import ServiceEnv
 from uavxai.service.train import episodes_to_converge, train_command
 
 pytestmark = pytest.mark.slow

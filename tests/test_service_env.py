@@ -6,7 +6,8 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from uavxai.comms.service_env import (
+from uavxai.scenario import default_scenario
+from uavxai.service.service_env import (
     HOVER,
     MOVE_NAMES,
     MOVES,
@@ -14,7 +15,6 @@ from uavxai.comms.service_env import (
     ServiceEnv,
     levels_to_power,
 )
-from uavxai.scenario import default_scenario
 
 
 def make_env(**comms) -> ServiceEnv:

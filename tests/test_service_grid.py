@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from uavxai.comms.channel import Channel
-from uavxai.comms.service_env import SearchSpace, levels_to_power
 from uavxai.errors import UserError
 from uavxai.scenario import default_scenario
 from uavxai.service.grid import optimal_levels, optimal_objective, solve_grid
+from uavxai.service.service_env import SearchSpace, levels_to_power
 
 
 def brute_force(channel: Channel, gain: np.ndarray, L: int) -> float:

@@ -11,8 +11,6 @@ import pytest
 
 from uavxai.cli import main
 from uavxai.comms.channel import Channel
-from uavxai.comms.orbit_rate import orbit_average
-from uavxai.comms.service_env import SearchSpace, levels_to_power
 from uavxai.dynamics.orbit import scenario_orbit_radius
 from uavxai.scenario import default_scenario
 from uavxai.service import grid
@@ -22,6 +20,8 @@ from uavxai.service.orbit import (
     orbit_gain_means,
     solve_grid_orbit,
 )
+from uavxai.service.orbit_rate import orbit_average
+from uavxai.service.service_env import SearchSpace, levels_to_power
 from uavxai.service.stage import plan_service
 from uavxai.sim.mission import MissionConfig
 

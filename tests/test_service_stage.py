@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 
 from uavxai.cli import main as cli_main
-from uavxai.comms.service_env import ServiceEnv
 from uavxai.errors import CheckpointError, ScenarioError, UserError
 from uavxai.paths import scenarios_dir
 from uavxai.scenario import default_scenario, load_scenario
 from uavxai.service import d3qn
+from uavxai.service.service_env import ServiceEnv
 from uavxai.service.stage import plan_service, run_service_stage
 from uavxai.service.train import CURVE_COLUMNS, train_command
 

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from uavxai.comms.service_env import ServiceEnv
 from uavxai.service import universal
 from uavxai.service.grid import solve_grid
 from uavxai.service.layouts import problem_scenario
+from uavxai.service.service_env import ServiceEnv
 from uavxai.service.starts import SEPARATION_STEPS, screened_starts
 
 # An unseen OFDMA high-rise layout where the optimum hovers at 50 m right above two users
@@ -64,8 +64,8 @@ def test_kicks_leave_a_qos_plateau(monkeypatch):
     """Shared band, K = 20: without the kicks the planner ends where one more user misses QoS
     than needs to (the objective halved); with them it crosses that step, and the reported
     objective is the channel equations' at the returned point and levels."""
-    from uavxai.comms.service_env import levels_to_power
     from uavxai.service import starts
+    from uavxai.service.service_env import levels_to_power
 
     env = ServiceEnv.from_scenario(
         problem_scenario(np.array(PLATEAU_USERS), "shared", "highrise_urban")

@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 import torch
 
-from uavxai.comms.service_env import ServiceEnv, levels_to_power
 from uavxai.scenario import default_scenario
 from uavxai.service import universal
 from uavxai.service.grid import solve_grid
 from uavxai.service.layouts import draw_layout, problem_scenario, random_problem
+from uavxai.service.service_env import ServiceEnv, levels_to_power
 from uavxai.service.stage import plan_service
 
 ENV_PARAMS = {  # Al-Hourani (a, b, eta_LoS, eta_NLoS), written out again on purpose

@@ -165,10 +165,9 @@ def test_the_recording_shows_the_operators_modes_as_phases(tmp_path) -> None:
 def test_an_operators_airspeed_is_a_ceiling_the_planner_may_slow_below(world_kind: str) -> None:
     """DO_CHANGE_SPEED lowers the autopilot's top speed: a speed-up asked for above it is
     flown at it, a slow-down below it is flown; raising it lets the speed-up through again."""
-    from manoeuvres import flight_test_scenario
-
     from uavxai.dynamics.world import JSBSimWorld
     from uavxai.sim.kinematic import KinematicWorld
+    from uavxai.sim.manoeuvres import flight_test_scenario
 
     world = (JSBSimWorld if world_kind == "jsbsim" else KinematicWorld)(
         flight_test_scenario(25.0))

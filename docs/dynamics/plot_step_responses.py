@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import sys
 from pathlib import Path
 
 import matplotlib
@@ -18,9 +17,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from uavxai.avoidance.types import PlannerConfig  # noqa: E402
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tests"))  # the tests' manoeuvres
-import manoeuvres as m  # noqa: E402
+from uavxai.sim import manoeuvres as m  # noqa: E402
 
 SPEEDS = (12.0, 20.0, 30.0)
 COLOURS = {12.0: "tab:orange", 20.0: "tab:blue", 30.0: "tab:green"}

@@ -3,8 +3,9 @@
 .venv/bin/python docs/service/make_figures.py            # objective_map.png (~1 min)
 .venv/bin/uavxai train scenarios/demo.yaml --algo d3qn --out runs/train-demo
 cp runs/train-demo/learning_curve.png docs/service/learning_curve_demo.png
-.venv/bin/python benchmarks/bench_service_seeds.py --plot docs/service/d3qn_vs_dqn_shared.png
-.venv/bin/python benchmarks/bench_service_seeds.py --access ofdma \
+.venv/bin/python benchmarks/studies/bench_service_seeds.py \
+    --plot docs/service/d3qn_vs_dqn_shared.png
+.venv/bin/python benchmarks/studies/bench_service_seeds.py --access ofdma \
     --plot docs/service/d3qn_vs_dqn_ofdma.png
 """
 
@@ -18,10 +19,10 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from uavxai.comms.service_env import ServiceEnv, naive_placement  # noqa: E402
 from uavxai.paths import scenarios_dir  # noqa: E402
 from uavxai.scenario import load_scenario  # noqa: E402
 from uavxai.service.grid import optimal_objective, solve_grid  # noqa: E402
+from uavxai.service.service_env import ServiceEnv, naive_placement  # noqa: E402
 from uavxai.service.stage import plan_service  # noqa: E402
 
 HERE = Path(__file__).parent

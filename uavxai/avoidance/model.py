@@ -1156,7 +1156,7 @@ def model_drift(
     flight (``flown[k]`` the ownship then, ``actions[k]`` the action chosen), the model flies
     the actions actually chosen, one decision period each, open loop; per horizon n (in
     decisions) the horizontal distances between its position and ``flown[k + n]``, m. The
-    evidence behind ``PlannerConfig.own_error_10s_m`` (benchmarks/bench_own_model.py)."""
+    evidence behind ``PlannerConfig.own_error_10s_m`` (benchmarks/studies/bench_own_model.py)."""
     period = config.decision_period_s
     last = max(horizons)
     out: dict[int, list[float]] = {n: [] for n in horizons}

@@ -75,7 +75,7 @@ def climb_speed_band(gust_sigma_mps: float) -> tuple[float, float]:
     by that sigma, so its full rate is sure only one sigma above its band (measured, a lone
     uav_fw in moderate turbulence, climb of 4 s / 8 s at speed targets 12 and 13 m/s: median
     3.4 / 7.1 m and 6.8 / 15.6 m against 4.5 / 12.1 and 7.9 / 18.5 m in calm air;
-    benchmarks/bench_climb.py)."""
+    benchmarks/studies/bench_climb.py)."""
     lo, hi = CLIMB_SPEED_BAND_MPS
     return lo, hi + gust_sigma_mps
 

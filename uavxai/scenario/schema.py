@@ -376,7 +376,7 @@ class MCTSConfig(_Model):
     # How far the ownship strays from the tree planners' model 10 s ahead (1 sigma per axis,
     # growing as t^1.5), added to the intruders' track uncertainty (uavxai.avoidance.model.
     # intruder_margin); 0: the model's path is taken as flown. docs/scenario.md has the values
-    # measured in JSBSim (benchmarks/bench_own_model.py) and what they cost.
+    # measured in JSBSim (benchmarks/studies/bench_own_model.py) and what they cost.
     own_error_10s_m: Annotated[float, Field(ge=0, le=1000)] = 0.0
     # How far ahead a track's velocity error grows the separation the tree planners ask of it
     # (uavxai.avoidance.model.intruder_margin); null: over the whole search. With a poor

@@ -34,9 +34,9 @@ import numpy as np
 import torch
 from torch import nn
 
-from uavxai.comms.service_env import MOVES, ServiceEnv
 from uavxai.errors import CheckpointError
 from uavxai.outputs import write_torch
+from uavxai.service.service_env import MOVES, ServiceEnv
 
 CHECKPOINT_FORMAT = "uavxai.service.branching-q/1"
 

@@ -13,8 +13,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from uavxai.comms.service_env import ServiceEnv
 from uavxai.service import d3qn
+from uavxai.service.service_env import ServiceEnv
 
 
 @dataclass

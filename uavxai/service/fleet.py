@@ -29,9 +29,9 @@ import numpy as np
 
 from uavxai.comms.channel import Channel
 from uavxai.comms.fleet import FleetChannel
-from uavxai.comms.service_env import MOVES, SearchSpace
 from uavxai.service.grid import MAX_DP_COST, dp_cost, optimal_levels, solve_grid
 from uavxai.service.layouts import problem_scenario
+from uavxai.service.service_env import MOVES, SearchSpace
 
 PLANNER_STEPS = (1, 4)  # lattice steps a UAV may move in one local-search candidate
 REFERENCE_STEPS = (1, 2, 4, 8)

@@ -40,8 +40,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from uavxai.comms.channel import Channel
-from uavxai.comms.service_env import SearchSpace, levels_to_power
 from uavxai.errors import UserError
+from uavxai.service.service_env import SearchSpace, levels_to_power
 
 DP_BYTES_PER_CALL = 16_000_000  # memory per vectorised DP call: a batch of positions
 MAX_DP_COST = 20.0  # relative to K = 10, L = 6 (5 ms a position, 5-20 s a grid); beyond: hours

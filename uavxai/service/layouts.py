@@ -1,6 +1,6 @@
 """Random service problems: user layouts, K, access mode and environment.
 
-The universal D3QN (``universal.py``) trains on these and ``benchmarks/bench_placement.py``
+The universal D3QN (``universal.py``) trains on these and ``benchmarks/studies/bench_placement.py``
 evaluates on them, with disjoint seeds (training draws from ``default_rng([seed, episode])``
 with small seeds; the benchmark from ``default_rng([BENCH_SEED, ...])``).
 
@@ -17,8 +17,8 @@ from typing import Literal
 import numpy as np
 
 from uavxai.comms.channel import ENVIRONMENTS
-from uavxai.comms.service_env import ServiceEnv
 from uavxai.scenario import Scenario, default_scenario
+from uavxai.service.service_env import ServiceEnv
 
 Kind = Literal["uniform", "clustered"]
 KINDS: tuple[str, ...] = ("uniform", "clustered")

@@ -5,7 +5,7 @@ A fixed wing cannot hover: on station it flies a loiter orbit of radius R about 
 point (``uavxai.dynamics.orbit.scenario_orbit_radius``, the same radius the mission flies,
 wind included) at the point's height, with the power allocation fixed over the orbit. The
 objective of a centre c with integer levels l is ``OrbitAverage.objective``
-(``uavxai.comms.orbit_rate``):
+(``uavxai.service.orbit_rate``):
 
     rbar_k(c, l) = mean_j R_k(c + o_j, l)           the orbit-mean rate of user k
     J(c, l)      = sum_k rbar_k / 2^lambda,   lambda = #{k : rbar_k < qos}
@@ -49,12 +49,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from uavxai.comms.channel import Channel
-from uavxai.comms.orbit_rate import CHUNK_CENTRES, orbit_gains
-from uavxai.comms.service_env import SearchSpace, levels_to_power
 from uavxai.dynamics.orbit import scenario_orbit_radius
 from uavxai.errors import UserError
 from uavxai.scenario import Scenario
 from uavxai.service import grid
+from uavxai.service.orbit_rate import CHUNK_CENTRES, orbit_gains
+from uavxai.service.service_env import SearchSpace, levels_to_power
 
 ORBIT_POINTS = 36  # every 10 degrees, as orbit_rate's default
 TABLE_BYTES = 16_000_000  # orbit rate tables per chunk: ORBIT_POINTS x (S, K, L) per centre

@@ -13,8 +13,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from uavxai.comms.service_env import ServiceEnv, levels_to_power
 from uavxai.service.d3qn import Episode
+from uavxai.service.service_env import ServiceEnv, levels_to_power
 
 Score = Callable[[np.ndarray, np.ndarray], np.ndarray]  # (positions (M,3), levels (M,K)) -> (M,)
 

@@ -41,15 +41,15 @@ import numpy as np
 import torch
 
 from uavxai.comms.channel import Channel
-from uavxai.comms.orbit_rate import orbit_average
-from uavxai.comms.service_env import ServiceEnv, levels_to_power
 from uavxai.errors import CheckpointError, UserError
 from uavxai.paths import service_checkpoints_dir
 from uavxai.scenario import Scenario
 from uavxai.service import d3qn, universal
 from uavxai.service.grid import Progress, solve_grid
 from uavxai.service.orbit import OrbitObjective, solve_grid_orbit
+from uavxai.service.orbit_rate import orbit_average
 from uavxai.service.random_search import random_search
+from uavxai.service.service_env import ServiceEnv, levels_to_power
 
 ERGODIC_DRAWS = 2000
 PLANNERS = ("d3qn", "dqn", "random", "grid")

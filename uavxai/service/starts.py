@@ -29,8 +29,8 @@ from collections.abc import Callable
 import numpy as np
 
 from uavxai.comms.channel import Channel
-from uavxai.comms.service_env import MOVES, SearchSpace, levels_to_power
 from uavxai.service.grid import optimal_levels, optimal_objective, useful_totals
+from uavxai.service.service_env import MOVES, SearchSpace, levels_to_power
 
 KICKS = 6
 KICK_STEPS = 5

@@ -42,12 +42,12 @@ from typing import Any
 import numpy as np
 import torch
 
-from uavxai.comms.service_env import ServiceEnv
 from uavxai.outputs import write_figure, write_output
 from uavxai.scenario import Scenario
 from uavxai.service import d3qn, dqn
 from uavxai.service.grid import solve_grid
 from uavxai.service.random_search import random_search
+from uavxai.service.service_env import ServiceEnv
 
 DEFAULT_EPISODES = 300
 CONVERGENCE_TOLERANCE = 0.05

@@ -51,16 +51,16 @@ import torch
 from torch import nn
 
 from uavxai.comms.channel import ENVIRONMENTS, Channel, free_space_loss_db
-from uavxai.comms.service_env import (
+from uavxai.errors import CheckpointError
+from uavxai.outputs import write_output, write_torch
+from uavxai.service.layouts import random_problem
+from uavxai.service.service_env import (
     GAIN_REFERENCE_DISTANCE_M,
     MOVES,
     SearchSpace,
     ServiceEnv,
     levels_to_power,
 )
-from uavxai.errors import CheckpointError
-from uavxai.outputs import write_output, write_torch
-from uavxai.service.layouts import random_problem
 
 if TYPE_CHECKING:
     from uavxai.service.orbit import OrbitObjective
@@ -263,7 +263,7 @@ def reference_objective(env: ServiceEnv) -> float:
     levels polished by ``refine`` from equal power, position fixed. In the shared band with
     many users, equal power leaves every user below the QoS rate and the naive objective is
     ~2^-K of what good levels give; this scale stays about 1 near the optimum everywhere."""
-    from uavxai.comms.service_env import naive_placement
+    from uavxai.service.service_env import naive_placement
 
     naive = naive_placement(env.space, env.channel.users)
     full = np.full(env.channel.k, env.power_levels - 1, np.int64)

@@ -126,7 +126,7 @@ class Service(EngineStep):
             self._files = [self._users, self._service]
 
     def on_sample(self, ep: Episode, state: TrafficState) -> None:
-        from uavxai.comms.orbit_rate import orbit_bearing, orbit_position
+        from uavxai.service.orbit_rate import orbit_bearing, orbit_position
 
         m, t, dt = ep.mission, state.t, ep.clock.sample_s
         users = self.walk.positions
@@ -187,7 +187,7 @@ class Service(EngineStep):
         ``c.station`` with the current power, for the users where the plan saw them."""
         import dataclasses
 
-        from uavxai.comms.orbit_rate import orbit_average
+        from uavxai.service.orbit_rate import orbit_average
 
         seen = dataclasses.replace(self.channel, users=np.asarray(users, dtype=float))
         avg = orbit_average(seen, c.station, c.radius_m, self.delivery.power_w)

@@ -2,7 +2,7 @@
 once per second, telemetry published every 0.1 s to a UDP ground station on 127.0.0.1, with 20
 intruders as ADS-B. Prints numbers; asserts nothing.
 
-    .venv/bin/python benchmarks/bench_bridge.py [--intruders 20] [--sim-seconds 300]
+    .venv/bin/python benchmarks/performance/bench_bridge.py [--intruders 20] [--sim-seconds 300]
 """
 
 from __future__ import annotations

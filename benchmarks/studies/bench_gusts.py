@@ -11,23 +11,19 @@ ground velocity less its air velocity) and the intruders on their ground tracks,
 know the gusts to come (docs/results: a planning margin of this size did not remove the
 grazing collisions in JSBSim).
 
-    .venv/bin/python benchmarks/bench_gusts.py [--seeds 5]
+    .venv/bin/python benchmarks/studies/bench_gusts.py [--seeds 5]
 """
 
 from __future__ import annotations
 
 import argparse
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 
 from uavxai.geometry import turn_positions
+from uavxai.sim.manoeuvres import FRAME, flown
 from uavxai.units import FT, G
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # test fixtures
-from test_dynamics_environment import FRAME, flown  # noqa: E402
 
 BANKS = [(10.0, math.radians(30)), (25.0, 0.0), (35.0, math.radians(-30)), (50.0, 0.0)]
 

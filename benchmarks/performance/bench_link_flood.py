@@ -15,7 +15,8 @@ sending competes with the run), so the user CPU seconds of the simulator's own p
 of the repeats) are printed as well, and the cost of one refused datagram measured alone: those
 are the bridge's cost of the flood without the attacker's.
 
-    .venv/bin/python benchmarks/bench_link_flood.py [--intruders 3] [--steps 120] [--repeats 3]
+    .venv/bin/python benchmarks/performance/bench_link_flood.py [--intruders 3] [--steps 120]
+        [--repeats 3]
 """
 
 from __future__ import annotations

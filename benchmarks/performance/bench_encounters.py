@@ -6,8 +6,9 @@ method) on 1 and 2 local workers and on a private Ray (`--ray`), wall time and s
 against 1 worker, measured in the same process. From these, the hours a campaign of
 `--target` encounters per method takes on this machine.
 
-    .venv/bin/python benchmarks/bench_encounters.py [--encounters 8] [--methods none,mcts_daa]
-        [--dynamics kinematic,jsbsim] [--target 10000] [--ray] [--no-scaling]
+    .venv/bin/python benchmarks/performance/bench_encounters.py [--encounters 8]
+        [--methods none,mcts_daa] [--dynamics kinematic,jsbsim] [--target 10000] [--ray]
+        [--no-scaling]
 
 ``--dynamics`` takes one or both (each measured in turn, in this process, after the other's
 warm-up); ``--no-scaling`` measures the encounters only (the campaigns of the second part fly

@@ -5,7 +5,7 @@ read at 10 Hz, intruder pilots at 1 Hz), and the same trimmed aircraft stepped b
 `for fdm in fdms: fdm.run()` loop. Prints the real-time factor of both and their ratio
 (goal: world <= 1.3x bare; >= 20x real time with 21 aircraft on one core).
 
-    python benchmarks/bench_world.py [--seconds 30] [--repeats 3]
+    python benchmarks/performance/bench_world.py [--seconds 30] [--repeats 3]
 """
 
 from __future__ import annotations

@@ -7,7 +7,7 @@ sigma^2 / g_k)``. With 1 W in total and sigma^2 = -100 dBm, sigma^2 / g_k is ~1e
 gain falls by ~40 dB: the placement changes it by a fraction of a dB. In OFDMA there is no
 interference and the SNR follows the gain, tens of dB across the region.
 
-    python benchmarks/bench_service_sinr.py [--plot docs/service/shared_band_sinr.png]
+    python benchmarks/studies/bench_service_sinr.py [--plot docs/service/shared_band_sinr.png]
 
 prints the spread of each user's SINR over the lattice (h = 50..300 m) for the demo layout.
 """
@@ -20,9 +20,9 @@ from pathlib import Path
 import numpy as np
 
 from uavxai.comms.channel import Channel
-from uavxai.comms.service_env import SearchSpace
 from uavxai.paths import scenarios_dir
 from uavxai.scenario import load_scenario
+from uavxai.service.service_env import SearchSpace
 
 
 def sinr_db(channel: Channel, positions: np.ndarray) -> np.ndarray:

@@ -13,7 +13,8 @@ safety).
 Times are the process's CPU time per decision (less disturbed by other processes than wall
 time, which is printed too); the load average is printed beside them.
 
-    .venv/bin/python benchmarks/bench_mcts.py [--quick] [--encounters 40] [--episodes 20]
+    .venv/bin/python benchmarks/performance/bench_mcts.py [--quick] [--encounters 40]
+        [--episodes 20]
         [--intruders 20,40] [--simulations 200] [--depth 4] [--repeats 5] [--no-vertical]
 """
 

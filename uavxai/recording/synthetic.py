@@ -1,6 +1,7 @@
 """Made-up but plausible runs for exercising the recorder without JSBSim or a planner.
 
-Used by the recording tests, the recording benchmark and to render the docs screenshot: the
+Used by the recording tests, the recording benchmark (benchmarks/performance/) and to render
+the docs screenshot (it lives in the package so those need no path to tests/): the
 ownship weaves towards its goal, intruders fly straight lines, and every decision carries a
 hand-built search tree whose statistics look like an MCTS's (visits concentrated on a few
 actions, Q in [0, 1], collisions where the predicted separation is small).
@@ -9,7 +10,9 @@ actions, Q in [0, 1], collisions where the predicted separation is small).
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -18,11 +21,16 @@ from uavxai.dynamics.state import OWNSHIP_ID, TrafficState, intruder_id
 from uavxai.units import G
 from uavxai.vocabulary import ACCEL_SIGNS, BANK_SIGNS, N_ACTIONS, action_name
 
+if TYPE_CHECKING:
+    from uavxai.recording.recorder import RunRecorder
+
 BOUNDS = {"x": (0.0, 2000.0), "y": (0.0, 2000.0), "h": (50.0, 300.0)}
 GOAL = np.array([1000.0, 1000.0, 120.0])
 
 
-def traffic(n_intruders: int, duration_s: float, rate_hz: float = 10.0, seed: int = 0):
+def traffic(
+    n_intruders: int, duration_s: float, rate_hz: float = 10.0, seed: int = 0
+) -> Iterator[TrafficState]:
     """TrafficStates every 1/rate_hz s: row 0 the ownship, then ``intruder-1..N``."""
     rng = np.random.default_rng(seed)
     n = n_intruders + 1
@@ -127,6 +135,7 @@ def _plan(state: TrafficState, horizon_s: float = 16.0, points: int = 5) -> np.n
 
 
 def users(k: int = 10, seed: int = 0) -> np.ndarray:
+    """``k`` ground users uniform in the middle quarter of the area, at h = 0."""
     rng = np.random.default_rng(seed)
     xy = rng.uniform(750.0, 1250.0, size=(k, 2))
     return np.column_stack([xy, np.zeros(k)])
@@ -144,17 +153,27 @@ def write_demo(path: Path, n_intruders: int = 20, duration_s: float = 120.0) -> 
         for i, state in enumerate(traffic(n_intruders, duration_s)):
             rec.log_traffic(state)
             if i % 10 == 0:
-                k = i // 10
-                d = decision(state, k)
-                rec.log_decision(k, state.t, d, ids)
-                rec.log_metrics(
-                    state.t,
-                    sum_rate_bps=2.3e7,
-                    min_separation_m=state.min_separation(),
-                    bank_deg=math.degrees(state.att[0, 0]),
-                    airspeed_mps=float(state.airspeed[0]),
-                    decision_ms=d.ms,
-                )
+                log_decision(rec, i // 10, state, decision(state, i // 10), ids)
+
+
+def log_decision(
+    rec: RunRecorder,
+    k: int,
+    state: TrafficState,
+    d: Decision,
+    ids: list[str],
+    sum_rate_bps: float = 2.3e7,
+) -> None:
+    """Decision ``k`` and the metrics logged beside it, as a run logs them once a period."""
+    rec.log_decision(k, state.t, d, ids)
+    rec.log_metrics(
+        state.t,
+        sum_rate_bps=sum_rate_bps,
+        min_separation_m=state.min_separation(),
+        bank_deg=math.degrees(state.att[0, 0]),
+        airspeed_mps=float(state.airspeed[0]),
+        decision_ms=d.ms,
+    )
 
 
 if __name__ == "__main__":

@@ -16,9 +16,9 @@ position visited); "service" is what `uavxai service` returns for the layout.
 Episodes to converge: first episode from which the 10-episode running mean of the greedy
 objective stays within 5 % of its final level.
 
-    python benchmarks/bench_service.py                       # 20 layouts x 2 modes, ~40 min
-    python benchmarks/bench_service.py --layouts 2 --episodes 100   # about 2 minutes
-    python benchmarks/bench_service.py --dqn                 # also DQN on every layout
+    python benchmarks/studies/bench_service.py                       # 20 layouts x 2 modes, ~40 min
+    python benchmarks/studies/bench_service.py --layouts 2 --episodes 100   # about 2 minutes
+    python benchmarks/studies/bench_service.py --dqn                 # also DQN on every layout
 """
 
 from __future__ import annotations
@@ -32,10 +32,10 @@ import numpy as np
 import torch
 
 from uavxai.comms.channel import ENVIRONMENTS
-from uavxai.comms.service_env import ServiceEnv
 from uavxai.scenario import default_scenario
 from uavxai.service import d3qn, dqn
 from uavxai.service.grid import solve_grid
+from uavxai.service.service_env import ServiceEnv
 from uavxai.service.stage import plan_service
 from uavxai.service.train import episodes_to_converge
 

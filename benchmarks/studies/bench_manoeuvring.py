@@ -8,7 +8,7 @@ when it leaves). Prints, per method, the collision rate with its 95 % Wilson int
 risk ratio against ``none`` on the same seeds (paired bootstrap), the goal rate, the worst
 and 5th-percentile minimum separation and the p50 decision time. Asserts nothing.
 
-    .venv/bin/python benchmarks/bench_manoeuvring.py --intruders 20 --episodes 100 \\
+    .venv/bin/python benchmarks/studies/bench_manoeuvring.py --intruders 20 --episodes 100 \\
         --methods mcts,mcts_paper,mvp,none
 
 ``mcts_paper`` is ``mcts`` predicting as the paper did (constant velocity, every collision

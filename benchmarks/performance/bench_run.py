@@ -23,8 +23,8 @@ Measured (issue 31): 20 intruders, 30 s simulated, no latency, median of 5 at lo
 CPUs (two campaigns running): run / plain JSBSim 1.00, run / bare world 0.94 (plain JSBSim
 itself at 0.6x real time: the machine was oversubscribed; measure again on a quiet one).
 
-    .venv/bin/python benchmarks/bench_run.py [--intruders 20] [--steps 60] [--repeats 5] \
-        [--latency 0.5]
+    .venv/bin/python benchmarks/performance/bench_run.py [--intruders 20] [--steps 60] \
+        [--repeats 5] [--latency 0.5]
 """
 
 from __future__ import annotations

@@ -17,9 +17,9 @@ the mean and a 95 % confidence interval over seeds, and the paired difference D3
 
 With ``--plot PNG`` it draws the mean greedy curves with their 95 % bands.
 
-    python benchmarks/bench_service_seeds.py                         # 8 seeds, ~10 min
-    python benchmarks/bench_service_seeds.py --seeds 3 --episodes 100  # ~1 min
-    python benchmarks/bench_service_seeds.py --access ofdma --plot curves.png
+    python benchmarks/studies/bench_service_seeds.py                         # 8 seeds, ~10 min
+    python benchmarks/studies/bench_service_seeds.py --seeds 3 --episodes 100  # ~1 min
+    python benchmarks/studies/bench_service_seeds.py --access ofdma --plot curves.png
 """
 
 from __future__ import annotations
@@ -33,10 +33,10 @@ import numpy as np
 import torch
 from scipy import stats
 
-from uavxai.comms.service_env import ServiceEnv
 from uavxai.scenario import Scenario, load_scenario
 from uavxai.service import d3qn, dqn
 from uavxai.service.grid import solve_grid
+from uavxai.service.service_env import ServiceEnv
 from uavxai.service.train import SMOOTHING_EPISODES, episodes_to_converge, running_mean
 
 CONFIGS = {"d3qn": d3qn.D3QNConfig, "dqn": dqn.DQNConfig}

@@ -11,10 +11,11 @@ cell. Rows are appended to ``--out`` (JSON lines) as they finish, so a run cut s
 already there, so the full table can be run over several sessions, and ``--shard i/n`` takes
 every n-th of the remaining (cell, layout) jobs, so n processes can share it.
 
-    python benchmarks/bench_fleet_placement.py --quick            # 2 layouts per cell
-    python benchmarks/bench_fleet_placement.py --layouts 50 [--n 4 --k 40] [--out rows.jsonl]
-    python benchmarks/bench_fleet_placement.py --cells 0-11 --shard 0/2 --out rows.jsonl
-    python benchmarks/bench_fleet_placement.py --planner-only --n 4 --k 40 --layouts 10
+    python benchmarks/studies/bench_fleet_placement.py --quick            # 2 layouts per cell
+    python benchmarks/studies/bench_fleet_placement.py --layouts 50 [--n 4 --k 40]
+        [--out rows.jsonl]
+    python benchmarks/studies/bench_fleet_placement.py --cells 0-11 --shard 0/2 --out rows.jsonl
+    python benchmarks/studies/bench_fleet_placement.py --planner-only --n 4 --k 40 --layouts 10
 
 Goals: planner >= 0.99 of the reference on the mean and >= 0.97 at p5, >= 1.15 x k-means on
 the mean, planning <= 100 ms for N = 4, K = 40. Times are CPU time of this process

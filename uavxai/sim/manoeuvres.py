@@ -1,6 +1,7 @@
 """Standard manoeuvres of the autopilot on the real JSBSim model: fly one, record every
-integration step, measure it. The tests assert on these measures and
-``docs/dynamics/plot_step_responses.py`` draws the same runs.
+integration step, measure it. The tests assert on these measures,
+``docs/dynamics/plot_step_responses.py`` draws the same runs and the climb and gust studies
+(``benchmarks/studies/``) fly them over many seeds.
 """
 
 from __future__ import annotations
@@ -12,6 +13,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from uavxai.avoidance.types import PlannerConfig
+from uavxai.dynamics.aircraft import Aircraft
+from uavxai.dynamics.geodesy import LocalFrame
 from uavxai.dynamics.world import JSBSimWorld
 from uavxai.scenario import Scenario, default_scenario
 from uavxai.units import G
@@ -119,6 +122,39 @@ def height_gained(scenario: Scenario, bank_deg: float, vertical: int) -> list[fl
     finally:
         world.close()
     return out
+
+
+# A lone Aircraft (no world, no pilots) in wind and turbulence, for the weather's own effect.
+FRAME = LocalFrame(34.1230, 108.8370, 400.0)  # any place: the weather is the same everywhere
+DT = 1.0 / 120.0
+
+
+def flown(
+    heading_deg: float,
+    wind: tuple[float, float],
+    turbulence: str = "none",
+    seed: int = 1,
+    seconds: float = 60.0,
+    speed: float = 20.0,
+    banks: list[tuple[float, float]] | None = None,
+) -> np.ndarray:
+    """Rows of raw_state() at 10 Hz (lat, lon, h ft, v east/north/down fps, phi, theta, psi,
+    vt fps) of an aircraft started level in this weather; ``banks`` [(t, bank_rad)]."""
+    a = Aircraft("uav_fw", FRAME, DT, seed=7)
+    a.set_environment(wind, turbulence, seed)
+    if not a.start(1000.0, 1000.0, 120.0, math.radians(heading_deg), speed):
+        raise RuntimeError(f"uav_fw did not trim at {speed} m/s in {turbulence} turbulence")
+    banks = sorted(banks or [])
+    rows = []
+    for k in range(round(seconds / DT)):
+        t = k * DT
+        while banks and banks[0][0] <= t:
+            a.command(bank_cmd_rad=banks.pop(0)[1])
+        a.run()
+        if k % 12 == 11:
+            rows.append(a.raw_state())
+    a.close()
+    return np.array(rows)
 
 
 # ------------------------------------------------------------------------------ measures

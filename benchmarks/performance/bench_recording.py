@@ -6,14 +6,13 @@ per frame). Then the same run recorded as a mission: the map on, K users with ra
 sample, phase and orbit every sample, tracks every decision. Inputs are generated up front so
 only recording is timed.
 
-    .venv/bin/python benchmarks/bench_recording.py [--duration 400] [--intruders 20] [--users 20]
+    .venv/bin/python benchmarks/performance/bench_recording.py [--duration 400] [--intruders 20]
+        [--users 20]
 """
 
 from __future__ import annotations
 
 import argparse
-import math
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -21,11 +20,9 @@ from pathlib import Path
 import numpy as np
 import rerun as rr
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # test fixtures
-import synthetic  # noqa: E402
-
-from uavxai.dynamics.geodesy import LocalFrame  # noqa: E402
-from uavxai.recording.recorder import RunRecorder  # noqa: E402
+from uavxai.dynamics.geodesy import LocalFrame
+from uavxai.recording import synthetic
+from uavxai.recording.recorder import RunRecorder
 
 RATE_HZ = 10.0
 JSBSIM_STEP_S = 15e-6  # one FGFDMExec.run() of a light aircraft (DEPENDENCY-NOTES)
@@ -54,16 +51,7 @@ def record(path: Path, states, decisions, n_intruders: int) -> dict[str, float]:
         t1 = time.perf_counter()
         spent["traffic"] += t1 - t0
         if i in decisions:
-            d = decisions[i]
-            rec.log_decision(i // int(RATE_HZ), state.t, d, ids)
-            rec.log_metrics(
-                state.t,
-                sum_rate_bps=2.3e7,
-                min_separation_m=state.min_separation(),
-                bank_deg=math.degrees(state.att[0, 0]),
-                airspeed_mps=float(state.airspeed[0]),
-                decision_ms=d.ms,
-            )
+            synthetic.log_decision(rec, i // int(RATE_HZ), state, decisions[i], ids)
             spent["decision"] += time.perf_counter() - t1
     t0 = time.perf_counter()
     rec.close()
@@ -111,17 +99,9 @@ def record_mission(path: Path, states, decisions, n_intruders: int, k_users: int
         t2 = time.perf_counter()
         spent["mission/sample"] += t2 - t1
         if i in decisions:
-            d = decisions[i]
-            rec.log_decision(i // int(RATE_HZ), state.t, d, ids)
+            k = i // int(RATE_HZ)
+            synthetic.log_decision(rec, k, state, decisions[i], ids, float(rate.sum()))
             rec.log_tracks(state.t, ids, state.pos[1:], np.full(n_intruders, 15.0))
-            rec.log_metrics(
-                state.t,
-                sum_rate_bps=float(rate.sum()),
-                min_separation_m=state.min_separation(),
-                bank_deg=math.degrees(state.att[0, 0]),
-                airspeed_mps=float(state.airspeed[0]),
-                decision_ms=d.ms,
-            )
             spent["decision"] += time.perf_counter() - t2
     t0 = time.perf_counter()
     rec.close()

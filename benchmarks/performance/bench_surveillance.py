@@ -2,7 +2,8 @@
 10 Hz, the CT-EKF tracker fed with them, and beliefs read once a second, for N intruders.
 Prints numbers; asserts nothing.
 
-    .venv/bin/python benchmarks/bench_surveillance.py [--intruders 40] [--sim-seconds 400]
+    .venv/bin/python benchmarks/performance/bench_surveillance.py [--intruders 40]
+        [--sim-seconds 400]
 """
 
 from __future__ import annotations

@@ -7,22 +7,18 @@ the climb's height target (the ceiling less the margin) or the descent's; the he
 and moderate turbulence, at speed targets 12-22 m/s. The speed priority of the autopilot
 (no climb near the minimum speed) is what the model's climb rate follows.
 
-    .venv/bin/python benchmarks/bench_climb.py [--seeds 8]
+    .venv/bin/python benchmarks/studies/bench_climb.py [--seeds 8]
 """
 
 from __future__ import annotations
 
 import argparse
-import sys
-from pathlib import Path
 
 import numpy as np
 
 from uavxai.avoidance.model import climb_rate
 from uavxai.avoidance.types import PlannerConfig
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # test fixtures
-from manoeuvres import CLIMB_TIMES, climb_scenario, height_gained  # noqa: E402
+from uavxai.sim.manoeuvres import CLIMB_TIMES, climb_scenario, height_gained
 
 SPEEDS = (12.0, 13.0, 15.0, 18.0, 22.0)
 

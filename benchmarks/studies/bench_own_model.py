@@ -8,7 +8,7 @@ prediction of the path it flew, open loop) and compares with where the aircraft 
 the per-axis error (RMS / sqrt 2) at 4, 8, 12 and 16 s, and ``sigma10``: a t^1.5 law (the
 position error of a random acceleration) fitted to them, the error 10 s ahead. Asserts nothing.
 
-    .venv/bin/python benchmarks/bench_own_model.py [--episodes 4] [--intruders 20]
+    .venv/bin/python benchmarks/studies/bench_own_model.py [--episodes 4] [--intruders 20]
 """
 
 from __future__ import annotations

@@ -18,7 +18,7 @@ Settings: ``edge`` — OFDMA near the QoS edge (QoS 1.2 Mbit/s: the hover placem
 user below it on the orbit on many layouts), where placement matters; ``demo`` — the demo's
 comms (``scenarios/demo.yaml``: OFDMA, QoS 100 kbit/s), users static.
 
-    nice -n 10 .venv/bin/python benchmarks/bench_orbit_placement.py [--layouts 20]
+    nice -n 10 .venv/bin/python benchmarks/studies/bench_orbit_placement.py [--layouts 20]
         [--service-s 240] [--settings edge demo] [--planner d3qn|grid|random]
         [--json out.json] [--optimum N]
 """

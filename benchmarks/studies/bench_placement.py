@@ -4,9 +4,11 @@ Unseen random problems (``uavxai.service.layouts``, seeds disjoint from training
 cell access {shared, ofdma} x environment {suburban, urban, dense_urban, highrise_urban} x
 K {5, 10, 20} x users {uniform, clustered}, fading-free. Two steps:
 
-    python benchmarks/bench_placement.py optima --layouts 50 --minutes 40 [--part 0 --parts 2]
-    python benchmarks/bench_placement.py evaluate --layouts N [--part 0 --parts 2]
-    python benchmarks/bench_placement.py report --layouts N [--plot docs/service/placement.png]
+    python benchmarks/studies/bench_placement.py optima --layouts 50 --minutes 40
+        [--part 0 --parts 2]
+    python benchmarks/studies/bench_placement.py evaluate --layouts N [--part 0 --parts 2]
+    python benchmarks/studies/bench_placement.py report --layouts N
+        [--plot docs/service/placement.png]
 
 ``optima`` solves the exact optimum (``grid``, seeded with the d3qn planner's answer) of each
 problem and appends it to ``docs/service/bench_placement_optima.jsonl``, layout index by
@@ -42,14 +44,14 @@ import numpy as np
 import torch
 
 from uavxai.comms.channel import ENVIRONMENTS
-from uavxai.comms.service_env import HOVER, ServiceEnv, levels_to_power
 from uavxai.service import universal
 from uavxai.service.grid import solve_grid
 from uavxai.service.layouts import ACCESS, KINDS, draw_layout, problem_scenario
+from uavxai.service.service_env import HOVER, ServiceEnv, levels_to_power
 
 BENCH_SEED = 13_000  # training uses default_rng([seed < 1000, episode]): disjoint
 KS = (5, 10, 20)
-CACHE = Path(__file__).resolve().parents[1] / "docs" / "service" / "bench_placement_optima.jsonl"
+CACHE = Path(__file__).resolve().parents[2] / "docs" / "service" / "bench_placement_optima.jsonl"
 RUNS = CACHE.with_name("bench_placement_runs.jsonl")  # every method on every cached problem
 ABLATION = CACHE.with_name("bench_placement_ablation.jsonl")  # no_network for earlier runs
 # Rows solved by the faster exact solver (a hint, block DP, failure cap) carry solver = 3; the

@@ -1,7 +1,7 @@
 """Campaign throughput: seconds per kinematic episode for each method at 20 intruders (one
 process), and the wall time of the same small campaign on 1 and 2 local workers.
 
-    .venv/bin/python benchmarks/bench_campaign.py [--episodes 4]
+    .venv/bin/python benchmarks/performance/bench_campaign.py [--episodes 4]
 
 Prints numbers only; nothing is asserted.
 """
