@@ -70,6 +70,11 @@ def describe(err: dict[str, Any], model: type[BaseModel]) -> str:
         return f"'{loc}': unknown key.{hint} Allowed here: {', '.join(allowed)}."
     if kind == "missing":
         return f"'{loc}': required but missing."
+    if kind in ("model_type", "dict_type"):
+        keys = _allowed_keys(model, (*err["loc"], "_"))  # the section's own keys
+        if keys:
+            return (f"'{loc}' = {short_value(value)}: a section belongs here, a mapping of "
+                    f"{', '.join(keys)} (e.g. {{{keys[0]}: ...}}).")  # fmt: skip
     msg = printable(err["msg"].removeprefix("Value error, "), 400)
     if not loc:
         return f"{msg}."

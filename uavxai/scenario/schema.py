@@ -79,12 +79,21 @@ def _admits(annotation: Any, kind: type) -> bool:
     return any(_admits(a, kind) for a in typing.get_args(annotation))
 
 
+def _holds_sections(annotation: Any) -> bool:
+    """Whether ``annotation`` (a list's, say) admits a section (a model) anywhere inside."""
+    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        return True
+    return any(_holds_sections(a) for a in typing.get_args(annotation))
+
+
 def _strict_scalars(value: Any, annotation: Any) -> None:
     """Refuse what pydantic's lax mode would coerce: text for a number or a boolean ('9' -> 9,
     'yes' -> true) and booleans or numbers for one another (true -> 1, 1 -> true)."""
     if isinstance(value, dict):
         return  # a nested section: its own model checks its fields
     if isinstance(value, list | tuple):
+        if _holds_sections(annotation):
+            return  # a list of sections: each item's model checks it, and says what it is
         for item in value:
             _strict_scalars(item, annotation)
         return
