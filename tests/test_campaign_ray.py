@@ -44,3 +44,34 @@ def test_evaluate_on_a_started_ray_head(tmp_path: Path) -> None:
         assert len((out / "episodes.csv").read_text().splitlines()) == 5
     finally:
         subprocess.run([ray_bin, "stop", "--force"], env=env, capture_output=True, timeout=120)
+
+
+def test_ray_local_ignores_a_dead_clusters_address_file() -> None:
+    """`--ray local` starts its own Ray even where an earlier `ray start` left its address
+    behind (Ray's driver would otherwise try to join that cluster and fail)."""
+    import tempfile
+
+    pytest.importorskip("ray")
+    from uavxai.campaign import run_campaign
+    from uavxai.scenario import default_scenario
+
+    # A short folder: Ray's sockets live under it and Unix caps socket paths near 107 bytes.
+    ray_tmp = tempfile.mkdtemp(prefix="rt", dir="/tmp")
+    (Path(ray_tmp) / "ray").mkdir()
+    (Path(ray_tmp) / "ray" / "ray_current_cluster").write_text("192.0.2.2:6379")
+    saved = {k: os.environ.get(k) for k in ("RAY_TMPDIR", "RAY_USAGE_STATS_ENABLED")}
+    os.environ.update(RAY_TMPDIR=ray_tmp, RAY_USAGE_STATS_ENABLED="0")
+    try:
+        rows = run_campaign(default_scenario("ray-local"), ["none"], [3], 2, workers=1,
+                            ray_address="local")  # fmt: skip
+    finally:
+        import ray
+
+        ray.shutdown()
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+        shutil.rmtree(ray_tmp, ignore_errors=True)
+    assert len(rows) == 2 and {r["method"] for r in rows} == {"none"}

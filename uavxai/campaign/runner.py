@@ -200,7 +200,11 @@ def _ray_connect(ray, address: str, workers: int) -> None:
             "episodes fly at once", workers, address)  # fmt: skip
     try:
         if address == "local":
-            ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False)
+            # address="local" starts a new instance even where a `ray start` of the past left
+            # its address file behind (/tmp/ray/ray_current_cluster): without it, ray.init
+            # joins that dead cluster and fails.
+            ray.init(address="local", num_cpus=workers, include_dashboard=False,
+                     log_to_driver=False)  # fmt: skip
         else:
             ray.init(address=address, log_to_driver=False)
     except (ConnectionError, ValueError, RuntimeError) as exc:
