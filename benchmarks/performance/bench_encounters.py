@@ -19,6 +19,9 @@ geometry.clip, the sampler's column; the same numbers to the bit), kinematic, se
 the two trees interleaved at load 8-11 on 2 CPUs: CPU s per encounter `none` 0.728 / 0.480,
 `mcts_daa` 1.189 / 0.868, `mvp` 1.303 / 0.975; JSBSim (4 encounters) `none` 1.179 / 1.250,
 `mcts_daa` 2.244 / 2.316 (unchanged within the noise: JSBSim's integration dominates).
+On the idle machine (commit bcde9ec, `--encounters 150 --methods none --ray`): `none`
+0.317 CPU s per encounter; 300 encounters 99.2 s on 1 worker, 48.9 s on 2 (speed-up 2.03),
+58.3 s on a private Ray of 2 CPUs (1.70, its start inside); docs/cluster.md.
 
 Prints numbers only; nothing is asserted. On a machine shared with other work the CPU times
 hold better than the wall times: the load is printed beside them.
