@@ -1,8 +1,11 @@
 """Markdown tables of campaign results: goal and collision rate per method against intruders.
 
     .venv/bin/python docs/results/make_tables.py docs/results/kinematic/results.csv
+    .venv/bin/python docs/results/make_tables.py --daa KINEMATIC/results.csv [JSBSIM/results.csv]
 
-Prints to stdout; README.md in this folder pastes its output.
+The second form is the detect-and-avoid table of issue 27: every weighted metric with its 95 %
+interval per method (and dynamics), then the kinematic and JSBSim NMAC risk ratios side by
+side. Prints to stdout; README.md in this folder pastes its output.
 """
 
 from __future__ import annotations
@@ -12,6 +15,17 @@ import sys
 from pathlib import Path
 
 ORDER = ("mcts", "mcts_fast", "exhaustive", "dqn", "safe_dqn", "none")
+DAA_ORDER = ("none", "mvp", "mcts", "mcts_vertical", "mcts_daa")
+# (label, results.csv column, digits): each with its _lo/_hi interval columns.
+DAA_METRICS = (
+    ("P(NMAC)", "nmac_prob", 3),
+    ("NMAC risk ratio", "nmac_risk_ratio", 3),
+    ("induced risk ratio", "induced_risk_ratio", 3),
+    ("P(LoWC)", "lowc_prob", 3),
+    ("LoWC ratio", "lowc_ratio", 3),
+    ("alert rate", "alert_rate", 3),
+    ("unnecessary manoeuvre", "unnecessary_manoeuvre_rate", 3),
+)
 
 
 def table(path: Path) -> str:
@@ -54,7 +68,48 @@ def table(path: Path) -> str:
     return "\n".join(lines + detail)
 
 
+def _rows(path: Path) -> dict[str, dict[str, str]]:
+    with path.open() as f:
+        rows = {r["method"]: r for r in csv.DictReader(f)}
+    order = [m for m in DAA_ORDER if m in rows] + sorted(set(rows) - set(DAA_ORDER))
+    return {m: rows[m] for m in order}
+
+
+def _ci(r: dict[str, str], col: str, digits: int) -> str:
+    v, lo, hi = (float(r[c]) for c in (col, col + "_lo", col + "_hi"))
+    return f"{v:.{digits}g} [{lo:.{digits}g}, {hi:.{digits}g}]"
+
+
+def daa_table(paths: list[Path]) -> str:
+    """Issue 27's table: one row per method and dynamics, every metric with its interval,
+    then the risk ratios of the two dynamics side by side (when two files are given)."""
+    by_file = [(p, _rows(p)) for p in paths]
+    head = ("| method | file | encounters | " + " | ".join(m[0] for m in DAA_METRICS)
+            + " | reversals / enc | path excess (mean) | interval check |")  # fmt: skip
+    lines = [head, "|" + "---|" * (len(DAA_METRICS) + 6)]
+    for path, rows in by_file:
+        for m, r in rows.items():
+            cells = [_ci(r, col, d) for _, col, d in DAA_METRICS]
+            lines.append(
+                f"| {m} | {path.parent.name} | {int(r['episodes']):,} | " + " | ".join(cells)
+                + f" | {float(r['mean_reversals']):.2f} | "
+                f"{100 * float(r['mean_path_excess']):.1f} % | {r['ci_check']} |"
+            )  # fmt: skip
+    if len(by_file) == 2:
+        (pa, a), (pb, b) = by_file
+        lines += ["", f"| method | NMAC risk ratio, {pa.parent.name} | NMAC risk ratio, "
+                  f"{pb.parent.name} | encounters |", "|---|---|---|---|"]  # fmt: skip
+        for m in [m for m in a if m in b]:
+            lines.append(f"| {m} | {_ci(a[m], 'nmac_risk_ratio', 3)} | "
+                         f"{_ci(b[m], 'nmac_risk_ratio', 3)} | {int(a[m]['episodes']):,} / "
+                         f"{int(b[m]['episodes']):,} |")  # fmt: skip
+    return "\n".join(lines)
+
+
 if __name__ == "__main__":
+    if sys.argv[1:2] == ["--daa"]:
+        print(daa_table([Path(a) for a in sys.argv[2:]]))
+        sys.exit(0)
     for arg in sys.argv[1:]:
         print(f"<!-- {arg} -->")
         print(table(Path(arg)))
