@@ -119,19 +119,10 @@ def test_from_scenario_defaults_to_static_and_reads_the_config():
     assert m.model == "static"
     np.testing.assert_array_equal(m.positions, draw_users(sc))
 
-    class Users:  # stands in for the schema with comms.users.mobility, as a plain mapping
-        region = sc.comms.users.region
-        mobility = {"model": "random_waypoint", "speed_mps": [1.0, 1.2], "pause_s": [5, 6]}
-
-    class Comms:
-        users = Users()
-
-    class Sc:
-        seed = 5
-        comms = Comms()
-
+    walking = default_scenario(seed=5, comms={"users": {"mobility": {
+        "model": "random_waypoint", "speed_mps": [1.0, 1.2], "pause_s": [5, 6]}}})  # fmt: skip
     users = draw_users(sc)
-    m = UserMobility.from_scenario(Sc(), users)
+    m = UserMobility.from_scenario(walking, users)
     assert m.model == "random_waypoint"
     assert m.speed_mps == (1.0, 1.2) and m.pause_s == (5.0, 6.0)
     again = UserMobility(

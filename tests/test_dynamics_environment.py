@@ -21,6 +21,7 @@ from uavxai.dynamics.aircraft import (
 from uavxai.dynamics.environment import EnvironmentConfig
 from uavxai.dynamics.geodesy import LocalFrame
 from uavxai.errors import UserError
+from uavxai.scenario import default_scenario
 from uavxai.sim.manoeuvres import DT, FRAME, flown
 from uavxai.units import FT, KT
 
@@ -138,15 +139,10 @@ def test_environment_config_for_both_dynamics():
     assert env.crab_angle_rad(math.pi / 2, 20.0) == pytest.approx(0.0, abs=1e-12)  # tail wind
     assert not env.calm and EnvironmentConfig().calm
 
-    class Wind:
-        speed_mps, from_deg = 4.0, 90.0
-
-    class Env:
-        wind, turbulence = Wind(), "light"
-
-    got = EnvironmentConfig.from_scenario(type("S", (), {"environment": Env()})())
-    assert got == EnvironmentConfig(4.0, 90.0, "light")
-    assert EnvironmentConfig.from_scenario(object()) == EnvironmentConfig()
+    windy = default_scenario(environment={"wind": {"speed_mps": 4, "from_deg": 90},
+                                          "turbulence": "light"})  # fmt: skip
+    assert EnvironmentConfig.from_scenario(windy) == EnvironmentConfig(4.0, 90.0, "light")
+    assert EnvironmentConfig.from_scenario(default_scenario()) == EnvironmentConfig()
     with pytest.raises(UserError, match="environment.turbulence"):
         EnvironmentConfig(turbulence="gusty")
 

@@ -242,24 +242,37 @@ def test_contract_sections_are_in_the_schema_and_the_reference() -> None:
         assert f"`{key}`" in doc, key
 
 
-def test_new_sections_default_to_what_the_code_does_without_them() -> None:
-    """Where code reads these sections with getattr defaults, the schema's defaults must be
-    the same, so adding the sections changed nothing for scenarios that omit them. (The
-    mission's are read from the schema only: uavxai.sim.mission states none of its own.)"""
-    from types import SimpleNamespace
-
+def test_section_configs_take_the_schemas_defaults_and_values() -> None:
+    """The plain configs of the surveillance, environment and walking users are the schema's
+    section field for field, their defaults the schema's (declared there once): a scenario
+    that omits a section and the config built without arguments agree, and every value set
+    in the scenario reaches the config. (The mission's are read from the schema only.)"""
     from uavxai.comms.mobility import UserMobility
     from uavxai.dynamics.environment import EnvironmentConfig
     from uavxai.surveillance.adsb import SurveillanceConfig
+    from uavxai.surveillance.sensor import SensorConfig
 
     sc = default_scenario()
     assert SurveillanceConfig.from_scenario(sc) == SurveillanceConfig()
     assert EnvironmentConfig.from_scenario(sc) == EnvironmentConfig()
-    a, b = UserMobility.from_scenario(sc), UserMobility.from_scenario(
-        SimpleNamespace(seed=sc.seed, comms=SimpleNamespace(users=SimpleNamespace(
-            positions=None, count=sc.comms.users.count, region=sc.comms.users.region)))
-    )
-    assert (a.model, a.speed_mps, a.pause_s) == (b.model, b.speed_mps, b.pause_s)
+    walk, plain = UserMobility.from_scenario(sc), UserMobility([[0.0, 0.0]], ((0, 1), (0, 1)))
+    assert (walk.model, walk.speed_mps, walk.pause_s) == (
+        plain.model, plain.speed_mps, plain.pause_s)  # fmt: skip
+    odd = default_scenario(
+        surveillance={"model": "truth", "rate_hz": 2, "nacp": 9, "nacv": 1, "latency_s": 0.2,
+                      "dropout": 0.1, "noncooperative": 0.25, "preroll_s": 3,
+                      "sensor": {"range_m": 800, "fov_deg": 120, "sigma_m": 5}},
+        environment={"wind": {"speed_mps": 4, "from_deg": 90}, "turbulence": "light"},
+        comms={"users": {"mobility": {"model": "random_waypoint", "speed_mps": [1, 2],
+                                      "pause_s": 10}}},
+    )  # fmt: skip
+    assert SurveillanceConfig.from_scenario(odd) == SurveillanceConfig(
+        "truth", 2.0, 9, 1, 0.2, 0.1, 0.25, SensorConfig(800.0, 120.0, 5.0), 3.0)  # fmt: skip
+    assert EnvironmentConfig.from_scenario(odd) == EnvironmentConfig(4.0, 90.0, "light")
+    walk = UserMobility.from_scenario(odd)
+    assert (walk.model, walk.speed_mps, walk.pause_s) == ("random_waypoint", (1, 2), (10, 10))
+    no_sensor = default_scenario(surveillance={"sensor": None})
+    assert SurveillanceConfig.from_scenario(no_sensor).sensor is None
     assert sc.surveillance.model == "adsb" and sc.intruders.flow == "replace"
     assert sc.mission.service_s == 300 and sc.mission.return_home is True
     assert sc.environment.wind.from_deg == 270 and sc.environment.turbulence == "none"

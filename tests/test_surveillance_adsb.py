@@ -12,6 +12,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from uavxai.dynamics.geodesy import LocalFrame
 from uavxai.dynamics.state import TrafficState
 from uavxai.errors import UserError
+from uavxai.scenario import default_scenario
 from uavxai.surveillance.adsb import (
     NACP_EPU_M,
     NACV_HFOM_MPS,
@@ -193,15 +194,11 @@ def test_bad_settings_name_the_field():
 
 
 def test_from_scenario_reads_what_is_there_and_defaults_the_rest():
-    class Section:
-        nacp = 9
-        latency_s = 1.0
-        sensor = type("S", (), {"range_m": 2000.0})()
-
-    cfg = SurveillanceConfig.from_scenario(type("Sc", (), {"surveillance": Section()})())
+    sc = default_scenario(surveillance={"nacp": 9, "latency_s": 1.0, "sensor": {"range_m": 2000}})
+    cfg = SurveillanceConfig.from_scenario(sc)
     assert (cfg.nacp, cfg.latency_s, cfg.nacv, cfg.model) == (9, 1.0, 2, "adsb")
     assert cfg.sensor == SensorConfig(range_m=2000.0)
-    assert SurveillanceConfig.from_scenario(object()) == SurveillanceConfig()
+    assert SurveillanceConfig.from_scenario(default_scenario()) == SurveillanceConfig()
 
 
 def test_adsb_vehicle_round_trip_through_pymavlink():

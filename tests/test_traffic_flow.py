@@ -10,6 +10,7 @@ import pytest
 
 from uavxai.dynamics.flow import TrafficFlow, apply_entries
 from uavxai.errors import UserError
+from uavxai.scenario import default_scenario
 
 BOX = ((0.0, 2000.0), (0.0, 2000.0))
 N = 20
@@ -105,22 +106,15 @@ def test_same_seed_same_traffic():
 
 
 def test_from_scenario_and_bad_input():
-    class Ic:
-        count, list, altitude_m, speed_mps = 20, None, (100, 140), (15, 30)
-
-    class W:
-        x, y = (0, 2000), (0, 1000)
-
-    class Sc:
-        intruders, world, seed = Ic(), W(), 4
-
-    flow = TrafficFlow.from_scenario(Sc())
+    sc = default_scenario(seed=4, intruders={"count": 20}, world={"x": [0, 2000], "y": [0, 1000]},
+                          ownship={"start": {"x": 100, "y": 100}, "goal": [1500, 800, 120]},
+                          comms={"users": {"region": {"x": [200, 600], "y": [200, 600]}}})
+    flow = TrafficFlow.from_scenario(sc)
     assert flow is not None and flow.next_number == 21 and flow.y_bounds == (0.0, 1000.0)
-    Ic.flow = "none"
-    assert TrafficFlow.from_scenario(Sc()) is None
-    Ic.flow = "bounce"
-    with pytest.raises(UserError, match="intruders.flow"):
-        TrafficFlow.from_scenario(Sc())
+    assert TrafficFlow.from_scenario(sc.model_copy(update={
+        "intruders": sc.intruders.model_copy(update={"flow": "none"})})) is None
+    with pytest.raises(UserError, match="intruders.flow"):  # the schema names the key
+        default_scenario(intruders={"flow": "bounce"})
     with pytest.raises(UserError):
         TrafficFlow((0, 0), (0, 1))
 

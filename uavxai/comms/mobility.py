@@ -28,11 +28,10 @@ import numpy as np
 
 from uavxai.comms.channel import draw_users
 from uavxai.errors import UserError
+from uavxai.scenario import Mobility, Scenario
 
 MOBILITY_MODELS = ("static", "random_waypoint")
-DEFAULT_MODEL = "static"
-DEFAULT_SPEED_MPS = (0.5, 1.5)
-DEFAULT_PAUSE_S = (0.0, 30.0)
+_DEFAULT = Mobility()  # the schema's defaults (comms.users.mobility), declared there once
 
 # Mixed into the scenario seed so that the walkers' streams are not the stream that placed the
 # users (draw_users uses default_rng(seed)) nor any other consumer of the bare seed.
@@ -43,15 +42,6 @@ MOBILITY_STREAM = 0x6D6F62  # "mob"
 _MAX_PASSES = 100_000
 
 SeedLike = int | Sequence[int] | np.random.SeedSequence | np.random.Generator | None
-
-
-def _field(config: Any, name: str, default: Any) -> Any:
-    """``config.name`` or ``config[name]``; ``default`` when absent or None (the schema key
-    ``comms.users.mobility`` may be a pydantic model, a plain dict or missing)."""
-    if config is None:
-        return default
-    value = config.get(name) if isinstance(config, Mapping) else getattr(config, name, None)
-    return default if value is None else value
 
 
 def _bounds(value: Any, name: str, lowest: float, strict: bool) -> tuple[float, float]:
@@ -103,9 +93,9 @@ class UserMobility:
         self,
         users_xy: np.ndarray,
         region: Any,
-        model: str = DEFAULT_MODEL,
-        speed_mps: float | Sequence[float] = DEFAULT_SPEED_MPS,
-        pause_s: float | Sequence[float] = DEFAULT_PAUSE_S,
+        model: str = _DEFAULT.model,
+        speed_mps: float | Sequence[float] = _DEFAULT.speed_mps,
+        pause_s: float | Sequence[float] = _DEFAULT.pause_s,
         seed: SeedLike = None,
     ) -> None:
         if model not in MOBILITY_MODELS:
@@ -142,23 +132,23 @@ class UserMobility:
     # ------------------------------------------------------------------ construction
     @classmethod
     def from_scenario(
-        cls, scenario: Any, users: np.ndarray | None = None, seed: SeedLike = None
+        cls, scenario: Scenario, users: np.ndarray | None = None, seed: SeedLike = None
     ) -> UserMobility:
         """From ``comms.users`` (``mobility: {model, speed_mps, pause_s}``, all optional:
         a scenario without the key gets static users). ``users`` defaults to
         ``channel.draw_users(scenario)``; ``seed`` to ``[scenario.seed, MOBILITY_STREAM]``."""
         users_cfg = scenario.comms.users
-        config = getattr(users_cfg, "mobility", None)
+        config = users_cfg.mobility
         if users is None:
             users = draw_users(scenario)
         if seed is None:
-            seed = [int(getattr(scenario, "seed", 0)), MOBILITY_STREAM]
+            seed = [int(scenario.seed), MOBILITY_STREAM]
         return cls(
             users,
             users_cfg.region,
-            model=str(_field(config, "model", DEFAULT_MODEL)),
-            speed_mps=_field(config, "speed_mps", DEFAULT_SPEED_MPS),
-            pause_s=_field(config, "pause_s", DEFAULT_PAUSE_S),
+            model=config.model,
+            speed_mps=config.speed_mps,
+            pause_s=config.pause_s,
             seed=seed,
         )
 

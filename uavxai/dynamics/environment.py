@@ -14,14 +14,16 @@ from dataclasses import dataclass
 from uavxai.dynamics.aircraft import TURBULENCE, wind_ne_from
 from uavxai.errors import UserError
 from uavxai.geometry import wrap_angle
+from uavxai.scenario import Environment, Scenario
 from uavxai.units import FT, KT
 
+_DEFAULT = Environment()  # the schema's defaults (environment:), declared there once
 
 @dataclass(frozen=True)
 class EnvironmentConfig:
-    wind_speed_mps: float = 0.0
-    wind_from_deg: float = 270.0  # the direction the wind blows FROM, clockwise from north
-    turbulence: str = "none"  # none | light | moderate | severe
+    wind_speed_mps: float = _DEFAULT.wind.speed_mps
+    wind_from_deg: float = _DEFAULT.wind.from_deg  # blows FROM, clockwise from north
+    turbulence: str = _DEFAULT.turbulence  # none | light | moderate | severe
 
     def __post_init__(self) -> None:
         wind_ne_from(self.wind_speed_mps, self.wind_from_deg)  # validates both
@@ -31,17 +33,10 @@ class EnvironmentConfig:
             )
 
     @classmethod
-    def from_scenario(cls, scenario: object) -> EnvironmentConfig:
-        """The scenario's ``environment`` section; calm air for a schema without it."""
-        env = getattr(scenario, "environment", None)
-        if env is None:
-            return cls()
-        wind = getattr(env, "wind", None)
-        return cls(
-            wind_speed_mps=float(getattr(wind, "speed_mps", 0.0)),
-            wind_from_deg=float(getattr(wind, "from_deg", 270.0)),
-            turbulence=str(getattr(env, "turbulence", "none")),
-        )
+    def from_scenario(cls, scenario: Scenario) -> EnvironmentConfig:
+        """The scenario's ``environment`` section."""
+        env = scenario.environment
+        return cls(env.wind.speed_mps, env.wind.from_deg, env.turbulence)
 
     @property
     def wind_ne(self) -> tuple[float, float]:

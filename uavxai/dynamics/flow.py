@@ -22,8 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from uavxai.errors import UserError
+from uavxai.scenario import Scenario
 
-FLOWS = ("replace", "none")
 # A newcomer never appears closer than this to the ownship (horizontally): real traffic does
 # not materialise in the sky next to anyone; at 1 km a 30 m/s intruder is at least 17 s from
 # a head-on meeting, time for the surveillance picture to hold a track of it. (Every point of
@@ -117,27 +117,23 @@ class TrafficFlow:
 
     @classmethod
     def from_scenario(
-        cls, scenario: object, seed: int | None = None, first_number: int | None = None
+        cls, scenario: Scenario, seed: int | None = None, first_number: int | None = None
     ) -> TrafficFlow | None:
-        """The flow of a scenario, or None with ``intruders.flow: none``. Works with scenario
-        schemas without ``intruders.flow`` (then: replace)."""
-        ic = scenario.intruders  # type: ignore[attr-defined]
-        flow = getattr(ic, "flow", "replace")
-        if flow not in FLOWS:
-            raise UserError(f"intruders.flow = {flow!r}; allowed: {', '.join(FLOWS)}")
-        if flow == "none":
+        """The flow of a scenario, or None with ``intruders.flow: none`` (the schema checks
+        the name)."""
+        ic = scenario.intruders
+        if ic.flow == "none":
             return None
-        w = scenario.world  # type: ignore[attr-defined]
+        w = scenario.world
         if first_number is None:
-            lst = getattr(ic, "list", None)
-            first_number = (len(lst) if lst is not None else int(ic.count)) + 1
+            first_number = (len(ic.list) if ic.list is not None else int(ic.count)) + 1
         return cls(
             tuple(w.x),
             tuple(w.y),
             altitude_m=tuple(ic.altitude_m),
             speed_mps=tuple(ic.speed_mps),
             first_number=first_number,
-            seed=scenario.seed if seed is None else int(seed),  # type: ignore[attr-defined]
+            seed=scenario.seed if seed is None else int(seed),
         )
 
     def left(self, pos: np.ndarray) -> np.ndarray:

@@ -35,6 +35,7 @@ import numpy as np
 from uavxai.dynamics.geodesy import LocalFrame
 from uavxai.dynamics.state import TrafficState
 from uavxai.errors import UserError
+from uavxai.scenario import Scenario, Surveillance
 from uavxai.surveillance.sensor import SensorConfig, sensor_sees
 
 # 95 % horizontal position bound (EPU) per NACp, m (DO-260B Table 2-14). 8 = 0.05 NM.
@@ -89,22 +90,25 @@ def nacv_sigmas(nacv: int) -> tuple[float, float]:
     return sigma_from_r95(NACV_HFOM_MPS[nacv]), NACV_VFOM_MPS[nacv] / R95_PER_SIGMA_1D
 
 
+_DEFAULT = Surveillance()  # the schema's defaults (surveillance:), declared there once
+
+
 @dataclass(frozen=True)
 class SurveillanceConfig:
     """As the scenario's ``surveillance`` section (docs/scenario.md). ``sensor`` None: no onboard
     sensor, non-cooperative intruders are not seen at all."""
 
-    model: str = "adsb"
-    rate_hz: float = 1.0
-    nacp: int = 10
-    nacv: int = 2
-    latency_s: float = 0.5
-    dropout: float = 0.05
-    noncooperative: float = 0.0
+    model: str = _DEFAULT.model
+    rate_hz: float = _DEFAULT.rate_hz
+    nacp: int = _DEFAULT.nacp
+    nacv: int = _DEFAULT.nacv
+    latency_s: float = _DEFAULT.latency_s
+    dropout: float = _DEFAULT.dropout
+    noncooperative: float = _DEFAULT.noncooperative
     sensor: SensorConfig | None = field(default_factory=SensorConfig)
     # how long the receiver has been listening before the episode's t = 0 (the episode's
     # picture, uavxai.sim.picture.Picture, hears the traffic flown back over that window)
-    preroll_s: float = 10.0
+    preroll_s: float = _DEFAULT.preroll_s
 
     def __post_init__(self) -> None:
         if self.model not in MODELS:
@@ -125,32 +129,12 @@ class SurveillanceConfig:
             raise UserError(f"surveillance.preroll_s must be >= 0, got {self.preroll_s}")
 
     @classmethod
-    def from_scenario(cls, scenario: object) -> SurveillanceConfig:
-        """The scenario's ``surveillance`` section; defaults for whatever it lacks (so this
-        works with scenario schemas with and without that section)."""
-        s = getattr(scenario, "surveillance", None)
-        if s is None:
-            return cls()
-        defaults = cls()
-        sensor = getattr(s, "sensor", defaults.sensor)
-        if sensor is not None and not isinstance(sensor, SensorConfig):
-            base = SensorConfig()
-            sensor = SensorConfig(
-                range_m=float(getattr(sensor, "range_m", base.range_m)),
-                fov_deg=float(getattr(sensor, "fov_deg", base.fov_deg)),
-                sigma_m=float(getattr(sensor, "sigma_m", base.sigma_m)),
-            )
-        return cls(
-            model=str(getattr(s, "model", defaults.model)),
-            rate_hz=float(getattr(s, "rate_hz", defaults.rate_hz)),
-            nacp=int(getattr(s, "nacp", defaults.nacp)),
-            nacv=int(getattr(s, "nacv", defaults.nacv)),
-            latency_s=float(getattr(s, "latency_s", defaults.latency_s)),
-            dropout=float(getattr(s, "dropout", defaults.dropout)),
-            noncooperative=float(getattr(s, "noncooperative", defaults.noncooperative)),
-            sensor=sensor,
-            preroll_s=float(getattr(s, "preroll_s", defaults.preroll_s)),
-        )
+    def from_scenario(cls, scenario: Scenario) -> SurveillanceConfig:
+        """The scenario's ``surveillance`` section, field for field (the schema validated it
+        and declares the defaults)."""
+        s = scenario.surveillance
+        sensor = None if s.sensor is None else SensorConfig(**s.sensor.model_dump())
+        return cls(**{**s.model_dump(exclude={"sensor"}), "sensor": sensor})
 
     @property
     def sigma_pos(self) -> tuple[float, float]:

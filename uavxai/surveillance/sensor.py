@@ -16,6 +16,9 @@ import numpy as np
 from uavxai.dynamics.state import TrafficState
 from uavxai.errors import UserError
 from uavxai.geometry import wrap_angle
+from uavxai.scenario import Sensor
+
+_DEFAULT = Sensor()  # the schema's defaults (surveillance.sensor), declared there once
 
 
 @dataclass(frozen=True)
@@ -24,9 +27,9 @@ class SensorConfig:
     position only, within ``range_m`` and ``fov_deg`` (total, centred on the ownship's
     heading, horizontal), with per-axis noise ``sigma_m``, at the surveillance rate."""
 
-    range_m: float = 1000.0
-    fov_deg: float = 220.0
-    sigma_m: float = 10.0
+    range_m: float = _DEFAULT.range_m
+    fov_deg: float = _DEFAULT.fov_deg
+    sigma_m: float = _DEFAULT.sigma_m
 
     def __post_init__(self) -> None:
         if not self.range_m >= 0:
