@@ -551,6 +551,9 @@ class Surveillance(_Model):
     noncooperative: Probability = 0.0
     sensor: Sensor | None = Sensor()  # null: no onboard sensor
     preroll_s: Annotated[float, Field(ge=0, le=600)] = 10.0  # listening before t = 0
+    # the filter of each track: ekf (one coordinated turn, its rate estimated) or imm
+    # (straight, left and right turns mixed; uavxai.surveillance.imm)
+    tracker: Literal["ekf", "imm"] = "ekf"
 
 
 # ------------------------------------------------------------------------------------- operator

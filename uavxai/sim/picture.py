@@ -38,7 +38,8 @@ from uavxai.surveillance.adsb import (
     adsb_message,
     report_from_adsb,
 )
-from uavxai.surveillance.tracker import Tracker, truth_beliefs
+from uavxai.surveillance.imm import ImmTrack
+from uavxai.surveillance.tracker import Tracker, TrackerConfig, truth_beliefs
 
 _STREAM = 0x53555256  # spawn key of the surveillance noise, apart from traffic and JSBSim
 
@@ -56,7 +57,10 @@ class Receiver:
         self.config = SurveillanceConfig.from_scenario(scenario)
         self.frame = LocalFrame.from_origin(scenario.world.origin)
         wind = EnvironmentConfig.from_scenario(scenario).wind_enu[:2]  # tracked in the air mass
-        self.tracker = Tracker(wind_mps=wind)
+        if self.config.tracker == "imm":
+            self.tracker = Tracker(TrackerConfig.for_traffic(scenario), wind, track=ImmTrack)
+        else:
+            self.tracker = Tracker(wind_mps=wind)
         self._reader = FrameReader(new_codec(None, 255, 0), stream=False)
         self.decoded: list[Report] = []  # the last batch of ADS-B reports, as decoded here
 

@@ -109,6 +109,7 @@ class SurveillanceConfig:
     # how long the receiver has been listening before the episode's t = 0 (the episode's
     # picture, uavxai.sim.picture.Picture, hears the traffic flown back over that window)
     preroll_s: float = _DEFAULT.preroll_s
+    tracker: str = _DEFAULT.tracker  # ekf | imm (uavxai.surveillance.tracker, .imm)
 
     def __post_init__(self) -> None:
         if self.model not in MODELS:
@@ -125,6 +126,8 @@ class SurveillanceConfig:
             raise UserError(
                 f"surveillance.noncooperative must be in [0, 1], got {self.noncooperative}"
             )
+        if self.tracker not in ("ekf", "imm"):
+            raise UserError(f"surveillance.tracker = {self.tracker!r}; allowed: ekf, imm")
         if not self.preroll_s >= 0:
             raise UserError(f"surveillance.preroll_s must be >= 0, got {self.preroll_s}")
 

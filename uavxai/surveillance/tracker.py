@@ -38,9 +38,11 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from uavxai.avoidance.types import Intruder
+from uavxai.dynamics.behaviours import TURN_HOLD_S
 from uavxai.dynamics.state import TrafficState
 from uavxai.errors import UserError
 from uavxai.geometry import turn_rate_of_bank
+from uavxai.scenario import Scenario
 from uavxai.surveillance.adsb import Report
 
 X, Y, VX, VY, W, H, VH = range(7)
@@ -56,6 +58,10 @@ class TrackerConfig:
     init_turn_rate_sigma: float = 0.2  # rad/s, a new track's turn-rate uncertainty
     init_vel_sigma_mps: float = 15.0  # velocity uncertainty of a track born position-only
     max_turn_rate: float = 1.0  # rad/s, the estimate is clipped to +- this
+    # surveillance.tracker: imm (uavxai.surveillance.imm): the turn rate of its turning modes,
+    # rad/s, and the mean time between manoeuvres, s (the traffic's; sim.picture sets them)
+    imm_turn_rate: float = 0.12
+    imm_sojourn_s: float = 12.5
 
     def __post_init__(self) -> None:
         for name in (
@@ -66,9 +72,20 @@ class TrackerConfig:
             "init_turn_rate_sigma",
             "init_vel_sigma_mps",
             "max_turn_rate",
+            "imm_turn_rate",
+            "imm_sojourn_s",
         ):
             if not getattr(self, name) > 0:
                 raise UserError(f"TrackerConfig.{name} must be > 0, got {getattr(self, name)}")
+
+    @classmethod
+    def for_traffic(cls, scenario: Scenario) -> TrackerConfig:
+        """The IMM's manoeuvres from the scenario's traffic: a turn at half its bank limit at
+        its mean speed, and the random-turn pilots' mean hold between bank changes."""
+        speed = 0.5 * sum(scenario.intruders.speed_mps)
+        bank = 0.5 * math.radians(scenario.avoidance.bank_limit_deg)
+        return cls(imm_turn_rate=turn_rate_of_bank(bank, speed),
+                   imm_sojourn_s=0.5 * sum(TURN_HOLD_S))  # fmt: skip
 
 
 def _ct_terms(w: float, T: float) -> tuple[float, float, float, float]:
@@ -129,7 +146,7 @@ def ct_process_noise(T: float, cfg: TrackerConfig) -> np.ndarray:
     return Q
 
 
-def _largest_sd(P: np.ndarray, i: int, j: int) -> float:
+def largest_sd(P: np.ndarray, i: int, j: int) -> float:
     """Square root of the larger eigenvalue of the 2x2 block (i, j) of P (closed form)."""
     a, b, d = P[i, i], P[i, j], P[j, j]
     lam = 0.5 * (a + d) + math.sqrt(max(0.25 * (a - d) ** 2 + b * b, 0.0))
@@ -218,20 +235,24 @@ class Track:
             vh=float(x[VH]),
             turn_rate=float(x[W]),
             # the larger axis of the horizontal error ellipse: conservative for separation
-            sigma_m=_largest_sd(P, X, Y),
-            sigma_v=_largest_sd(P, VX, VY),
+            sigma_m=largest_sd(P, X, Y),
+            sigma_v=largest_sd(P, VX, VY),
             age_s=float(max(t - self.t, 0.0)),
         )
 
 
 class Tracker:
     """All tracks, by intruder id; ``wind_mps`` (east, north): the steady wind, tracked in
-    the air mass's frame (module docstring)."""
+    the air mass's frame (module docstring); ``track``: the filter of one track."""
 
     def __init__(
-        self, config: TrackerConfig | None = None, wind_mps: tuple[float, float] = (0.0, 0.0)
+        self,
+        config: TrackerConfig | None = None,
+        wind_mps: tuple[float, float] = (0.0, 0.0),
+        track: type = Track,
     ) -> None:
         self.config = config or TrackerConfig()
+        self._new_track = track  # Track (the EKF) or uavxai.surveillance.imm.ImmTrack
         self.wind = np.array([float(wind_mps[0]), float(wind_mps[1]), 0.0])
         self._windy = bool(np.any(self.wind))
         self.tracks: dict[str, Track] = {}
@@ -244,7 +265,7 @@ class Tracker:
                 r = self._into_air(r)
             track = self.tracks.get(r.id)
             if track is None:
-                self.tracks[r.id] = Track(r, self.config)
+                self.tracks[r.id] = self._new_track(r, self.config)
             elif not track.update(r):
                 self.ignored += 1
 
