@@ -95,6 +95,7 @@ class Aircraft:
         self.name = name
         self.frame = frame
         self.dt = dt
+        self._battery_spec: BatterySpec | None = None  # read from the package when asked
         self.fdm = load_fdm(name, dt)
         self.fdm["simulation/randomseed"] = seed
         self.run = self.fdm.run
@@ -247,10 +248,9 @@ class Aircraft:
     # ---------------------------------------------- electrical (see uavxai.dynamics.energy)
     def battery_spec(self) -> BatterySpec:
         """The battery and electrical loads the aircraft package declares."""
-        spec = getattr(self, "_battery_spec", None)
-        if spec is None:
-            spec = self._battery_spec = BatterySpec.from_fdm(self.fdm, self.name)
-        return spec
+        if self._battery_spec is None:
+            self._battery_spec = BatterySpec.from_fdm(self.fdm, self.name)
+        return self._battery_spec
 
     def shaft_power_w(self) -> float:
         """The motor's shaft power now, W, as JSBSim's electric engine computes it."""

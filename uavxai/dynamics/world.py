@@ -85,6 +85,8 @@ class JSBSimWorld(ScheduledWorld):
         self._failure: str | None = None
         self.lost_intruders: list[str] = []  # intruders that failed and were replaced, why
         self._checked: TrafficState | None = None  # the last state _check tested
+        self._envelope_key: tuple[str, ...] | None = None  # the aircraft _envelope_cache is of
+        self._envelope_cache = np.empty((2, 0))
         # Lookahead: the intruders flown ahead of the ownship by this many ticks, their states
         # at the kept ticks, and a JSBSim error met ahead (it ends the run when the ownship
         # gets there, as it would have in lockstep).
@@ -372,7 +374,7 @@ class JSBSimWorld(ScheduledWorld):
         range as its package declares it (:data:`ENVELOPE_AIRSPEED_FACTORS`, not narrowed by
         avoidance.speed_mps): the intruders may fly another aircraft than the ownship."""
         key = tuple(a.name for a in self.aircraft)
-        if getattr(self, "_envelope_key", None) != key:
+        if self._envelope_key != key:
             ranges = np.array([aircraft_speed_range(a.name) for a in self.aircraft]).T
             self._envelope_cache = ranges * np.array(ENVELOPE_AIRSPEED_FACTORS)[:, None]
             self._envelope_key = key
