@@ -22,6 +22,7 @@ from uavxai.avoidance.direct import DirectPlanner
 from uavxai.avoidance.exhaustive import ExhaustivePlanner
 from uavxai.avoidance.mcts import MCTSPlanner
 from uavxai.avoidance.mvp import MVPPlanner
+from uavxai.avoidance.route import RoutedPlanner
 from uavxai.avoidance.types import Planner, PlannerConfig
 from uavxai.errors import UserError
 from uavxai.vocabulary import (
@@ -86,6 +87,14 @@ register("mcts_daa")(
     )
 )
 register("mvp")(lambda config, checkpoint: MVPPlanner(config))
+# mcts_vertical steering for a coarse route's waypoint (uavxai.avoidance.route): issue 31's
+# route layer, so that the tree is not lured between intruders into a dead end.
+register("mcts_route")(
+    lambda config, checkpoint: RoutedPlanner(
+        MCTSPlanner(dataclasses.replace(config, actions="vertical"), name="mcts_route"),
+        name="mcts_route",
+    )
+)
 
 
 def _learned(name: str) -> PlannerFactory:
