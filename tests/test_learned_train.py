@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import torch
 
-from uavxai.avoidance.learned import QNetwork, load_checkpoint, obs_dim, observe
+from uavxai.avoidance.learned import QNetwork, load_checkpoint, obs_dim
 from uavxai.avoidance.types import N_ACTIONS
 from uavxai.errors import UserError
 from uavxai.learning.env import EncounterEnv
@@ -118,8 +118,7 @@ def _real_batch(n_obs_nearest: int, size: int, seed: int = 0) -> Batch:
     env.reset(seed=seed, options=ROUTE)
 
     def obs() -> np.ndarray:
-        pos, vel = env.intruder_arrays()
-        return observe(env.own, pos, vel, env.goal, env.config, n_obs_nearest)
+        return env.observation()  # what reset and step return: what the networks see
 
     def where() -> Situation:
         pos, vel = env.intruder_arrays()

@@ -1,10 +1,10 @@
 """Learned avoidance baselines: DQN and Safe-DQN (the paper's learned comparisons).
 
-Both see the same intruder-count-independent observation (:func:`observe`): the shared
-encounter observation of :mod:`uavxai.avoidance.observation` (goal bearing and distance,
-speed, bank, the nearest wall; the ``n_nearest`` intruders, nearest first, relative position
-and velocity in the ownship's heading frame, zero-padded with a ``present`` flag) plus each of
-those intruders' closest point of approach, so 3 or 40 intruders give the same vector.
+Both see the same intruder-count-independent observation, the one of
+:mod:`uavxai.avoidance.observation` (goal bearing and distance, speed, bank, the nearest wall;
+the ``n_nearest`` intruders, nearest first, relative position and velocity in the ownship's
+heading frame, zero-padded with a ``present`` flag, and each one's closest point of approach),
+so 3 or 40 intruders give the same vector; the Gymnasium env they are trained on returns it.
 
 - **DQN**: one Q-network over the 9 actions, trained on the sum of the goal and safety rewards
   (see :mod:`uavxai.learning.train`); acts greedily.
@@ -40,8 +40,7 @@ from uavxai.avoidance.model import (
     bank_command,
     ownship_state,
 )
-from uavxai.avoidance.observation import SCALE_M, observation_size
-from uavxai.avoidance.observation import observe as encounter_observation
+from uavxai.avoidance.observation import N_NEAREST, observation_size, observe
 from uavxai.avoidance.types import (
     N_ACTIONS,
     ChildStats,
@@ -54,51 +53,14 @@ from uavxai.avoidance.types import (
     check_plan_inputs,
 )
 from uavxai.errors import CheckpointError, short_repr
-from uavxai.geometry import closest_point_of_approach
 from uavxai.learning import checkpoint
 from uavxai.paths import avoidance_checkpoints_dir
 
 ALGOS = ("dqn", "safe_dqn")
-N_NEAREST = 8
-CPA_FEATURES = 2  # per intruder slot: distance and time of the closest point of approach
-TCPA_SCALE_S = 30.0
-TCPA_MAX_S = 120.0
 
 
 def obs_dim(n_nearest: int = N_NEAREST) -> int:
-    return observation_size(n_nearest) + CPA_FEATURES * n_nearest
-
-
-# --------------------------------------------------------------------------------- observation
-def observe(
-    state: np.ndarray,
-    pos: np.ndarray,
-    vel: np.ndarray,
-    goal: np.ndarray,
-    config: PlannerConfig,
-    n_nearest: int = N_NEAREST,
-) -> np.ndarray:
-    """What the networks see (float32, ``obs_dim(n_nearest)``): the shared encounter
-    observation (:func:`uavxai.avoidance.observation.observe`) followed, for the same nearest
-    intruders in the same order, by the distance (over ``SCALE_M``) and time (over 30 s) of
-    the closest point of approach at the current relative velocity; zeros for absent slots.
-
-    The closest approach is a function of the relative position and velocity already in the
-    observation, but one an MLP learns slowly; handing it over makes the baselines better
-    at the one thing they are compared on, avoiding intruders.
-    """
-    base = encounter_observation(state, pos, vel, goal, config, n_nearest)
-    cpa = np.zeros((n_nearest, CPA_FEATURES), dtype=np.float32)
-    if len(pos) and n_nearest:
-        rel = np.asarray(pos, dtype=float) - state[:3]
-        nearest = np.argsort(np.sqrt(np.sum(rel**2, axis=1)), kind="stable")[:n_nearest]
-        v, psi = float(state[3]), float(state[4])
-        rel = rel[nearest]
-        rv = np.asarray(vel, dtype=float)[nearest] - (v * math.sin(psi), v * math.cos(psi), 0.0)
-        tcpa, dcpa = closest_point_of_approach(rel, rv, TCPA_MAX_S)
-        cpa[: len(nearest), 0] = dcpa / SCALE_M
-        cpa[: len(nearest), 1] = tcpa / TCPA_SCALE_S
-    return np.concatenate([base, cpa.ravel()])
+    return observation_size(n_nearest)
 
 
 # A fixed encounter whose observation a checkpoint stores: if the observation code changes
