@@ -216,6 +216,11 @@ def test_training_changes_the_networks_and_repeats_with_the_seed() -> None:
     assert a.best_episode in (3, 6)
     assert a.validation == b.validation
     assert [r["outcome"] for r in a.curve] == [r["outcome"] for r in b.curve]
+    # the same numbers, row by row (the episodes of a vector env, its resets and rewards)
+    numbers = ("intruders", "steps", "return_goal", "return_safety", "min_separation_m",
+               "transitions")  # fmt: skip
+    assert [[r[k] for k in numbers] for r in a.curve] == [[r[k] for k in numbers] for r in b.curve]
+    assert a.td_losses == b.td_losses
     for pa, pb in zip(a.nets["q"].parameters(), b.nets["q"].parameters(), strict=True):
         assert torch.equal(pa, pb)
     torch.manual_seed(TINY.seed)
