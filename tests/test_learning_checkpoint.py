@@ -77,3 +77,25 @@ def test_the_replay_buffer_keeps_the_last_transitions_and_samples_only_stored_on
 def test_n_step_return_discounts_each_part() -> None:
     ret = n_step_return([(1.0, -1.0), (1.0, 0.0), (0.0, 2.0)], 0.5)
     np.testing.assert_allclose(ret, [1.5, -0.5])
+
+
+def test_a_bit_flipped_service_model_is_refused_as_the_avoidance_ones_are(tmp_path: Path) -> None:
+    """The one reader checks every record's CRC for every kind: a flipped bit in a shipped
+    universal model's weights (which torch.load reads without a word) is refused."""
+    import zipfile
+
+    shipped = universal.shipped_path("d3qn")
+    with zipfile.ZipFile(shipped) as archive:
+        record = next(r for r in archive.infolist() if r.filename.endswith("/data/0"))
+    data = bytearray(shipped.read_bytes())
+    at = record.header_offset  # the data follows the 30-byte local header, name and extra
+    start = at + 30 + int.from_bytes(data[at + 26 : at + 28], "little")
+    start += int.from_bytes(data[at + 28 : at + 30], "little")
+    data[start + 17] ^= 0x04
+    flipped = tmp_path / "flipped.pt"
+    flipped.write_bytes(bytes(data))
+    good = torch.load(shipped, weights_only=True)["state_dict"]
+    bad = torch.load(flipped, weights_only=True)["state_dict"]
+    assert any(not torch.equal(good[k], bad[k]) for k in good)  # torch alone loads it
+    with pytest.raises(CheckpointError, match=r"flipped.pt: damaged .* CRC"):
+        universal.load(flipped)
