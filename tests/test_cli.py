@@ -209,6 +209,25 @@ def test_train_prints_a_short_table_and_writes_the_json(
     assert "train_report.json" in text
 
 
+def test_train_reaches_every_trainer_and_refuses_an_algo_of_another_stage(
+    tiny: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """One command trains every learned planner (issue 29): the universal service model too,
+    whose model.pt the service stage loads; an algorithm another stage trains is exit 2."""
+    from uavxai.service import universal
+
+    out = tmp_path / "universal"
+    argv = ["train", str(tiny), "--stage", "universal", "--algo", "dqn", "--episodes", "1"]
+    assert main([*argv, "--out", str(out)]) == 0
+    net, info = universal.load(out / "model.pt")
+    assert info["algo"] == "dqn" and not net.dueling
+    capsys.readouterr()
+    bad = ["train", str(tiny), "--stage", "universal", "--algo", "safe_dqn"]
+    assert main([*bad, "--out", str(tmp_path / "bad")]) == 2
+    err = capsys.readouterr().err
+    assert "--algo safe_dqn" in err and "allowed: d3qn, dqn" in err and "Traceback" not in err
+
+
 def test_force_never_empties_a_folder_without_a_marker(tmp_path: Path) -> None:
     """Files named like uavxai's outputs (a user's PNGs, a summary.json) do not make a folder
     uavxai's: without the marker, --force is refused and every file stays."""

@@ -60,6 +60,13 @@ def test_every_module_of_the_package_has_a_layer() -> None:
     modules = {f"uavxai.{p.stem}" for p in (ROOT / "uavxai").glob("*.py")
                if p.stem not in ("__init__", "__main__")}  # fmt: skip
     packages = {f"uavxai.{p.parent.name}" for p in (ROOT / "uavxai").glob("*/__init__.py")}
+    # A package split over two layers (uavxai.learning: the trainers above the engine, the
+    # checkpoint reader below the planners) is covered when every module of it is named.
+    for package in sorted(packages - layered):
+        folder = ROOT / package.replace(".", "/")
+        inner = {f"{package}.{p.stem}" for p in folder.glob("*.py") if p.stem != "__init__"}
+        if inner and inner <= layered:
+            packages.discard(package)
     assert sorted((modules | packages) - layered) == []
 
 

@@ -13,7 +13,6 @@ import pytest
 import torch
 
 from uavxai.avoidance.learned import (
-    MAX_HIDDEN_WIDTH,
     QNetwork,
     load_checkpoint,
     obs_dim,
@@ -21,6 +20,7 @@ from uavxai.avoidance.learned import (
 )
 from uavxai.cli import main
 from uavxai.errors import CheckpointError, UserError
+from uavxai.learning.checkpoint import MAX_CHECKPOINT_BYTES, MAX_HIDDEN_WIDTH
 
 N_NEAREST, HIDDEN = 4, (16,)
 
@@ -157,11 +157,9 @@ def test_missing_metadata_and_extra_tensors_are_refused(good, tmp_path) -> None:
 
 
 def test_oversized_and_foreign_files_are_refused(good, tmp_path) -> None:
-    from uavxai.avoidance import learned
-
     big = tmp_path / "big.pt"
     with open(big, "wb") as f:  # sparse: no disk or memory is used for it
-        f.truncate(learned.MAX_CHECKPOINT_BYTES + 1)
+        f.truncate(MAX_CHECKPOINT_BYTES + 1)
     refused(big, "bytes", "at most")
     legacy = tmp_path / "legacy.pt"
     torch.save(torch.load(good, weights_only=True), legacy, _use_new_zipfile_serialization=False)

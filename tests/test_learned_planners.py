@@ -17,12 +17,12 @@ from uavxai.avoidance.learned import (
     SafeDQNPlanner,
     load_checkpoint,
     obs_dim,
-    observe,
     safe_action,
     save_checkpoint,
 )
 from uavxai.avoidance.mcts import intruder_arrays
 from uavxai.avoidance.model import ownship_state
+from uavxai.avoidance.observation import SCALE_M, TCPA_SCALE_S, observe
 from uavxai.avoidance.planners import make_planner
 from uavxai.avoidance.types import N_ACTIONS, Decision, Intruder, Ownship, PlannerConfig
 from uavxai.cli import main
@@ -77,8 +77,8 @@ def test_closest_approach_features_of_a_head_on_intruder() -> None:
     pos, vel = np.array([[1030.0, 1600.0, 120.0]]), np.array([[0.0, -10.0, 0.0]])
     obs = observe(state, pos, vel, np.array(GOAL), CONFIG, n_nearest=2)
     dcpa, tcpa = obs[-4], obs[-3]
-    assert dcpa * learned.SCALE_M == pytest.approx(30.0, abs=1e-3)
-    assert tcpa * learned.TCPA_SCALE_S == pytest.approx(20.0, abs=1e-3)
+    assert dcpa * SCALE_M == pytest.approx(30.0, abs=1e-3)
+    assert tcpa * TCPA_SCALE_S == pytest.approx(20.0, abs=1e-3)
     assert np.all(obs[-2:] == 0.0)  # the absent second slot
 
 
@@ -124,7 +124,7 @@ def test_dqn_chooses_its_highest_q_and_safe_dqn_its_filtered_best() -> None:
     d = safe.plan(OWN, intruders, GOAL)
     pos, vel = intruder_arrays(intruders)
     goal = np.asarray(GOAL, float)
-    obs = learned.observe(ownship_state(OWN), pos, vel, goal, CONFIG, safe.n_nearest)
+    obs = observe(ownship_state(OWN), pos, vel, goal, CONFIG, safe.n_nearest)
     q = safe.q_values(obs)
     passed = q["safety"] >= np.sort(q["safety"])[4]
     assert passed[d.action]

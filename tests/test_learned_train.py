@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import torch
 
-from uavxai.avoidance.learned import QNetwork, load_checkpoint, obs_dim, observe
+from uavxai.avoidance.learned import QNetwork, load_checkpoint, obs_dim
 from uavxai.avoidance.types import N_ACTIONS
 from uavxai.errors import UserError
 from uavxai.learning.env import EncounterEnv
@@ -118,8 +118,7 @@ def _real_batch(n_obs_nearest: int, size: int, seed: int = 0) -> Batch:
     env.reset(seed=seed, options=ROUTE)
 
     def obs() -> np.ndarray:
-        pos, vel = env.intruder_arrays()
-        return observe(env.own, pos, vel, env.goal, env.config, n_obs_nearest)
+        return env.observation()  # what reset and step return: what the networks see
 
     def where() -> Situation:
         pos, vel = env.intruder_arrays()
@@ -217,6 +216,11 @@ def test_training_changes_the_networks_and_repeats_with_the_seed() -> None:
     assert a.best_episode in (3, 6)
     assert a.validation == b.validation
     assert [r["outcome"] for r in a.curve] == [r["outcome"] for r in b.curve]
+    # the same numbers, row by row (the episodes of a vector env, its resets and rewards)
+    numbers = ("intruders", "steps", "return_goal", "return_safety", "min_separation_m",
+               "transitions")  # fmt: skip
+    assert [[r[k] for k in numbers] for r in a.curve] == [[r[k] for k in numbers] for r in b.curve]
+    assert a.td_losses == b.td_losses
     for pa, pb in zip(a.nets["q"].parameters(), b.nets["q"].parameters(), strict=True):
         assert torch.equal(pa, pb)
     torch.manual_seed(TINY.seed)

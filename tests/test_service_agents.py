@@ -9,11 +9,12 @@ import pytest
 import torch
 
 from uavxai.errors import CheckpointError
+from uavxai.learning import branching, checkpoint
+from uavxai.learning.service import episodes_to_converge
 from uavxai.scenario import default_scenario
-from uavxai.service import d3qn, dqn
+from uavxai.service import d3qn
 from uavxai.service.grid import solve_grid
 from uavxai.service.service_env import ServiceEnv
-from uavxai.service.train import episodes_to_converge
 
 
 def tiny_env(seed: int = 0, access: str = "ofdma") -> ServiceEnv:
@@ -41,14 +42,14 @@ def test_branching_dueling_network():
     torch.testing.assert_close(power.mean(-1), v.expand(5, 10))
     plain = d3qn.BranchingQNetwork(13, 10, 6, 40, 3, dueling=False)
     assert plain.value is None
-    assert dqn.DQNConfig().dueling is False and dqn.DQNConfig().double is False
+    assert branching.DQNConfig().dueling is False and branching.DQNConfig().double is False
 
 
 @pytest.mark.parametrize("double", [True, False])
 def test_td_target_by_hand(double):
     """One update with lr = 0 returns the loss; recompute it from the two networks' outputs."""
     torch.manual_seed(1)
-    cfg = d3qn.D3QNConfig(learning_rate=0.0, gamma=0.9, double=double)
+    cfg = branching.D3QNConfig(learning_rate=0.0, gamma=0.9, double=double)
     q = d3qn.BranchingQNetwork(5, 2, 3, 8, 2, dueling=True)
     target = copy.deepcopy(q)
     with torch.no_grad():  # make the target differ so that double and plain targets differ
@@ -58,11 +59,11 @@ def test_td_target_by_hand(double):
     actions = torch.tensor([[0, 1, 2], [6, 0, 0], [3, 2, 1], [1, 1, 1]])
     rewards = torch.tensor([1.0, 0.5, 0.0, 2.0])
     dones = torch.tensor([0.0, 0.0, 1.0, 0.0])
-    loss = d3qn._update(
+    loss = branching._update(
         q,
         target,
         torch.optim.Adam(q.parameters(), lr=0.0),
-        (obs, actions, rewards, next_obs, dones),
+        {"obs": obs, "action": actions, "reward": rewards, "next_obs": next_obs, "done": dones},
         cfg,
     )
     with torch.no_grad():
@@ -89,7 +90,7 @@ def test_short_training_beats_the_random_policy():
     env.action_space.seed(0)
     env.reset(seed=0)
     random_reward = np.mean([env.step(env.action_space.sample())[1] for _ in range(2000)])
-    result = d3qn.train(env, d3qn.D3QNConfig(episodes=60, learning_starts=200, seed=0))
+    result = branching.train(env, branching.D3QNConfig(episodes=60, learning_starts=200, seed=0))
     greedy = d3qn.rollout(result.net, d3qn.fading_free(env))
     assert greedy.ret / env.steps > 1.3 * random_reward
     assert greedy.objective > 0.8 * optimum
@@ -100,7 +101,8 @@ def test_short_training_beats_the_random_policy():
 
 def test_training_is_reproducible():
     def run():
-        return d3qn.train(tiny_env(seed=2), d3qn.D3QNConfig(episodes=8, learning_starts=50))
+        cfg = branching.D3QNConfig(episodes=8, learning_starts=50)
+        return branching.train(tiny_env(seed=2), cfg)
 
     a, b = run(), run()
     assert [r["greedy_objective"] for r in a.curve] == [r["greedy_objective"] for r in b.curve]
@@ -111,7 +113,8 @@ def test_training_is_reproducible():
 def test_checkpoint_roundtrip(tmp_path):
     net = d3qn.BranchingQNetwork(6, 3, 3, 40, 3, dueling=True)
     path = tmp_path / "model.pt"
-    d3qn.save_checkpoint(path, net, "d3qn", d3qn.D3QNConfig(), {"scenario": "x", "seed": 3})
+    meta = {"scenario": "x", "seed": 3}
+    branching.save_checkpoint(path, net, "d3qn", branching.D3QNConfig(), meta)
     loaded, info = d3qn.load_checkpoint(path)
     assert info["algo"] == "d3qn" and info["k"] == 3 and info["meta"]["seed"] == 3
     obs = torch.randn(2, 6)
@@ -124,14 +127,14 @@ def test_checkpoint_errors_name_the_file(tmp_path):
         d3qn.load_checkpoint(missing)
     garbage = tmp_path / "garbage.pt"
     garbage.write_bytes(b"this is not a model")
-    with pytest.raises(CheckpointError, match="garbage.pt: not a readable model"):
+    with pytest.raises(CheckpointError, match="garbage.pt: not a readable torch checkpoint"):
         d3qn.load_checkpoint(garbage)
     foreign = tmp_path / "foreign.pt"
     torch.save({"weights": torch.zeros(3)}, foreign)
     with pytest.raises(CheckpointError, match="foreign.pt: not a uavxai service-point model"):
         d3qn.load_checkpoint(foreign)
     damaged = tmp_path / "damaged.pt"
-    torch.save({"format": d3qn.CHECKPOINT_FORMAT, "k": 3}, damaged)
+    torch.save({"format": checkpoint.FORMATS["branching"][0], "k": 3}, damaged)
     # a model file without its sizes: the field and what is allowed are named (the size guard)
     with pytest.raises(CheckpointError, match=r"damaged.pt: obs_dim = None; allowed: an integer"):
         d3qn.load_checkpoint(damaged)

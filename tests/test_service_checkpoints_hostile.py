@@ -14,8 +14,9 @@ import torch
 
 from uavxai.cli import main
 from uavxai.errors import CheckpointError
+from uavxai.learning import branching, checkpoint
 from uavxai.paths import service_checkpoints_dir
-from uavxai.service import d3qn, guard, universal
+from uavxai.service import d3qn, universal
 
 SHIPPED = service_checkpoints_dir() / "universal_d3qn_l6.pt"
 
@@ -23,10 +24,10 @@ SHIPPED = service_checkpoints_dir() / "universal_d3qn_l6.pt"
 @pytest.fixture
 def good_d3qn(tmp_path: Path) -> Path:
     torch.manual_seed(0)
-    cfg = d3qn.D3QNConfig(hidden=8, layers=2)
+    cfg = branching.D3QNConfig(hidden=8, layers=2)
     net = d3qn.BranchingQNetwork(10, 2, 3, cfg.hidden, cfg.layers, cfg.dueling)
     path = tmp_path / "good.pt"
-    d3qn.save_checkpoint(path, net, "d3qn", cfg, meta={"note": "ok"})
+    branching.save_checkpoint(path, net, "d3qn", cfg, meta={"note": "ok"})
     return path
 
 
@@ -49,11 +50,11 @@ def test_good_checkpoints_load(good_d3qn: Path) -> None:
 @pytest.mark.parametrize(
     ("field", "value", "allowed"),
     [
-        ("hidden", 16_000, f"from 1 to {guard.MAX_HIDDEN_WIDTH}"),
-        ("obs_dim", 16_000, f"from 1 to {guard.MAX_OBS_DIM}"),
-        ("k", 10**9, f"from 1 to {guard.MAX_USERS}"),
-        ("power_levels", 0, f"from 1 to {guard.MAX_POWER_LEVELS}"),
-        ("layers", 10**6, f"from 1 to {guard.MAX_LAYERS}"),
+        ("hidden", 16_000, f"from 1 to {checkpoint.MAX_HIDDEN_WIDTH}"),
+        ("obs_dim", 16_000, f"from 1 to {checkpoint.MAX_OBS_DIM}"),
+        ("k", 10**9, f"from 1 to {checkpoint.MAX_USERS}"),
+        ("power_levels", 0, f"from 1 to {checkpoint.MAX_POWER_LEVELS}"),
+        ("layers", 10**6, f"from 1 to {checkpoint.MAX_LAYERS}"),
         ("hidden", 8.0, "an integer"),
         ("hidden", True, "an integer"),
         ("dueling", "yes", "true or false"),

@@ -10,12 +10,13 @@ import pytest
 import torch
 from scipy import stats
 
+from uavxai.learning import branching
+from uavxai.learning.service import episodes_to_converge, train_command
 from uavxai.paths import scenarios_dir
 from uavxai.scenario import default_scenario, load_scenario
-from uavxai.service import d3qn, dqn
+from uavxai.service import d3qn
 from uavxai.service.grid import solve_grid
 from uavxai.service.service_env import ServiceEnv
-from uavxai.service.train import episodes_to_converge, train_command
 
 pytestmark = pytest.mark.slow
 
@@ -45,7 +46,7 @@ def test_d3qn_reaches_95_percent_of_the_optimum(access):
         sc = default_scenario(seed=seed, comms={"access": access, "fading": "none"})
         env = ServiceEnv.from_scenario(sc)
         optimum = solve_grid(env.channel, env.space, env.power_levels).objective
-        result = d3qn.train(env, d3qn.D3QNConfig(seed=seed))
+        result = branching.train(env, branching.D3QNConfig(seed=seed))
         result.net.load_state_dict(result.best_state)
         greedy = d3qn.rollout(result.net, d3qn.fading_free(env))
         assert greedy.objective == pytest.approx(result.best_greedy)
@@ -57,8 +58,8 @@ def test_d3qn_reaches_95_percent_of_the_optimum(access):
 def _greedy_curve(algo: str, seed: int) -> np.ndarray:
     torch.set_num_threads(1)
     env = ServiceEnv.from_scenario(load_scenario(scenarios_dir() / "demo.yaml"))
-    cfg = (d3qn.D3QNConfig if algo == "d3qn" else dqn.DQNConfig)(seed=seed)
-    result = d3qn.train(env, cfg)
+    cfg = (branching.D3QNConfig if algo == "d3qn" else branching.DQNConfig)(seed=seed)
+    result = branching.train(env, cfg)
     return np.array([row["greedy_objective"] for row in result.curve])
 
 

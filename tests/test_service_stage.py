@@ -10,12 +10,13 @@ import pytest
 
 from uavxai.cli import main as cli_main
 from uavxai.errors import CheckpointError, ScenarioError, UserError
+from uavxai.learning import branching
+from uavxai.learning.service import CURVE_COLUMNS, train_command
 from uavxai.paths import scenarios_dir
 from uavxai.scenario import default_scenario, load_scenario
 from uavxai.service import d3qn
 from uavxai.service.service_env import ServiceEnv
 from uavxai.service.stage import plan_service, run_service_stage
-from uavxai.service.train import CURVE_COLUMNS, train_command
 
 SERVICE_FIELDS = (
     "service_point", "power_w", "sinr_db", "rate_bps", "sum_rate_bps", "qos_satisfied"
@@ -75,10 +76,10 @@ def test_unserved_user_has_null_sinr():
 def test_trained_checkpoint_is_flown_greedily_and_repeatably(tmp_path):
     sc = small(2)
     env = ServiceEnv.from_scenario(sc)
-    cfg = d3qn.D3QNConfig(episodes=6, learning_starts=50, seed=2)
-    net = d3qn.train(env, cfg).net
+    cfg = branching.D3QNConfig(episodes=6, learning_starts=50, seed=2)
+    net = branching.train(env, cfg).net
     path = tmp_path / "model.pt"
-    d3qn.save_checkpoint(path, net, "d3qn", cfg, {})
+    branching.save_checkpoint(path, net, "d3qn", cfg, {})
     sc = sc.model_copy(update={"service": sc.service.model_copy(update={"checkpoint": str(path)})})
     first, second = plan_service(sc), plan_service(sc)
     np.testing.assert_array_equal(first.service_point, second.service_point)
@@ -99,7 +100,7 @@ def test_checkpoint_problems_are_user_errors(tmp_path):
     with pytest.raises(ScenarioError, match=r"missing\.pt: no such file"):
         small(checkpoint=str(tmp_path / "missing.pt"))
     (tmp_path / "text.pt").write_text("hello")
-    with pytest.raises(CheckpointError, match=r"text\.pt: not a readable model"):
+    with pytest.raises(CheckpointError, match=r"text\.pt: not a readable torch checkpoint"):
         plan_service(small(checkpoint=str(tmp_path / "text.pt")), "d3qn")
     # the shipped universal models serve K = 2..20 with power_levels = 6
     with pytest.raises(CheckpointError, match="no shipped d3qn model for power_levels = 3"):
@@ -109,7 +110,7 @@ def test_checkpoint_problems_are_user_errors(tmp_path):
         plan_service(many, "dqn")
     # a model for another K
     net = d3qn.BranchingQNetwork(3 + 4, 4, 3, 40, 3, dueling=True)
-    d3qn.save_checkpoint(tmp_path / "k4.pt", net, "d3qn", d3qn.D3QNConfig(), {})
+    branching.save_checkpoint(tmp_path / "k4.pt", net, "d3qn", branching.D3QNConfig(), {})
     with pytest.raises(CheckpointError, match="trained for K = 4 users, the scenario has 3"):
         plan_service(small(checkpoint=str(tmp_path / "k4.pt")), "d3qn")
     with pytest.raises(UserError, match="unknown"):

@@ -9,6 +9,8 @@ import numpy as np
 import pytest
 import torch
 
+from uavxai.learning import checkpoint
+from uavxai.learning import universal as universal_training
 from uavxai.scenario import default_scenario
 from uavxai.service import universal
 from uavxai.service.grid import solve_grid
@@ -29,7 +31,7 @@ def test_shipped_model_loads_and_plans_for_every_k(algo):
     path = universal.shipped_path(algo)
     assert path.stat().st_size < 300_000
     data = torch.load(path, map_location="cpu", weights_only=True)  # plain tensors and values
-    assert data["format"] == universal.CHECKPOINT_FORMAT and data["algo"] == algo
+    assert data["format"] == checkpoint.FORMATS["universal"][0] and data["algo"] == algo
     meta = json.loads(path.with_suffix(".json").read_text())
     assert meta["k_range"] == [2, universal.K_MAX] and meta["config"]["dueling"] == (algo == "d3qn")
     net, info = universal.load(path)
@@ -120,12 +122,13 @@ def test_refine_never_leaves_the_lattice_and_never_loses():
 
 
 def test_training_is_seeded_and_reproducible():
-    cfg = universal.UniversalConfig(
+    cfg = universal_training.UniversalConfig(
         episodes=3, train_steps=12, learning_starts=8, batch_size=8, eval_every=3,
         eval_problems=2, hidden=16, k_range=(2, 5), seed=3,
     )
-    a, b = universal.train(cfg), universal.train(cfg)
-    c = universal.train(universal.UniversalConfig(**{**universal.config_dict(cfg), "seed": 4}))
+    a, b = universal_training.train(cfg), universal_training.train(cfg)
+    other = {**universal_training.config_dict(cfg), "seed": 4}
+    c = universal_training.train(universal_training.UniversalConfig(**other))
     sa, sb, sc = a.net.state_dict(), b.net.state_dict(), c.net.state_dict()
     assert all(torch.equal(sa[n], sb[n]) for n in sa)
     assert not all(torch.equal(sa[n], sc[n]) for n in sa)
@@ -135,7 +138,7 @@ def test_training_is_seeded_and_reproducible():
 def test_dqn_ablation_has_no_value_head(tmp_path):
     net = universal.SetQNetwork(6, hidden=16, dueling=False)
     assert net.value is None
-    universal.save(tmp_path / "m.pt", net, "dqn", {"note": "test"})
+    universal_training.save(tmp_path / "m.pt", net, "dqn", {"note": "test"})
     loaded, info = universal.load(tmp_path / "m.pt")
     assert info["algo"] == "dqn" and not info["dueling"]
     assert json.loads((tmp_path / "m.json").read_text()) == {"note": "test"}

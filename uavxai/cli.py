@@ -216,21 +216,30 @@ def _add_run(sub: argparse._SubParsersAction) -> None:
     _add_force(r)
 
 
+# What `uavxai train --stage S` trains: the algorithms of each stage (uavxai.learning).
+TRAINABLE = {
+    "service": ("d3qn", "dqn"),
+    "universal": ("d3qn", "dqn"),
+    "avoidance": ("dqn", "safe_dqn"),
+}
+
+
 def _add_train(sub: argparse._SubParsersAction) -> None:
     """`uavxai train`: a learned planner of either stage."""
     t = sub.add_parser("train", help="train a learned planner (progress bar)")
     _add_scenario(t)
     t.add_argument(
         "--stage",
-        choices=("service", "avoidance"),
+        choices=tuple(TRAINABLE),
         default="service",
-        help="which stage's planner to train",
+        help="which planner to train: service (one layout), universal (the service model for "
+        "any layout), avoidance",
     )
     t.add_argument(
         "--algo",
         required=True,
         choices=("d3qn", "dqn", "safe_dqn"),
-        help="service: d3qn | dqn; avoidance: dqn | safe_dqn",
+        help="service, universal: d3qn | dqn; avoidance: dqn | safe_dqn",
     )
     t.add_argument("--episodes", type=_positive_int, help="training episodes (default per algo)")
     t.add_argument(
@@ -625,7 +634,7 @@ def cmd_service(args: argparse.Namespace) -> int:
 
 def cmd_train(args: argparse.Namespace) -> int:
     sc = _load(args)
-    allowed = {"service": ("d3qn", "dqn"), "avoidance": ("dqn", "safe_dqn")}[args.stage]
+    allowed = TRAINABLE[args.stage]
     if args.algo not in allowed:
         raise UserError(
             f"--algo {args.algo} is not available for --stage {args.stage}; "
@@ -636,9 +645,11 @@ def cmd_train(args: argparse.Namespace) -> int:
     if args.finetune and args.stage != "service":
         raise UserError("--finetune is for --stage service (the universal d3qn/dqn model).")
     if args.stage == "service":
-        from uavxai.service.train import finetune_command, train_command
+        from uavxai.learning.service import finetune_command, train_command
 
         trainer = finetune_command if args.finetune else train_command
+    elif args.stage == "universal":
+        from uavxai.learning.universal import train_command as trainer
     else:
         from uavxai.learning.train import train_command as trainer
     report = trainer(sc, algo=args.algo, episodes=args.episodes, out=out)

@@ -32,12 +32,13 @@ import numpy as np
 import torch
 
 from uavxai.comms.channel import ENVIRONMENTS
+from uavxai.learning import branching
+from uavxai.learning.service import episodes_to_converge
 from uavxai.scenario import default_scenario
-from uavxai.service import d3qn, dqn
+from uavxai.service import d3qn
 from uavxai.service.grid import solve_grid
 from uavxai.service.service_env import ServiceEnv
 from uavxai.service.stage import plan_service
-from uavxai.service.train import episodes_to_converge
 
 
 def bench_layout(access: str, seed: int, episodes: int, with_dqn: bool) -> dict[str, float]:
@@ -49,7 +50,7 @@ def bench_layout(access: str, seed: int, episodes: int, with_dqn: bool) -> dict[
     t0 = time.perf_counter()
     grid = solve_grid(env.channel, env.space, env.power_levels)
     grid_s = time.perf_counter() - t0
-    result = d3qn.train(env, d3qn.D3QNConfig(episodes=episodes, seed=seed))
+    result = branching.train(env, branching.D3QNConfig(episodes=episodes, seed=seed))
     greedy = d3qn.rollout(result.net, d3qn.fading_free(env))
     converge, _ = episodes_to_converge([row["greedy_objective"] for row in result.curve])
     model = result.best_greedy
@@ -58,7 +59,7 @@ def bench_layout(access: str, seed: int, episodes: int, with_dqn: bool) -> dict[
     opt, naive = grid.objective, env.naive_objective
     extra = {}
     if with_dqn:
-        base = dqn.train(env, dqn.DQNConfig(episodes=episodes, seed=seed))
+        base = branching.train(env, branching.DQNConfig(episodes=episodes, seed=seed))
         greedy_dqn = d3qn.rollout(base.net, d3qn.fading_free(env))
         extra = {
             "dqn_over_opt": greedy_dqn.objective / opt,

@@ -33,20 +33,21 @@ import numpy as np
 import torch
 from scipy import stats
 
+from uavxai.learning import branching
+from uavxai.learning.service import SMOOTHING_EPISODES, episodes_to_converge, running_mean
 from uavxai.scenario import Scenario, load_scenario
-from uavxai.service import d3qn, dqn
+from uavxai.service import d3qn
 from uavxai.service.grid import solve_grid
 from uavxai.service.service_env import ServiceEnv
-from uavxai.service.train import SMOOTHING_EPISODES, episodes_to_converge, running_mean
 
-CONFIGS = {"d3qn": d3qn.D3QNConfig, "dqn": dqn.DQNConfig}
+CONFIGS = {"d3qn": branching.D3QNConfig, "dqn": branching.DQNConfig}
 METRICS = ("auc", "final", "model", "converge", "reward")
 
 
 def run(scenario: Scenario, algo: str, seed: int, episodes: int, optimum: float) -> dict:
     torch.set_num_threads(1)
     env = ServiceEnv.from_scenario(scenario)
-    result = d3qn.train(env, CONFIGS[algo](episodes=episodes, seed=seed))
+    result = branching.train(env, CONFIGS[algo](episodes=episodes, seed=seed))
     greedy = np.array([row["greedy_objective"] for row in result.curve]) / optimum
     tail = max(1, episodes // 10)
     returns = np.array([row["return"] for row in result.curve]) / env.naive_objective

@@ -1,10 +1,10 @@
 """Learned avoidance baselines: DQN and Safe-DQN (the paper's learned comparisons).
 
-Both see the same intruder-count-independent observation (:func:`observe`): the shared
-encounter observation of :mod:`uavxai.avoidance.observation` (goal bearing and distance,
-speed, bank, the nearest wall; the ``n_nearest`` intruders, nearest first, relative position
-and velocity in the ownship's heading frame, zero-padded with a ``present`` flag) plus each of
-those intruders' closest point of approach, so 3 or 40 intruders give the same vector.
+Both see the same intruder-count-independent observation, the one of
+:mod:`uavxai.avoidance.observation` (goal bearing and distance, speed, bank, the nearest wall;
+the ``n_nearest`` intruders, nearest first, relative position and velocity in the ownship's
+heading frame, zero-padded with a ``present`` flag, and each one's closest point of approach),
+so 3 or 40 intruders give the same vector; the Gymnasium env they are trained on returns it.
 
 - **DQN**: one Q-network over the 9 actions, trained on the sum of the goal and safety rewards
   (see :mod:`uavxai.learning.train`); acts greedily.
@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import math
 import time
-import zipfile
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -41,8 +40,7 @@ from uavxai.avoidance.model import (
     bank_command,
     ownship_state,
 )
-from uavxai.avoidance.observation import SCALE_M, observation_size
-from uavxai.avoidance.observation import observe as encounter_observation
+from uavxai.avoidance.observation import N_NEAREST, observation_size, observe
 from uavxai.avoidance.types import (
     N_ACTIONS,
     ChildStats,
@@ -55,52 +53,14 @@ from uavxai.avoidance.types import (
     check_plan_inputs,
 )
 from uavxai.errors import CheckpointError, short_repr
-from uavxai.geometry import closest_point_of_approach
-from uavxai.outputs import write_torch
+from uavxai.learning import checkpoint
 from uavxai.paths import avoidance_checkpoints_dir
 
 ALGOS = ("dqn", "safe_dqn")
-CHECKPOINT_FORMAT = "uavxai-avoidance-qnet"
-N_NEAREST = 8
-CPA_FEATURES = 2  # per intruder slot: distance and time of the closest point of approach
-TCPA_SCALE_S = 30.0
-TCPA_MAX_S = 120.0
 
 
 def obs_dim(n_nearest: int = N_NEAREST) -> int:
-    return observation_size(n_nearest) + CPA_FEATURES * n_nearest
-
-
-# --------------------------------------------------------------------------------- observation
-def observe(
-    state: np.ndarray,
-    pos: np.ndarray,
-    vel: np.ndarray,
-    goal: np.ndarray,
-    config: PlannerConfig,
-    n_nearest: int = N_NEAREST,
-) -> np.ndarray:
-    """What the networks see (float32, ``obs_dim(n_nearest)``): the shared encounter
-    observation (:func:`uavxai.avoidance.observation.observe`) followed, for the same nearest
-    intruders in the same order, by the distance (over ``SCALE_M``) and time (over 30 s) of
-    the closest point of approach at the current relative velocity; zeros for absent slots.
-
-    The closest approach is a function of the relative position and velocity already in the
-    observation, but one an MLP learns slowly; handing it over makes the baselines better
-    at the one thing they are compared on, avoiding intruders.
-    """
-    base = encounter_observation(state, pos, vel, goal, config, n_nearest)
-    cpa = np.zeros((n_nearest, CPA_FEATURES), dtype=np.float32)
-    if len(pos) and n_nearest:
-        rel = np.asarray(pos, dtype=float) - state[:3]
-        nearest = np.argsort(np.sqrt(np.sum(rel**2, axis=1)), kind="stable")[:n_nearest]
-        v, psi = float(state[3]), float(state[4])
-        rel = rel[nearest]
-        rv = np.asarray(vel, dtype=float)[nearest] - (v * math.sin(psi), v * math.cos(psi), 0.0)
-        tcpa, dcpa = closest_point_of_approach(rel, rv, TCPA_MAX_S)
-        cpa[: len(nearest), 0] = dcpa / SCALE_M
-        cpa[: len(nearest), 1] = tcpa / TCPA_SCALE_S
-    return np.concatenate([base, cpa.ravel()])
+    return observation_size(n_nearest)
 
 
 # A fixed encounter whose observation a checkpoint stores: if the observation code changes
@@ -155,11 +115,11 @@ def save_checkpoint(
     meta: dict,
 ) -> None:
     """``model.pt``: the networks' weights and what is needed to rebuild and feed them
-    (written whole: :func:`~uavxai.outputs.write_torch`)."""
-    write_torch(
+    (:func:`uavxai.learning.checkpoint.save`)."""
+    checkpoint.save(
         path,
+        "avoidance",
         {
-            "format": CHECKPOINT_FORMAT,
             "algo": algo,
             "n_nearest": int(n_nearest),
             "obs_dim": obs_dim(n_nearest),
@@ -175,119 +135,71 @@ def shipped_checkpoint(algo: str) -> Path:
     return avoidance_checkpoints_dir() / f"{algo}.pt"
 
 
-# Bounds on what a checkpoint may declare, checked before anything is allocated from it: a file
-# is data, and its sizes are not to be trusted (issue 14: hidden layers of 60000 asked for over
-# 8 GB before any shape was compared). Generous next to what training writes ((128, 128), 8).
-MAX_CHECKPOINT_BYTES = 256 * 2**20
-MAX_CHECKPOINT_RECORDS = 1000
-MAX_HIDDEN_LAYERS = 8
-MAX_HIDDEN_WIDTH = 4096
-MAX_N_NEAREST = 64
-
-
-
-
-class _Source:
-    """Where a checkpoint came from, so that every error names the file and the remedy alike."""
-
-    def __init__(self, p: Path, where: str, algo: str) -> None:
-        self.p = p
-        self.where = where
-        self.algo = algo
-        self.retrain = f"`uavxai train SCENARIO --stage avoidance --algo {algo}`"
-
-    def bad(self, field: str, value: object, allowed: str) -> CheckpointError:
-        """The error for a declared field outside what this uavxai can load."""
-        return CheckpointError(
-            f"{self.where} {self.p}: {field} = {short_repr(value)}; allowed: {allowed}. Use a "
-            f"model.pt written by {self.retrain}."
-        )
-
-
 def load_checkpoint(path: str | Path | None, algo: str) -> tuple[dict[str, QNetwork], dict]:
     """The networks of a checkpoint for ``algo`` (None: the shipped one), in eval mode.
 
-    Raises :class:`CheckpointError` naming the file (and the field, with what is allowed) when
-    it is missing, unreadable, damaged, made for another algorithm or observation, declares
-    sizes beyond the bounds above or different from its tensors, or holds non-finite weights.
-    Every declared size is checked against the bounds and the stored tensors' shapes before a
-    network is built, so a hostile file cannot make this allocate more than it holds.
+    Read by :mod:`uavxai.learning.checkpoint` (bounded, CRC-checked, weights only, every
+    declared size bounded and compared with the stored tensors before a network is built);
+    then it must be made for ``algo`` and for this uavxai's observation. Any problem is a
+    :class:`CheckpointError` naming the file, the field and what is allowed.
     """
     if algo not in ALGOS:
         raise CheckpointError(f"unknown learned avoidance algorithm '{algo}'; known: {ALGOS}")
     p = Path(path) if path is not None else shipped_checkpoint(algo)
     where = "avoidance.checkpoint" if path is not None else "the shipped checkpoint"
+    retrain = f"`uavxai train SCENARIO --stage avoidance --algo {algo}`"
     if not p.is_file():
-        hint = (
-            "train one with `uavxai train SCENARIO --stage avoidance --algo "
-            f"{algo} --out DIR` and point avoidance.checkpoint at DIR/model.pt"
+        raise CheckpointError(
+            f"{where} {p}: no such file; train one with {retrain[:-1]} --out DIR` and point "
+            "avoidance.checkpoint at DIR/model.pt."
         )
-        raise CheckpointError(f"{where} {p}: no such file; {hint}.")
-    src = _Source(p, where, algo)
-    _check_archive(p, where, algo)
-    ckpt = _read_checkpoint(src)
-    n_nearest, hidden, meta = _checked_sizes(ckpt, src)
+    src = checkpoint.Source(p, where, f"Use a model.pt written by {retrain}.")
+    ckpt = checkpoint.read(src, "avoidance")
+    if ckpt.get("algo") != algo:
+        raise src.error(
+            f"trained for {short_repr(ckpt.get('algo'))}, but the planner is '{algo}'; use a "
+            f"checkpoint trained with --algo {algo}."
+        )
+    n_nearest, hidden = _checked_sizes(ckpt, src)
     n_obs = obs_dim(n_nearest)
     _check_observation(ckpt, n_nearest, n_obs, src)
-    state_dicts = _checked_state_dicts(ckpt, n_obs, hidden, src)
-    nets = _build_networks(state_dicts, n_obs, hidden, src)
-    info = {"n_nearest": n_nearest, "hidden": hidden, **meta}
+    state_dicts = ckpt.get("state_dicts")
+    if not isinstance(state_dicts, dict):
+        raise src.bad("state_dicts", state_dicts, f"one state dict per network {head_names(algo)}")
+    nets = {
+        name: checkpoint.build_checked(
+            lambda: QNetwork(n_obs, hidden),
+            state_dicts.get(name),
+            src,
+            name,
+            sizes=f"hidden {hidden} and {n_obs} inputs",
+        )
+        for name in head_names(algo)
+    }
+    info = {"n_nearest": n_nearest, "hidden": hidden, **checkpoint.declared_meta(ckpt, src)}
     return nets, info
 
 
-def _read_checkpoint(src: _Source) -> dict:
-    """The unpickled checkpoint dict, once it is known to be an avoidance one for ``src.algo``."""
-    where, p, algo = src.where, src.p, src.algo
-    try:
-        ckpt = torch.load(p, map_location="cpu", weights_only=True)
-    except Exception as exc:  # noqa: BLE001 - any unreadable file is the same user error
-        raise CheckpointError(
-            f"{where} {p}: not a readable torch checkpoint ({type(exc).__name__}); "
-            f"expected a model.pt written by `uavxai train --stage avoidance --algo {algo}`."
-        ) from None
-    if not isinstance(ckpt, dict) or ckpt.get("format") != CHECKPOINT_FORMAT:
-        found = short_repr(ckpt.get("format")) if isinstance(ckpt, dict) else type(ckpt).__name__
-        raise CheckpointError(
-            f"{where} {p}: not an avoidance checkpoint (format {found}); "
-            f"expected one written by `uavxai train --stage avoidance --algo {algo}`."
-        )
-    if ckpt.get("algo") != algo:
-        raise CheckpointError(
-            f"{where} {p}: trained for {short_repr(ckpt.get('algo'))}, but the planner is "
-            f"'{algo}'; use a checkpoint trained with --algo {algo}."
-        )
-    return ckpt
-
-
-def _checked_sizes(ckpt: dict, src: _Source) -> tuple[int, list[int], dict]:
-    """The declared ``n_nearest``, ``hidden`` and ``meta``, each within the bounds above.
-
-    Checked before anything is allocated from them: a hostile file could otherwise ask for a
-    network far larger than the tensors it holds.
-    """
-    n_nearest = ckpt.get("n_nearest")
-    if not _is_int(n_nearest) or not 1 <= n_nearest <= MAX_N_NEAREST:
-        raise src.bad("n_nearest", n_nearest, f"an integer from 1 to {MAX_N_NEAREST}")
+def _checked_sizes(ckpt: dict, src: checkpoint.Source) -> tuple[int, list[int]]:
+    """The declared ``n_nearest`` and ``hidden`` widths, each within the checkpoint bounds,
+    checked before anything is allocated from them."""
+    n_nearest = checkpoint.declared_int(ckpt, "n_nearest", 1, checkpoint.MAX_N_NEAREST, src)
     hidden = ckpt.get("hidden")
     if (
         not isinstance(hidden, list | tuple)
-        or not 1 <= len(hidden) <= MAX_HIDDEN_LAYERS
-        or not all(_is_int(h) and 1 <= h <= MAX_HIDDEN_WIDTH for h in hidden)
+        or not 1 <= len(hidden) <= checkpoint.MAX_LAYERS
+        or not all(checkpoint.is_int(h) and 1 <= h <= checkpoint.MAX_HIDDEN_WIDTH for h in hidden)
     ):
         raise src.bad(
             "hidden",
             hidden,
-            f"a list of 1 to {MAX_HIDDEN_LAYERS} layer widths, each an integer from 1 to "
-            f"{MAX_HIDDEN_WIDTH}",
+            f"a list of 1 to {checkpoint.MAX_LAYERS} layer widths, each an integer from 1 to "
+            f"{checkpoint.MAX_HIDDEN_WIDTH}",
         )
-    hidden = [int(h) for h in hidden]
-    meta = ckpt.get("meta", {})
-    if not isinstance(meta, dict) or not all(isinstance(k, str) for k in meta):
-        raise src.bad("meta", meta, "a mapping from names to values")
-    return n_nearest, hidden, meta
+    return n_nearest, [int(h) for h in hidden]
 
 
-def _check_observation(ckpt: dict, n_nearest: int, n_obs: int, src: _Source) -> None:
+def _check_observation(ckpt: dict, n_nearest: int, n_obs: int, src: checkpoint.Source) -> None:
     """Refuse a network trained on another observation layout than this uavxai's.
 
     The stored probe is the observation of a fixed encounter at training time; if today's
@@ -301,112 +213,9 @@ def _check_observation(ckpt: dict, n_nearest: int, n_obs: int, src: _Source) -> 
         or not probe.is_floating_point()
         or not np.allclose(probe.numpy(), _probe_observation(n_nearest), atol=1e-5)
     ):
-        raise CheckpointError(
-            f"{src.where} {src.p}: trained on an observation that differs from this uavxai's "
-            f"(size {short_repr(ckpt.get('obs_dim'))}, {n_nearest} nearest intruders); "
-            f"retrain it with {src.retrain}."
-        )
-
-
-def _checked_state_dicts(ckpt: dict, n_obs: int, hidden: list[int], src: _Source) -> dict:
-    """The state dicts, each network's tensors of exactly the declared shapes and finite."""
-    where, p, algo, retrain = src.where, src.p, src.algo, src.retrain
-    state_dicts = ckpt.get("state_dicts")
-    if not isinstance(state_dicts, dict):
-        raise src.bad(
-            "state_dicts", state_dicts, f"one state dict per network {head_names(algo)}"
-        )
-    expected = _expected_shapes(n_obs, hidden)
-    for name in head_names(algo):
-        sd = state_dicts.get(name)
-        if not isinstance(sd, dict):
-            raise CheckpointError(
-                f"{where} {p}: network '{name}' is missing; retrain with {retrain}."
-            )
-        shapes = {
-            k: tuple(v.shape) if isinstance(v, torch.Tensor) else type(v).__name__
-            for k, v in sd.items()
-        }
-        if shapes != expected:
-            wrong = sorted(set(shapes.items()) ^ set(expected.items()), key=str)[:4]
-            raise CheckpointError(
-                f"{where} {p}: network '{name}' has the wrong shape for hidden {hidden} and "
-                f"{n_obs} inputs (differs at {short_repr(wrong)}); retrain with {retrain}."
-            )
-        for k, v in sd.items():
-            if not v.is_floating_point() or not bool(torch.isfinite(v).all()):
-                raise CheckpointError(
-                    f"{where} {p}: network '{name}' tensor '{k}' holds "
-                    f"{'non-finite values (NaN or inf)' if v.is_floating_point() else v.dtype}; "
-                    f"allowed: finite floating-point weights. The file is damaged; retrain with "
-                    f"{retrain}."
-                )
-    return state_dicts
-
-
-def _build_networks(
-    state_dicts: dict, n_obs: int, hidden: list[int], src: _Source
-) -> dict[str, QNetwork]:
-    """One eval-mode :class:`QNetwork` per head of ``src.algo``, loaded from ``state_dicts``."""
-    nets: dict[str, QNetwork] = {}
-    for name in head_names(src.algo):
-        net = QNetwork(n_obs, hidden)  # sizes now known to match the stored tensors
-        try:
-            net.load_state_dict(state_dicts[name])
-        except (KeyError, RuntimeError) as exc:
-            raise CheckpointError(
-                f"{src.where} {src.p}: network '{name}' is missing or has the wrong shape "
-                f"({str(exc).splitlines()[0]})."
-            ) from None
-        nets[name] = net.eval()
-    return nets
-
-
-def _is_int(value: object) -> bool:
-    return isinstance(value, int) and not isinstance(value, bool)
-
-
-def _expected_shapes(n_obs: int, hidden: Sequence[int]) -> dict[str, tuple[int, ...]]:
-    """The state-dict shapes of ``QNetwork(n_obs, hidden)``, computed without building it."""
-    shapes: dict[str, tuple[int, ...]] = {}
-    width = n_obs
-    for i, h in enumerate([*hidden, N_ACTIONS]):
-        shapes[f"net.{2 * i}.weight"] = (h, width)
-        shapes[f"net.{2 * i}.bias"] = (h,)
-        width = h
-    return shapes
-
-
-def _check_archive(p: Path, where: str, algo: str) -> None:
-    """Bounded size, and every record's CRC: torch's loader reads a bit-flipped tensor without
-    a word, but the zip archive torch.save writes keeps a CRC-32 of every record."""
-    expected = f"expected a model.pt written by `uavxai train --stage avoidance --algo {algo}`"
-    size = p.stat().st_size
-    if size > MAX_CHECKPOINT_BYTES:
-        raise CheckpointError(
-            f"{where} {p}: {size} bytes; allowed: at most {MAX_CHECKPOINT_BYTES} bytes; {expected}."
-        )
-    try:
-        with zipfile.ZipFile(p) as archive:
-            records = archive.infolist()
-            declared = sum(r.file_size for r in records)
-            if len(records) > MAX_CHECKPOINT_RECORDS or declared > MAX_CHECKPOINT_BYTES:
-                raise CheckpointError(
-                    f"{where} {p}: declares {len(records)} records of {declared} bytes; "
-                    f"allowed: at most {MAX_CHECKPOINT_RECORDS} records and "
-                    f"{MAX_CHECKPOINT_BYTES} bytes; {expected}."
-                )
-            damaged = archive.testzip()
-    except CheckpointError:
-        raise
-    except Exception as exc:  # noqa: BLE001 - not a zip, or one too broken to list
-        raise CheckpointError(
-            f"{where} {p}: not a readable torch checkpoint ({type(exc).__name__}); {expected}."
-        ) from None
-    if damaged is not None:
-        raise CheckpointError(
-            f"{where} {p}: damaged (record '{short_repr(damaged)}' fails its CRC check): the "
-            f"file changed after it was written; copy it again or retrain; {expected}."
+        raise src.error(
+            f"trained on an observation that differs from this uavxai's (size "
+            f"{short_repr(ckpt.get('obs_dim'))}, {n_nearest} nearest intruders); retrain it."
         )
 
 

@@ -1,10 +1,17 @@
-"""An observation of an encounter whose size does not depend on the number of intruders.
+"""An observation of an encounter whose size does not depend on the number of intruders: what
+the learned planners' networks see, and what the Gymnasium env
+(:class:`uavxai.learning.env.EncounterEnv`) returns.
 
-For learned planners (and anything else that wants a fixed-size vector): the ownship's own
-situation, then the ``n_nearest`` intruders, nearest first, relative to the ownship in its
-heading frame (forward, right, up). Absent slots are zeros with a ``present`` flag of 0, so
-3 or 40 intruders give the same vector. Distances are scaled by ``SCALE_M`` and speeds by
-the top ownship speed, so that every entry is of order one.
+The ownship's own situation, then the ``n_nearest`` intruders, nearest first, relative to the
+ownship in its heading frame (forward, right, up), then for the same intruders in the same
+order the distance and time of their closest point of approach at the current relative
+velocity. Absent slots are zeros with a ``present`` flag of 0, so 3 or 40 intruders give the
+same vector. Distances are scaled by ``SCALE_M``, speeds by the top ownship speed and times by
+``TCPA_SCALE_S``, so that every entry is of order one.
+
+The closest approach is a function of the relative position and velocity already in the
+observation, but one an MLP learns slowly; handing it over makes the learned baselines better
+at the one thing they are compared on, avoiding intruders.
 """
 
 from __future__ import annotations
@@ -15,14 +22,19 @@ import numpy as np
 
 from uavxai.avoidance.model import PHI, PHI_CMD, PSI, V, X, Y
 from uavxai.avoidance.types import PlannerConfig
+from uavxai.geometry import closest_point_of_approach
 
 SCALE_M = 500.0  # distances are divided by this
 OWN_FEATURES = 10
 INTRUDER_FEATURES = 8  # forward, right, up, v_forward, v_right, v_up, distance, present
+CPA_FEATURES = 2  # per intruder slot: distance and time of the closest point of approach
+TCPA_SCALE_S = 30.0
+TCPA_MAX_S = 120.0
+N_NEAREST = 8  # the intruder slots of the shipped networks
 
 
-def observation_size(n_nearest: int) -> int:
-    return OWN_FEATURES + INTRUDER_FEATURES * n_nearest
+def observation_size(n_nearest: int = N_NEAREST) -> int:
+    return OWN_FEATURES + (INTRUDER_FEATURES + CPA_FEATURES) * n_nearest
 
 
 def observe(
@@ -31,13 +43,16 @@ def observe(
     vel: np.ndarray,
     goal: np.ndarray,
     config: PlannerConfig,
-    n_nearest: int = 5,
+    n_nearest: int = N_NEAREST,
 ) -> np.ndarray:
-    """The observation (float32) of an ownship state row ``own`` (encounter-model columns),
-    intruders at ``pos`` (N, 3) moving with ``vel`` (N, 3), flying to ``goal`` (3,).
+    """The observation (float32, ``observation_size(n_nearest)``) of an ownship state row
+    ``own`` (encounter-model columns), intruders at ``pos`` (N, 3) moving with ``vel`` (N, 3),
+    flying to ``goal`` (3,).
 
     Own features: goal forward, right, up and distance; speed; bank command and bank (both
-    over the bank limit); the distance to the nearest wall; sin and cos of the heading.
+    over the bank limit); the distance to the nearest wall; sin and cos of the heading. Then
+    ``INTRUDER_FEATURES`` per slot, then ``CPA_FEATURES`` per slot (the order the shipped
+    networks were trained on).
     """
     psi = float(own[PSI])
     s, c = math.sin(psi), math.cos(psi)
@@ -92,4 +107,9 @@ def observe(
         axis=1,
     )
     out[OWN_FEATURES : OWN_FEATURES + block.size] = block.ravel()
+    tcpa, dcpa = closest_point_of_approach(rel[nearest], rel_v, TCPA_MAX_S)
+    cpa = OWN_FEATURES + INTRUDER_FEATURES * n_nearest
+    out[cpa : cpa + CPA_FEATURES * len(nearest)] = np.stack(
+        [dcpa / SCALE_M, tcpa / TCPA_SCALE_S], axis=1
+    ).ravel()
     return out

@@ -7,7 +7,12 @@ the engine sends through the direct command path, as any planner's does (bank co
 (:class:`uavxai.sim.kinematic.KinematicWorld`) flies one decision period, and the engine's
 :class:`uavxai.sim.judge.Judge` says how it ended: the same aircraft, intruder pilots,
 persistent traffic (``intruders.flow``) and outcome rules as ``uavxai evaluate --dynamics
-kinematic``. The agent sees every intruder's exact state (the ``truth`` picture).
+kinematic``. The agent sees every intruder's exact state (the ``truth`` picture), as the
+observation the learned planners' networks see (:mod:`uavxai.avoidance.observation`: the
+ownship, the ``n_nearest`` intruders and their closest approach), and is paid the paper's
+eq 14 reward. Training's shaped reward is a wrapper
+(:class:`uavxai.learning.train.ShapedReward`), its random routes another
+(:class:`uavxai.learning.train.RandomEncounters`, through ``reset(options=...)``).
 
 Outcomes are the engine's: ``goal`` (within ``goal_radius_m``), ``collision`` (3-D separation
 below ``d_min_m`` at any instant, a pass between two samples included), ``out_of_bounds``
@@ -33,7 +38,7 @@ import numpy as np
 from gymnasium import spaces
 
 from uavxai.avoidance.model import accel_command, bank_command, ownship_state, terminal_value
-from uavxai.avoidance.observation import observation_size, observe
+from uavxai.avoidance.observation import N_NEAREST, observation_size, observe
 from uavxai.avoidance.types import (
     N_ACTIONS,
     Decision,
@@ -109,9 +114,9 @@ class EncounterEnv(gym.Env):
     ``n_intruders`` otherwise, None: the scenario's). Rewards are the paper's eq 14,
     paid at the end: 1 at the goal, 0 for a collision or leaving the area, 0.1 at the
     time-out (which is reported as ``truncated``: the observation holds no clock); 0 on every
-    other step. The ``info`` dict carries ``outcome``, ``min_separation_m`` over the step,
-    ``distance_m`` to the goal, ``t`` and ``steps``, so that a learner can shape its own
-    reward.
+    other step. The ``info`` dict carries ``outcome`` ("" until the episode ends),
+    ``min_separation_m`` over the step, ``distance_m`` to the goal, ``t``, ``steps`` and
+    ``intruders`` (how many the episode has), so that a wrapper can shape the reward.
     """
 
     metadata = {"render_modes": []}
@@ -121,7 +126,7 @@ class EncounterEnv(gym.Env):
         scenario: Scenario,
         *,
         n_intruders: int | None = None,
-        n_nearest: int = 5,
+        n_nearest: int = N_NEAREST,
         sample_hz: float | None = None,
     ) -> None:
         self.scenario = scenario
@@ -269,4 +274,5 @@ class EncounterEnv(gym.Env):
             "distance_m": self.distance_to_goal(),
             "t": self.t,
             "steps": self.steps,
+            "intruders": len(self.episode_spec.intruders),
         }

@@ -3,7 +3,13 @@ kinematic world (:class:`uavxai.learning.env.EncounterEnv`; `uavxai train SCENAR
 avoidance --algo dqn|safe_dqn`).
 
 One file, top to bottom, CleanRL style: hyper-parameters in :class:`Hyperparameters`, the
-rewards in :func:`rewards`, then the loop in :func:`train`.
+rewards in :func:`rewards`, the envs as Gymnasium wrappers, then the loop in :func:`train`.
+
+The env's observation is what the networks see and its reward the paper's eq 14; training
+wraps it twice (:func:`training_env`): :class:`RandomEncounters` draws each episode through
+``reset(options=...)`` and :class:`ShapedReward` pays the shaped reward below. ``n_envs`` of
+them fly side by side in a ``gymnasium.vector.SyncVectorEnv`` (one batched forward pass for
+all), which resets an env in the step that ends its episode.
 
 Episodes are the scenario's (its start, goal, intruder behaviour, speeds and altitudes) with a
 fresh intruder count drawn from ``intruders`` each time, so that one network serves 5 or 40
@@ -45,6 +51,7 @@ import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+import gymnasium as gym
 import numpy as np
 import torch
 
@@ -54,7 +61,6 @@ from uavxai.avoidance.learned import (
     head_names,
     load_checkpoint,
     obs_dim,
-    observe,
     safe_action,
     save_checkpoint,
 )
@@ -62,6 +68,7 @@ from uavxai.avoidance.types import N_ACTIONS, PlannerConfig
 from uavxai.errors import UserError
 from uavxai.geometry import bearing, closest_point_of_approach, wrap_angle
 from uavxai.learning.env import EncounterEnv
+from uavxai.learning.replay import ReplayBuffer, n_step_return
 from uavxai.outputs import write_figure, write_output
 from uavxai.scenario import Scenario, Start
 from uavxai.sim.spec import episode_goal
@@ -165,36 +172,62 @@ def rewards(
 
 
 # ------------------------------------------------------------------------------ environments
-class _Episodes:
-    """The scenario's encounters, one env per slot, each with its own seed stream."""
+class ShapedReward(gym.Wrapper):
+    """The shaped reward of the module docstring in place of the env's eq 14: ``reward`` is
+    goal + safety, and ``info`` carries the two parts (``reward_goal``, ``reward_safety``:
+    Safe-DQN learns one network per part) beside the env's own ``eq14_reward``."""
 
-    def __init__(self, scenario: Scenario, hp: Hyperparameters, slot: int) -> None:
-        self.scenario, self.hp = scenario, hp
-        self.rng = np.random.default_rng(np.random.SeedSequence(hp.seed, spawn_key=(slot,)))
-        self.config = PlannerConfig.from_scenario(scenario)
-        self.env = EncounterEnv(scenario, n_nearest=hp.n_nearest, sample_hz=hp.sample_hz)
+    def __init__(self, env: gym.Env, hp: Hyperparameters) -> None:
+        super().__init__(env)
+        self.hp = hp
+        self._before: Situation | None = None
 
-    def reset(self) -> np.ndarray:
-        """The next episode: a fresh intruder count; the scenario's route (its start and the
-        goal every episode of it flies) or, for ``random_start_share``, a random one."""
+    def _situation(self) -> Situation:
+        e = self.env.unwrapped
+        pos, vel = e.intruder_arrays()
+        return situation(self.hp, e.own, pos, vel, e.goal)
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        obs, info = self.env.reset(seed=seed, options=options)
+        self._before = self._situation()
+        return obs, info
+
+    def step(self, action):
+        obs, eq14, terminated, truncated, info = self.env.step(action)
+        after = self._situation()
+        assert self._before is not None  # reset() came first: the env checks that
+        goal, safety = rewards(
+            self.hp, info["outcome"], self._before, after, info["min_separation_m"]
+        )
+        self._before = after
+        info = {**info, "eq14_reward": eq14, "reward_goal": goal, "reward_safety": safety}
+        return obs, goal + safety, terminated, truncated, info
+
+
+class RandomEncounters(gym.Wrapper):
+    """Training's episodes: every reset draws a fresh intruder count from ``hp.intruders``
+    and, for ``random_start_share`` of them, a random route (start and goal anywhere in the
+    area), passed to the env through ``reset(options=...)``. Its draws come from a generator
+    seeded by the first ``reset(seed=...)``, so a vector env's auto-resets repeat with it."""
+
+    def __init__(self, env: gym.Env, hp: Hyperparameters) -> None:
+        super().__init__(env)
+        self.hp = hp
+        self.rng = np.random.default_rng(hp.seed)
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        if seed is not None:
+            self.rng = np.random.default_rng(seed)
         rng, hp = self.rng, self.hp
-        options: dict = {"n_intruders": int(rng.integers(hp.intruders[0], hp.intruders[1] + 1))}
+        drawn: dict = {"n_intruders": int(rng.integers(hp.intruders[0], hp.intruders[1] + 1))}
         if rng.random() < hp.random_start_share:
-            options["start"], options["goal"] = self._random_route()
-        self.env.reset(seed=int(rng.integers(2**31)), options=options)
-        return self.obs()
-
-    def obs(self) -> np.ndarray:
-        pos, vel = self.env.intruder_arrays()
-        return observe(self.env.own, pos, vel, self.env.goal, self.config, self.hp.n_nearest)
-
-    def situation(self) -> Situation:
-        pos, vel = self.env.intruder_arrays()
-        return situation(self.hp, self.env.own, pos, vel, self.env.goal)
+            drawn["start"], drawn["goal"] = self._random_route()
+        return self.env.reset(seed=int(rng.integers(2**31)), options={**drawn, **(options or {})})
 
     def _random_route(self) -> tuple[Start, tuple[float, float, float]]:
         """A start and goal anywhere in the area, at least 600 m apart, 150 m off the walls."""
-        w, sc = self.scenario.world, self.scenario
+        sc = self.env.unwrapped.scenario
+        w = sc.world
         margin = 150.0
         lo = np.array([w.x[0] + margin, w.y[0] + margin])
         hi = np.array([w.x[1] - margin, w.y[1] - margin])
@@ -214,6 +247,22 @@ class _Episodes:
         return start, (float(b[0]), float(b[1]), goal_h)
 
 
+def training_env(scenario: Scenario, hp: Hyperparameters) -> gym.Env:
+    """One of training's envs: the scenario's encounters (:class:`RandomEncounters`) with the
+    shaped reward (:class:`ShapedReward`)."""
+    env = EncounterEnv(scenario, n_nearest=hp.n_nearest, sample_hz=hp.sample_hz)
+    return ShapedReward(RandomEncounters(env, hp), hp)
+
+
+def training_envs(scenario: Scenario, hp: Hyperparameters) -> gym.vector.SyncVectorEnv:
+    """``hp.n_envs`` training envs side by side (one batched forward pass for all), reset in
+    the step that ends an episode (``final_obs`` and ``final_info`` keep its end)."""
+    return gym.vector.SyncVectorEnv(
+        [lambda: training_env(scenario, hp)] * hp.n_envs,
+        autoreset_mode=gym.vector.AutoresetMode.SAME_STEP,
+    )
+
+
 # ---------------------------------------------------------------------------------- training
 @dataclass
 class TrainResult:
@@ -226,23 +275,19 @@ class TrainResult:
 
 
 def validate(
-    scenario: Scenario, hp: Hyperparameters, policy, config: PlannerConfig
+    scenario: Scenario, hp: Hyperparameters, policy, config: PlannerConfig | None = None
 ) -> dict[str, float]:
     """Greedy episodes of the scenario's own route at each of ``validation_intruders``, on
     seeds (``validation_seed`` + i) apart from any campaign's: goal and collision rates."""
     outcomes = []
+    env = EncounterEnv(scenario, n_nearest=hp.n_nearest, sample_hz=hp.sample_hz)
     for n in hp.validation_intruders:
         for i in range(hp.validation_episodes):
-            seed = hp.validation_seed + i
-            env = EncounterEnv(
-                scenario, n_intruders=n, n_nearest=hp.n_nearest, sample_hz=hp.sample_hz
-            )
-            env.reset(seed=seed)
-            while not env.outcome:
-                pos, vel = env.intruder_arrays()
-                obs = observe(env.own, pos, vel, env.goal, config, hp.n_nearest)
-                env.step(int(policy(obs[None])[0]))
-            outcomes.append(env.outcome)
+            obs, info = env.reset(seed=hp.validation_seed + i, options={"n_intruders": n})
+            while not info["outcome"]:
+                obs, _, _, _, info = env.step(int(policy(obs[None])[0]))
+            outcomes.append(info["outcome"])
+    env.close()
     k = len(outcomes)
     goal_rate, collision_rate = outcomes.count("goal") / k, outcomes.count("collision") / k
     return {
@@ -264,64 +309,45 @@ def train(
     from trained networks. ``on_episode(row)`` sees every finished episode."""
     if algo not in ALGOS:
         raise UserError(f"--algo {algo}: the avoidance stage trains {', '.join(ALGOS)}.")
-    # Setup: seeded networks, optimiser and replay buffer, one env per slot.
+    # Setup: seeded networks, optimiser and replay buffer, the vector of training envs.
     wall0 = time.perf_counter()
     torch.manual_seed(hp.seed)
     rng = np.random.default_rng(hp.seed)
     learner = _QLearner.create(algo, hp, init)
-    buffer = _ReplayBuffer(hp.buffer_size, obs_dim(hp.n_nearest), hp.gamma)
-    slots = [_Episodes(scenario, hp, i) for i in range(hp.n_envs)]
-    obs = np.stack([s.reset() for s in slots])
-    windows: list[list[tuple]] = [[] for _ in slots]  # the last n (obs, action, reward)
-    returns = np.zeros((hp.n_envs, 2))
-    episode_min_sep = np.full(hp.n_envs, math.inf)
+    buffer = _replay(hp)
+    envs = training_envs(scenario, hp)
+    obs, _ = envs.reset(seed=hp.seed)
+    run = _Run(hp, [[] for _ in range(hp.n_envs)], np.zeros((hp.n_envs, 2)),
+               np.full(hp.n_envs, math.inf))  # fmt: skip
     result = TrainResult(nets=learner.q)
     best = (-math.inf, learner.snapshot())
-    config = PlannerConfig.from_scenario(scenario)
-    recent: list[str] = []
-    losses: list[float] = []
-    transitions = 0
     explore_episodes = max(1, int(hp.exploration_fraction * hp.episodes))
     while (finished := len(result.curve)) < hp.episodes:
-        # Collect: epsilon-greedy actions for every slot from one batched forward pass.
-        epsilon = hp.start_e + (hp.end_e - hp.start_e) * min(1.0, finished / explore_episodes)
-        greedy = learner.act(obs)
-        explore = rng.random(hp.n_envs) < epsilon
-        actions = np.where(explore, rng.integers(0, N_ACTIONS, hp.n_envs), greedy)
-        for i, slot in enumerate(slots):
-            nxt, r, ended, min_sep = _collect_step(
-                slot, hp, obs[i], int(actions[i]), windows[i], buffer
-            )
-            transitions += 1
-            returns[i] += r
-            episode_min_sep[i] = min(episode_min_sep[i], min_sep)
+        # Collect: epsilon-greedy actions for every env from one batched forward pass.
+        run.epsilon = hp.start_e + (hp.end_e - hp.start_e) * min(1.0, finished / explore_episodes)
+        explore = rng.random(hp.n_envs) < run.epsilon
+        actions = np.where(explore, rng.integers(0, N_ACTIONS, hp.n_envs), learner.act(obs))
+        nxt, _, terminated, truncated, infos = envs.step(actions)
+        for i in range(hp.n_envs):
+            ended = bool(terminated[i] or truncated[i])
+            info = _info_at(infos, i, ended)
+            last = infos["final_obs"][i] if ended else nxt[i]
+            _store(run, i, obs[i], int(actions[i]), info, last, bool(terminated[i]), buffer)
+            run.transitions += 1
             # Update: one gradient step every train_frequency transitions once warmed up.
-            if transitions >= hp.learning_starts and transitions % hp.train_frequency == 0:
-                losses.append(learner.gradient_step(buffer.sample(rng, hp.batch_size)))
-            if ended:
-                recent = (recent + [slot.env.outcome])[-hp.log_window :]
-                row = _episode_row(
-                    len(result.curve),
-                    slot,
-                    returns[i],
-                    episode_min_sep[i],
-                    epsilon,
-                    losses,
-                    recent,
-                    transitions,
-                )
+            if run.transitions >= hp.learning_starts and run.transitions % hp.train_frequency == 0:
+                batch = Batch(**buffer.sample(rng, hp.batch_size))
+                run.losses.append(learner.gradient_step(batch))
+            if ended and len(result.curve) < hp.episodes:
+                row = run.episode_row(len(result.curve), i, info)
                 result.curve.append(row)
                 # Evaluate: validate now and then, keeping the best snapshot.
-                best = _evaluate(scenario, hp, learner, config, result, row, best)
+                best = _evaluate(scenario, hp, learner, result, row, best)
                 if on_episode:
                     on_episode(row)
-                if len(result.curve) == hp.episodes:
-                    break
-                returns[i] = 0.0
-                episode_min_sep[i] = math.inf
-                nxt = slot.reset()
-            obs[i] = nxt
-    result.td_losses = losses
+        obs = nxt
+    envs.close()
+    result.td_losses = run.losses
     result.wall_s = time.perf_counter() - wall0
     for k, net in learner.q.items():
         net.load_state_dict(best[1][k])
@@ -329,41 +355,98 @@ def train(
     return result
 
 
-class _ReplayBuffer:
-    """n-step transitions in a ring; rewards kept in two parts (goal, safety), DQN learns
-    their sum."""
+def _replay(hp: Hyperparameters) -> ReplayBuffer:
+    """n-step transitions; rewards kept in two parts (goal, safety), DQN learns their sum;
+    ``discount`` is gamma^k, 0 after a terminal state (no bootstrap)."""
+    n_obs = obs_dim(hp.n_nearest)
+    return ReplayBuffer(
+        hp.buffer_size,
+        {
+            "obs": ((n_obs,), np.float32),
+            "action": ((), np.int64),
+            "reward": ((2,), np.float32),
+            "next_obs": ((n_obs,), np.float32),
+            "discount": ((), np.float32),
+        },
+    )
 
-    def __init__(self, size: int, n_obs: int, gamma: float) -> None:
-        self.size, self.gamma = size, gamma
-        self.obs = np.zeros((size, n_obs), np.float32)
-        self.next = np.zeros((size, n_obs), np.float32)
-        self.act = np.zeros(size, np.int64)
-        self.rew = np.zeros((size, 2), np.float32)
-        self.discount = np.zeros(size, np.float32)  # gamma^k, 0 after a terminal state
-        self.stored = self.cursor = 0
 
-    def store(self, window: list[tuple], next_obs: np.ndarray, terminated: bool) -> None:
-        """One n-step transition from the oldest step of ``window`` to ``next_obs``."""
-        ret = np.zeros(2)
-        for k, (_, _, r) in enumerate(window):
-            ret += self.gamma**k * np.asarray(r)
-        c = self.cursor
-        self.obs[c], self.act[c] = window[0][0], window[0][1]
-        self.rew[c], self.next[c] = ret, next_obs
-        self.discount[c] = 0.0 if terminated else self.gamma ** len(window)
-        self.cursor = (c + 1) % self.size
-        self.stored = min(self.stored + 1, self.size)
+def _info_at(infos: dict, i: int, ended: bool) -> dict:
+    """Env ``i``'s info of the step from the vector env's batched infos (of the episode's end
+    when it ended: the vector env has already reset it)."""
+    source = infos["final_info"] if ended else infos
+    skip = ("final_info", "final_obs")
+    return {k: v[i] for k, v in source.items() if not k.startswith("_") and k not in skip}
 
-    def sample(self, rng: np.random.Generator, batch_size: int) -> Batch:
-        """A uniform batch (with replacement) of the stored transitions."""
-        idx = rng.integers(0, self.stored, batch_size)
-        return Batch(
-            obs=torch.as_tensor(self.obs[idx]),
-            action=torch.as_tensor(self.act[idx]),
-            reward=torch.as_tensor(self.rew[idx]),
-            next_obs=torch.as_tensor(self.next[idx]),
-            discount=torch.as_tensor(self.discount[idx]),
+
+@dataclass
+class _Run:
+    """The state of a training run between steps: each env's last n steps, returns and
+    closest approach of its episode; the exploration rate, transitions, losses and recent
+    outcomes."""
+
+    hp: Hyperparameters
+    windows: list[list[tuple]]  # per env, the last n (obs, action, (goal, safety) reward)
+    returns: np.ndarray  # (n_envs, 2)
+    min_sep: np.ndarray  # (n_envs,)
+    epsilon: float = 1.0
+    transitions: int = 0
+    losses: list[float] = field(default_factory=list)
+    recent: list[str] = field(default_factory=list)
+
+    def episode_row(self, episode: int, i: int, info: dict) -> dict:
+        """The learning-curve row of the episode env ``i`` just finished (CURVE_COLUMNS); the
+        env's returns and closest approach start again."""
+        self.recent = (self.recent + [str(info["outcome"])])[-self.hp.log_window :]
+        recent, losses = self.recent, self.losses
+        row = {
+            "episode": episode,
+            "intruders": int(info["intruders"]),
+            "outcome": str(info["outcome"]),
+            "steps": int(info["steps"]),
+            "return_goal": round(float(self.returns[i, 0]), 4),
+            "return_safety": round(float(self.returns[i, 1]), 4),
+            "min_separation_m": round(float(self.min_sep[i]), 2),
+            "epsilon": round(self.epsilon, 4),
+            "td_loss": round(float(np.mean(losses[-200:])), 6) if losses else math.nan,
+            "goal_rate": recent.count("goal") / len(recent),
+            "collision_rate": recent.count("collision") / len(recent),
+            "transitions": self.transitions,
+            "val_goal_rate": math.nan,
+            "val_collision_rate": math.nan,
+        }
+        self.returns[i] = 0.0
+        self.min_sep[i] = math.inf
+        return row
+
+
+def _store(
+    run: _Run,
+    i: int,
+    obs: np.ndarray,
+    action: int,
+    info: dict,
+    next_obs: np.ndarray,
+    terminated: bool,
+    buffer: ReplayBuffer,
+) -> None:
+    """Account env ``i``'s step and store the n-step transitions it completes (all that are
+    left when its episode ended)."""
+    r = (float(info["reward_goal"]), float(info["reward_safety"]))
+    run.returns[i] += r
+    run.min_sep[i] = min(run.min_sep[i], float(info["min_separation_m"]))
+    window = run.windows[i]
+    window.append((obs.copy(), action, r))
+    ended = bool(info["outcome"])
+    while len(window) == run.hp.n_step or (ended and window):
+        buffer.add(
+            obs=window[0][0],
+            action=window[0][1],
+            reward=n_step_return([w[2] for w in window], run.hp.gamma),
+            next_obs=next_obs,
+            discount=0.0 if terminated else run.hp.gamma ** len(window),
         )
+        window.pop(0)
 
 
 @dataclass
@@ -420,68 +503,10 @@ class _QLearner:
         return {k: copy.deepcopy(net.state_dict()) for k, net in self.q.items()}
 
 
-def _collect_step(
-    slot: _Episodes,
-    hp: Hyperparameters,
-    obs: np.ndarray,
-    action: int,
-    window: list[tuple],
-    buffer: _ReplayBuffer,
-) -> tuple[np.ndarray, tuple[float, float], bool, float]:
-    """Fly ``action`` in ``slot``, store the n-step transitions it completes; return the next
-    observation, the (goal, safety) reward, whether the episode ended and the step's minimum
-    separation."""
-    env = slot.env
-    before = slot.situation()
-    _, _, terminated, truncated, info = env.step(action)
-    nxt = slot.obs()
-    r = rewards(hp, env.outcome, before, slot.situation(), info["min_separation_m"])
-    window.append((obs.copy(), action, r))
-    if len(window) == hp.n_step:
-        buffer.store(window, nxt, terminated)
-        window.pop(0)
-    if terminated or truncated:  # flush the shorter returns of the last steps
-        while window:
-            buffer.store(window, nxt, terminated)
-            window.pop(0)
-    return nxt, r, terminated or truncated, info["min_separation_m"]
-
-
-def _episode_row(
-    episode: int,
-    slot: _Episodes,
-    returns: np.ndarray,
-    min_sep: float,
-    epsilon: float,
-    losses: list[float],
-    recent: list[str],
-    transitions: int,
-) -> dict:
-    """The learning-curve row of the episode ``slot`` just finished (columns: CURVE_COLUMNS)."""
-    env = slot.env
-    return {
-        "episode": episode,
-        "intruders": len(env.episode_spec.intruders),
-        "outcome": env.outcome,
-        "steps": env.steps,
-        "return_goal": round(float(returns[0]), 4),
-        "return_safety": round(float(returns[1]), 4),
-        "min_separation_m": round(float(min_sep), 2),
-        "epsilon": round(epsilon, 4),
-        "td_loss": round(float(np.mean(losses[-200:])), 6) if losses else math.nan,
-        "goal_rate": recent.count("goal") / len(recent),
-        "collision_rate": recent.count("collision") / len(recent),
-        "transitions": transitions,
-        "val_goal_rate": math.nan,
-        "val_collision_rate": math.nan,
-    }
-
-
 def _evaluate(
     scenario: Scenario,
     hp: Hyperparameters,
     learner: _QLearner,
-    config: PlannerConfig,
     result: TrainResult,
     row: dict,
     best: tuple[float, dict[str, dict]],
@@ -490,7 +515,7 @@ def _evaluate(
     record it in ``result`` and ``row``; return the best (score, snapshot) so far."""
     done = len(result.curve)
     if done % hp.validate_every == 0 or done == hp.episodes:
-        val = {"episode": done, **validate(scenario, hp, learner.act, config)}
+        val = {"episode": done, **validate(scenario, hp, learner.act)}
         result.validation.append(val)
         row["val_goal_rate"] = val["goal_rate"]
         row["val_collision_rate"] = val["collision_rate"]

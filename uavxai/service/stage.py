@@ -9,7 +9,7 @@ link at the chosen point. Planners:
   is flown greedily, zero-shot (no training on the layout), and its best visited point is
   polished by ``universal.refine`` (lattice neighbours and power levels, best improvement);
   ``extras`` report the D3QN alone (``d3qn_alone_objective``) beside what is returned. A
-  ``service.checkpoint`` written by ``python -m uavxai.service.universal`` is used the same
+  ``service.checkpoint`` written by ``uavxai train --stage universal`` is used the same
   way; one written by ``uavxai train`` (a per-layout model) is flown greedily as trained.
 - ``dqn`` — the same with the shipped DQN ablation (no dueling, no double targets).
 - ``random`` — ``service.steps`` random lattice points with random power levels.
@@ -42,6 +42,7 @@ import torch
 
 from uavxai.comms.channel import Channel
 from uavxai.errors import CheckpointError, UserError
+from uavxai.learning import checkpoint
 from uavxai.paths import service_checkpoints_dir
 from uavxai.scenario import Scenario
 from uavxai.service import d3qn, universal
@@ -172,7 +173,7 @@ def _is_universal(path: Path) -> bool:
         data = torch.load(path, map_location="cpu", weights_only=True)
     except Exception:  # noqa: BLE001 - resolve_checkpoint reports unreadable files
         return False
-    return isinstance(data, dict) and data.get("format") == universal.CHECKPOINT_FORMAT
+    return isinstance(data, dict) and data.get("format") == checkpoint.FORMATS["universal"][0]
 
 
 _POLICIES: dict[str, tuple[universal.NumpyPolicy, dict[str, Any]]] = {}
@@ -224,8 +225,8 @@ def universal_policy(scenario: Scenario, algo: str) -> tuple[universal.NumpyPoli
         raise CheckpointError(
             f"no shipped {algo} model for power_levels = {c.power_levels}; shipped: "
             f"{', '.join(have) or 'none'}. Set comms.power_levels: 6, train one with "
-            f"`python -m uavxai.service.universal --algo {algo}`, or use service.planner: grid "
-            "or random."
+            f"`uavxai train SCENARIO --stage universal --algo {algo}`, or use service.planner: "
+            "grid or random."
         )
     key = str(path.resolve())
     if key not in _POLICIES:
@@ -246,7 +247,7 @@ def universal_policy(scenario: Scenario, algo: str) -> tuple[universal.NumpyPoli
         raise CheckpointError(
             f"service model {path}: does not fit this scenario: {'; '.join(problems)}. Use "
             "service.planner: grid or random, or train a matching model with "
-            f"`python -m uavxai.service.universal --algo {algo}`."
+            f"`uavxai train SCENARIO --stage universal --algo {algo}`."
         )
     return policy, (str(path) if given is not None else f"shipped:{path.name}")
 

@@ -23,11 +23,11 @@ any K up to ``K_MAX``, both access modes and all four environments without retra
   ``r + gamma * mean_d Q_d^target(s', argmax Q_d^online(s'))``, the mean over the move branch
   and the K real power branches. DQN (the ablation) is the same network without V and with
   ``max_a Q_d^target`` (no double).
-- **Training** (``train``): every episode a new problem from ``layouts.random_problem``
-  (K uniform in 2..K_MAX, uniform or clustered users, random access mode and environment),
-  fading-free, rewards divided by the naive placement's objective. Every ``eval_every``
-  episodes the greedy policy is flown on a fixed validation set; the checkpoint keeps the
-  best validation score.
+- **Training** (:mod:`uavxai.learning.universal`): every episode a new problem from
+  ``layouts.random_problem`` (K uniform in 2..K_MAX, uniform or clustered users, random
+  access mode and environment), fading-free, rewards divided by the naive placement's
+  objective. Every ``eval_every`` episodes the greedy policy is flown on a fixed validation
+  set; the checkpoint keeps the best validation score.
 - **Planning** (``plan``): the greedy flight of ``steps`` moves from the region centre at
   100 m with the power branch's levels at every step, stopped when it hovers or revisits a
   point (the walk is deterministic); the best visited point (with the levels the network
@@ -39,10 +39,7 @@ any K up to ``K_MAX``, both access modes and all four environments without retra
 
 from __future__ import annotations
 
-import copy
-import json
-import time
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -51,9 +48,7 @@ import torch
 from torch import nn
 
 from uavxai.comms.channel import ENVIRONMENTS, Channel, free_space_loss_db
-from uavxai.errors import CheckpointError
-from uavxai.outputs import write_output, write_torch
-from uavxai.service.layouts import random_problem
+from uavxai.learning import checkpoint
 from uavxai.service.service_env import (
     GAIN_REFERENCE_DISTANCE_M,
     MOVES,
@@ -65,7 +60,6 @@ from uavxai.service.service_env import (
 if TYPE_CHECKING:
     from uavxai.service.orbit import OrbitObjective
 
-CHECKPOINT_FORMAT = "uavxai.service.universal-q/1"
 K_MAX = 20
 USER_FEATURES = 13
 GLOBAL_FEATURES = 23
@@ -404,325 +398,28 @@ def plan(
     return Plan(flight, best[0], best[1], best[2], rounds)
 
 
-# ---------------------------------------------------------------------------------- training
-@dataclass
-class UniversalConfig:
-    episodes: int = 2000
-    minutes: float = 30.0  # wall-clock cap: training stops at whichever comes first
-    train_steps: int = 60  # moves per training episode (half start at a random point)
-    hidden: int = 64
-    learning_rate: float = 5e-4
-    gamma: float = 0.95
-    buffer_size: int = 100_000
-    batch_size: int = 64
-    learning_starts: int = 1000
-    train_frequency: int = 4
-    target_network_frequency: int = 500
-    start_e: float = 0.9
-    end_e: float = 0.05
-    exploration_fraction: float = 0.4
-    max_grad_norm: float = 10.0
-    # Huber loss with lr 2.5e-4 and target updates every 1000 steps validated worse (-0.33 /
-    # -0.37 against -0.18 / -0.16 for D3QN / DQN): the shipped models use squared errors.
-    huber: bool = False
-    k_range: tuple[int, int] = (2, K_MAX)
-    eval_every: int = 100
-    eval_problems: int = 24
-    dueling: bool = True
-    double: bool = True
-    seed: int = 0
-
-
-class _Replay:
-    def __init__(self, size: int):
-        self.g = np.zeros((size, GLOBAL_FEATURES), np.float32)
-        self.u = np.zeros((size, K_MAX, USER_FEATURES), np.float32)
-        self.g2 = np.zeros_like(self.g)
-        self.u2 = np.zeros_like(self.u)
-        self.mask = np.zeros((size, K_MAX), bool)
-        self.a = np.zeros((size, 1 + K_MAX), np.int64)
-        self.r = np.zeros(size, np.float32)
-        self.size, self.pos, self.full = size, 0, False
-
-    def add(self, obs: Observation, nxt: Observation, action: np.ndarray, reward: float) -> None:
-        i, k = self.pos, len(obs.users)
-        self.g[i], self.g2[i] = obs.glob, nxt.glob
-        self.u[i] = 0.0
-        self.u2[i] = 0.0
-        self.u[i, :k], self.u2[i, :k] = obs.users, nxt.users
-        self.mask[i] = False
-        self.mask[i, :k] = True
-        self.a[i] = 0
-        self.a[i, : 1 + k] = action
-        self.r[i] = reward
-        self.pos = (i + 1) % self.size
-        self.full = self.full or self.pos == 0
-
-    def sample(self, n: int, rng: np.random.Generator) -> tuple[torch.Tensor, ...]:
-        idx = rng.integers(0, self.size if self.full else self.pos, size=n)
-        return tuple(
-            torch.as_tensor(x[idx]) for x in (self.g, self.u, self.mask, self.a, self.r, self.g2,
-                                               self.u2)
-        )
-
-
-def _update(q: SetQNetwork, target: SetQNetwork, opt, batch, cfg: UniversalConfig) -> float:
-    g, u, mask, a, r, g2, u2 = batch
-    m = mask.to(torch.float32)
-    branches = 1.0 + m.sum(1)
-    with torch.no_grad():
-        move_t, power_t = target(g2, u2, mask)
-        if cfg.double:
-            move_o, power_o = q(g2, u2, mask)
-            nm = move_t.gather(1, move_o.argmax(1, keepdim=True))[:, 0]
-            npw = power_t.gather(2, power_o.argmax(2, keepdim=True))[..., 0]
-        else:
-            nm, npw = move_t.max(1).values, power_t.max(2).values
-        y = r + cfg.gamma * (nm + (npw * m).sum(1)) / branches  # truncation only: no done
-    move, power = q(g, u, mask)
-    qm = move.gather(1, a[:, :1])[:, 0]
-    qp = power.gather(2, a[:, 1:, None])[..., 0]
-    def err(x: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
-        if cfg.huber:
-            return nn.functional.smooth_l1_loss(x, t, reduction="none")
-        return (x - t) ** 2
-
-    loss = ((err(qm, y) + (err(qp, y[:, None].expand_as(qp)) * m).sum(1)) / branches).mean()
-    opt.zero_grad()
-    loss.backward()
-    nn.utils.clip_grad_norm_(q.parameters(), cfg.max_grad_norm)
-    opt.step()
-    return float(loss.detach())
-
-
-@dataclass
-class TrainLog:
-    net: SetQNetwork
-    config: UniversalConfig
-    rows: list[dict[str, float]] = field(default_factory=list)
-    best_score: float = -np.inf
-    best_episode: int = 0
-    episodes: int = 0
-    wall_s: float = 0.0
-
-
-def validation_envs(n: int, k_range: tuple[int, int]) -> list[ServiceEnv]:
-    """A fixed validation set (seeds disjoint from training and from the benchmark), each
-    with ``reward_scale`` set to ``reference_objective``."""
-    envs = [random_problem(np.random.default_rng([7_777, i]), k_range) for i in range(n)]
-    for env in envs:
-        env.reward_scale = reference_objective(env)
-    return envs
-
-
-def score(net: SetQNetwork | NumpyPolicy, envs: list[ServiceEnv]) -> float:
-    """Mean log2 of (best visited objective / reference objective) of greedy flights."""
-    vals = [np.log2(max(fly(net, e).objective, 1e-30) / e.reward_scale) for e in envs]
-    return float(np.mean(vals))
-
-
-def train(
-    cfg: UniversalConfig,
-    log_path: Path | None = None,
-    *,
-    init: SetQNetwork | None = None,
-    problems: list[ServiceEnv] | None = None,
-) -> TrainLog:
-    """Train across random problems; the returned net holds the best validated weights.
-
-    Half the episodes start at a random lattice point instead of the region centre, so that
-    the replay covers the whole box (the greedy flight starts at the centre). Fine-tuning
-    (:func:`finetune`): ``init`` is the network to start from and ``problems`` the layouts
-    to train and validate on (each with ``reward_scale`` set); the starting weights are
-    scored first, so a fine-tuned net is never worse on them than the one it started from.
-    """
-    t0 = time.perf_counter()
-    torch.set_num_threads(1)
-    torch.manual_seed(cfg.seed)
-    rng = np.random.default_rng(cfg.seed)
-    q = SetQNetwork(6, cfg.hidden, cfg.dueling) if init is None else copy.deepcopy(init)
-    q.train()
-    policy = NumpyPolicy(q)
-    target = copy.deepcopy(q)
-    opt = torch.optim.Adam(q.parameters(), lr=cfg.learning_rate)
-    rb = _Replay(cfg.buffer_size)
-    val = validation_envs(cfg.eval_problems, cfg.k_range) if problems is None else problems
-    log = TrainLog(net=q, config=cfg)
-    best_state = copy.deepcopy(q.state_dict())
-    if init is not None:
-        log.best_score, log.best_episode = score(policy, val), 0
-    total = cfg.episodes * cfg.train_steps
-    global_step, eps = 0, cfg.start_e
-    for episode in range(cfg.episodes):
-        if problems is None:
-            env = random_problem(np.random.default_rng([cfg.seed, episode]), cfg.k_range)
-            scale = reference_objective(env)
-        else:
-            env = problems[episode % len(problems)]
-            scale = env.reward_scale
-        pos = env.space.start.copy()
-        if rng.random() < 0.5:
-            pos = np.array([rng.choice(axis) for axis in env.space.axes()])
-        obs = observe(env, pos)
-        nvec = env.action_space.nvec
-        ret = 0.0
-        for _ in range(cfg.train_steps):
-            frac = global_step / max(1, int(cfg.exploration_fraction * total))
-            eps = max(cfg.end_e, cfg.start_e + (cfg.end_e - cfg.start_e) * frac)
-            action = policy(obs)
-            explore = rng.random(len(nvec)) < eps
-            action[explore] = rng.integers(0, nvec[explore])
-            pos, refused = step(env, pos, int(action[0]))
-            reward = objective_at(env, pos, action[1:]) / scale / (2.0 if refused else 1.0)
-            nxt = observe(env, pos)
-            rb.add(obs, nxt, action, reward)
-            obs, ret = nxt, ret + reward
-            global_step += 1
-            if global_step > cfg.learning_starts and global_step % cfg.train_frequency == 0:
-                _update(q, target, opt, rb.sample(cfg.batch_size, rng), cfg)
-            if global_step % cfg.target_network_frequency == 0:
-                target.load_state_dict(q.state_dict())
-        log.episodes = episode + 1
-        last = (episode + 1 == cfg.episodes) or (time.perf_counter() - t0 > 60 * cfg.minutes)
-        if (episode + 1) % cfg.eval_every == 0 or last:
-            s = score(policy, val)
-            row = {"episode": episode + 1, "epsilon": eps, "return": ret / cfg.train_steps,
-                   "val_log2_over_reference": s, "wall_s": time.perf_counter() - t0}
-            log.rows.append(row)
-            if s > log.best_score:
-                log.best_score, log.best_episode = s, episode + 1
-                best_state = copy.deepcopy(q.state_dict())
-            if log_path is not None:
-                with log_path.open("a") as f:
-                    f.write(json.dumps(row) + "\n")
-        if last:
-            break
-    q.load_state_dict(best_state)
-    log.wall_s = time.perf_counter() - t0
-    return log
-
-
-def finetune(
-    net: SetQNetwork, env: ServiceEnv, cfg: UniversalConfig | None = None
-) -> TrainLog:
-    """Fine-tune a universal model on one layout (``env``, fading-free): training goes on
-    from ``net``'s weights on that layout alone, with little exploration, and the returned
-    net is the best greedy flight's weights, the starting ones included."""
-    env.reward_scale = reference_objective(env)
-    cfg = cfg or FINETUNE
-    cfg = replace(cfg, dueling=net.dueling, double=net.dueling, hidden=net.hidden)
-    return train(cfg, init=net, problems=[env])
-
-
-# A layout, not the world: a short, calm continuation of training (about 10 s on one core).
-FINETUNE = UniversalConfig(
-    episodes=100, minutes=5.0, learning_rate=2e-4, learning_starts=300,
-    target_network_frequency=200, start_e=0.3, end_e=0.05, exploration_fraction=0.5,
-    eval_every=5,
-)  # fmt: skip
-
-
 # ------------------------------------------------------------------------------- checkpoints
-def save(path: Path, net: SetQNetwork, algo: str, meta: dict[str, Any]) -> None:
-    """``path`` (state dict and sizes, loadable with ``weights_only=True``) and a JSON beside."""
-    write_torch(  # whole or not at all
-        path,
-        {
-            "format": CHECKPOINT_FORMAT,
-            "algo": algo,
-            "k_max": K_MAX,
-            "power_levels": net.power_levels,
-            "hidden": net.hidden,
-            "dueling": net.dueling,
-            "state_dict": net.state_dict(),
-        },
-    )
-    write_output(path.with_suffix(".json"), json.dumps(meta, indent=2, default=str) + "\n")
-
-
 def load(path: str | Path) -> tuple[SetQNetwork, dict[str, Any]]:
-    """A model written by :func:`save`; any problem is a CheckpointError. The declared sizes
-    are bounded and compared with the stored tensors, and the weights must be finite, before
-    a network is allocated (:mod:`uavxai.service.guard`)."""
-    from uavxai.service import guard
-
-    p = Path(path)
-    where = "service model"
-    remedy = "Use a model written by `uavxai train SCENARIO --stage service`, or the shipped one."
-    data = guard.read_checkpoint(p, where, remedy)
-    if not isinstance(data, dict) or data.get("format") != CHECKPOINT_FORMAT:
-        raise CheckpointError(f"service model {p}: not a {CHECKPOINT_FORMAT} model.")
-    levels = guard.declared_int(data, "power_levels", 1, guard.MAX_POWER_LEVELS, p, where, remedy)
-    hidden = guard.declared_int(data, "hidden", 1, guard.MAX_HIDDEN_WIDTH, p, where, remedy)
-    dueling = guard.declared_bool(data, "dueling", p, where, remedy)
-    try:
-        net = guard.build_checked(
-            lambda: SetQNetwork(levels, hidden, dueling), data.get("state_dict"), p, where, remedy
-        )
-        info = {key: data[key] for key in ("algo", "k_max", "power_levels", "dueling")}
-    except (KeyError, RuntimeError, TypeError) as exc:
-        raise CheckpointError(f"service model {p}: damaged ({exc}).") from None
+    """A model written by :func:`uavxai.learning.universal.save`, read without trusting it
+    (:mod:`uavxai.learning.checkpoint`); any problem is a CheckpointError."""
+    src = checkpoint.Source(
+        Path(path),
+        "service model",
+        "Use a model written by `uavxai train SCENARIO --stage service`, or the shipped one.",
+    )
+    data = checkpoint.read(src, "universal")
+    levels = checkpoint.declared_int(data, "power_levels", 1, checkpoint.MAX_POWER_LEVELS, src)
+    hidden = checkpoint.declared_int(data, "hidden", 1, checkpoint.MAX_HIDDEN_WIDTH, src)
+    dueling = checkpoint.declared_bool(data, "dueling", src)
+    net = checkpoint.build_checked(
+        lambda: SetQNetwork(levels, hidden, dueling), data.get("state_dict"), src
+    )
+    info = {"algo": data.get("algo"), "k_max": data.get("k_max"), "power_levels": levels,
+            "dueling": dueling}  # fmt: skip
     return net, info
-
-
-def config_dict(cfg: UniversalConfig) -> dict[str, Any]:
-    return asdict(cfg)
 
 
 def shipped_path(algo: str, power_levels: int = 6) -> Path:
     from uavxai.paths import service_checkpoints_dir
 
     return service_checkpoints_dir() / f"universal_{algo}_l{power_levels}.pt"
-
-
-def main(argv: list[str] | None = None) -> None:
-    """``python -m uavxai.service.universal --algo d3qn|dqn [--minutes 30] [--out DIR]``:
-    train the universal model and write ``universal_{algo}_l6.pt`` with its JSON."""
-    import argparse
-
-    from uavxai import __version__
-
-    parser = argparse.ArgumentParser(prog="python -m uavxai.service.universal")
-    parser.add_argument("--algo", choices=("d3qn", "dqn"), default="d3qn")
-    parser.add_argument("--minutes", type=float, default=UniversalConfig.minutes)
-    parser.add_argument("--episodes", type=int, default=UniversalConfig.episodes)
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--out", type=Path, default=None)
-    args = parser.parse_args(argv)
-    dueling = args.algo == "d3qn"
-    cfg = UniversalConfig(
-        episodes=args.episodes, minutes=args.minutes, seed=args.seed, dueling=dueling,
-        double=dueling,
-    )
-    path = (args.out / f"universal_{args.algo}_l6.pt") if args.out else shipped_path(args.algo)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    log_path = path.with_suffix(".log.jsonl")
-    log_path.unlink(missing_ok=True)
-    log = train(cfg, log_path)
-    meta = {
-        "algo": args.algo,
-        "format": CHECKPOINT_FORMAT,
-        "k_range": [2, K_MAX],
-        "power_levels": 6,
-        "access": list(ACCESS_MODES),
-        "environments": list(ENVIRONMENTS),
-        "layouts": "uavxai.service.layouts.random_problem: K uniform in 2..20, uniform or "
-        "clustered users in the default region, random access and environment, fading-free",
-        "other_parameters": "scenario defaults (2 GHz, 1 MHz, -100 dBm, 1 W, QoS 100 kbit/s, "
-        "10 m steps, world.h [50, 300] m)",
-        "config": config_dict(cfg),
-        "episodes_trained": log.episodes,
-        "best_episode": log.best_episode,
-        "best_val_log2_over_reference": log.best_score,
-        "wall_s": round(log.wall_s, 1),
-        "uavxai_version": __version__,
-        "torch_version": str(torch.__version__),
-        "command": f"python -m uavxai.service.universal --algo {args.algo} --minutes "
-        f"{args.minutes} --episodes {args.episodes} --seed {args.seed}",
-    }
-    save(path, log.net, args.algo, meta)
-    print(path, json.dumps(log.rows[-1] if log.rows else {}))
-
-
-if __name__ == "__main__":
-    main()

@@ -1,4 +1,4 @@
-"""Training of the service-point planners, and the shipped checkpoints.
+"""The service stage's training commands (`uavxai train --stage service`).
 
 ``uavxai train SCENARIO --stage service --algo d3qn|dqn`` calls :func:`train_command`: it
 trains the requested algorithm on the scenario's user layout, and — for the comparison figure
@@ -23,14 +23,14 @@ one, or a universal ``service.checkpoint``) on the scenario's layout alone and w
 the zero-shot model is flown (network, refinement, power step). The report gives the
 network alone and the planner before and after, against the exact optimum.
 
-``python -m uavxai.service.train shipped`` regenerates ``uavxai/service/checkpoints``: the
-universal D3QN and DQN of ``universal.py`` (any K from 2 to 20, both access modes, all four
-environments), used zero-shot by ``service.planner: d3qn|dqn``.
+``uavxai train SCENARIO --stage universal --algo d3qn|dqn`` trains the universal model of
+:mod:`uavxai.learning.universal` (any K from 2 to 20, both access modes, all four
+environments), the model ``service.planner: d3qn|dqn`` flies zero-shot; the shipped ones in
+``uavxai/service/checkpoints`` are its ``model.pt`` and ``model.json``.
 """
 
 from __future__ import annotations
 
-import argparse
 import copy
 import csv
 import io
@@ -42,9 +42,10 @@ from typing import Any
 import numpy as np
 import torch
 
+from uavxai.learning import branching
 from uavxai.outputs import write_figure, write_output
 from uavxai.scenario import Scenario
-from uavxai.service import d3qn, dqn
+from uavxai.service import d3qn
 from uavxai.service.grid import solve_grid
 from uavxai.service.random_search import random_search
 from uavxai.service.service_env import ServiceEnv
@@ -78,8 +79,8 @@ def train_command(scenario: Scenario, algo: str, episodes: int | None, out: Path
     episodes = episodes or DEFAULT_EPISODES
     env = ServiceEnv.from_scenario(scenario)
     configs = {
-        "d3qn": d3qn.D3QNConfig(episodes=episodes, seed=scenario.seed),
-        "dqn": dqn.DQNConfig(episodes=episodes, seed=scenario.seed),
+        "d3qn": branching.D3QNConfig(episodes=episodes, seed=scenario.seed),
+        "dqn": branching.DQNConfig(episodes=episodes, seed=scenario.seed),
     }
     runs, grid = _train_all(env, algo, configs, episodes, scenario.seed)
     chosen, episode = _save_best(out, runs[algo]["result"], algo, configs[algo], scenario)
@@ -118,6 +119,7 @@ def finetune_command(
 
     from rich.console import Console
 
+    from uavxai.learning import universal as trainer
     from uavxai.service import universal
     from uavxai.service.stage import universal_model_path, universal_policy
 
@@ -126,17 +128,17 @@ def finetune_command(
     net, _ = universal.load(start_path)
     env = d3qn.fading_free(ServiceEnv.from_scenario(scenario))
     cfg = replace(
-        universal.FINETUNE, episodes=episodes or universal.FINETUNE.episodes, seed=scenario.seed
+        trainer.FINETUNE, episodes=episodes or trainer.FINETUNE.episodes, seed=scenario.seed
     )
     before = universal.plan(universal.NumpyPolicy(net), env)
     with Console(stderr=True).status(f"fine-tuning {algo} on {scenario.name} ..."):
-        log = universal.finetune(net, env, cfg)
+        log = trainer.finetune(net, env, cfg)
         after = universal.plan(universal.NumpyPolicy(log.net), env)
         optimum = solve_grid(env.channel, env.space, env.power_levels).objective
-    universal.save(out / "model.pt", log.net, algo, {
+    trainer.save(out / "model.pt", log.net, algo, {
         "fine_tuned_on": scenario.name, "seed": scenario.seed, "from": str(start_path),
         "episodes": log.episodes, "best_episode": log.best_episode,
-        "config": universal.config_dict(log.config),
+        "config": trainer.config_dict(log.config),
     })  # fmt: skip
     return {
         "algo": algo,
@@ -151,7 +153,8 @@ def finetune_command(
             "after": after.flight.objective / optimum,
         },
         "planner_over_optimum": {
-            "before": before.objective / optimum, "after": after.objective / optimum,
+            "before": before.objective / optimum,
+            "after": after.objective / optimum,
         },
         "grid_objective": optimum,
     }
@@ -175,7 +178,7 @@ def _train_all(env, algo: str, configs: dict, episodes: int, seed: int):
     with progress_bar(columns=columns) as progress:
         for name in (algo, other):
             task = progress.add_task(name, total=episodes, status="")
-            result = d3qn.train(
+            result = branching.train(
                 env, configs[name], on_episode=_progress(progress, task, env.naive_objective)
             )
             runs[name] = {"curve": result.curve, "wall_s": result.wall_s, "result": result}
@@ -194,7 +197,7 @@ def _save_best(out: Path, chosen, algo: str, config, scenario: Scenario):
     net = copy.deepcopy(chosen.net)
     net.load_state_dict(chosen.best_state)
     episode = 1 + int(np.argmax([row["greedy_objective"] for row in chosen.curve]))
-    d3qn.save_checkpoint(
+    branching.save_checkpoint(
         out / "model.pt",
         net,
         algo,
@@ -324,24 +327,3 @@ def _plot(
     )
     write_figure(path, fig, dpi=110)
     plt.close(fig)
-
-
-# ------------------------------------------------------------------------- shipped checkpoints
-def main(argv: list[str] | None = None) -> None:
-    """``python -m uavxai.service.train shipped``: regenerate the shipped universal models
-    (D3QN and the DQN ablation) with ``uavxai.service.universal``."""
-    from uavxai.service import universal
-
-    parser = argparse.ArgumentParser(prog="python -m uavxai.service.train")
-    sub = parser.add_subparsers(dest="command", required=True)
-    s = sub.add_parser("shipped", help="regenerate the shipped universal D3QN and DQN")
-    s.add_argument("--algo", choices=("d3qn", "dqn", "both"), default="both")
-    s.add_argument("--minutes", type=float, default=universal.UniversalConfig.minutes)
-    s.add_argument("--seed", type=int, default=0)
-    args = parser.parse_args(argv)
-    for algo in ("d3qn", "dqn") if args.algo == "both" else (args.algo,):
-        universal.main(["--algo", algo, "--minutes", str(args.minutes), "--seed", str(args.seed)])
-
-
-if __name__ == "__main__":
-    main()
