@@ -36,6 +36,13 @@ arc), so separation is known at *every* instant:
   sub-step instants, which overstates the true minimum ``d`` by at most ``L^2 / (8 d)`` for a
   relative sub-step ``L``: under 2 m with the defaults (0.5 s sub-steps, 30 m/s, d > 65 m).
 
+"Separation" is the 3-D distance, the conflict volume a sphere of ``d_min``, unless
+``PlannerConfig.conflict_volume`` is "cylinder": then it is the cylinder's norm
+``max(|r_xy|, aspect |r_h|)`` (``aspect`` = ``d_min`` / half-height), below ``d_min`` exactly
+inside the cylinder, and everything above holds in that norm (its closest approach on a
+chord: :func:`uavxai.geometry.cylinder_closest`; a chord is up to ``aspect`` times longer in
+it, which the sampling's slack allows for; culling reaches the cylinder's corner).
+
 Speed (a tree search calls this hundreds of times per decision): the ownship's motion
 relative to its start, in its body frame, depends only on (speed, bank, bank command) and the
 action, so :meth:`EncounterModel.expand` memoises it together with a circle bounding all the
