@@ -22,10 +22,15 @@ EXACT = ("parent", "action", "depth", "closest", "terminal", "first_child")
 CLOSE = ("min_sep", "pos", "t_closest", "state")
 
 
-def crowded(seed: int, n_intruders: int, actions: str):
+# mcts_daa's conflict cylinder (uavxai.avoidance.planners._daa_config): the NMAC radius, the
+# collision distance up and down
+CYLINDER = {"conflict_volume": "cylinder", "d_min_m": 152.4, "conflict_half_height_m": 50.0}
+
+
+def crowded(seed: int, n_intruders: int, actions: str, **settings):
     """A seeded crowded encounter: config, model, root, goal, tracks."""
     scenario = default_scenario("kernel-test", intruders={"count": n_intruders})
-    cfg = dataclasses.replace(PlannerConfig.from_scenario(scenario), actions=actions)
+    cfg = dataclasses.replace(PlannerConfig.from_scenario(scenario), actions=actions, **settings)
     spec = episode_spec(scenario, seed, n_intruders=n_intruders)
     with open_world(spec) as world:
         intruders = truth_beliefs(world.state())
@@ -37,10 +42,11 @@ def crowded(seed: int, n_intruders: int, actions: str):
     return cfg, model, ownship_state(own), np.asarray(spec.goal), tracks
 
 
+@pytest.mark.parametrize("settings", [{}, CYLINDER], ids=["sphere", "cylinder"])
 @pytest.mark.parametrize("actions", ["paper", "vertical"])
 @pytest.mark.parametrize("seed", [0, 3, 7])
-def test_every_node_the_kernel_expands_has_the_python_children(seed, actions):
-    cfg, model, root, goal, tracks = crowded(seed, 30, actions)
+def test_every_node_the_kernel_expands_has_the_python_children(seed, actions, settings):
+    cfg, model, root, goal, tracks = crowded(seed, 30, actions, **settings)
     hold = cfg.action_hold_s
     tree = search(model, root, goal, tracks, simulations=cfg.simulations, c=cfg.c,
                   hold_s=hold, rng=np.random.default_rng(seed), time_left_s=30.0)  # fmt: skip

@@ -154,15 +154,22 @@ def test_a_margin_turns_a_near_miss_into_a_conflict():
     assert small.min_sep[0] == pytest.approx(plain.min_sep[0] - 5.0, abs=1e-6)
 
 
-def test_culling_with_margins_never_changes_the_answer():
-    cfg = PlannerConfig()
+# mcts_daa's conflict cylinder among traffic spread over 40-220 m: culled no closer than its
+# corner, margins grown in proportion (tests/test_avoidance_cylinder.py)
+CYLINDER = PlannerConfig(d_min_m=152.4, conflict_volume="cylinder", conflict_half_height_m=50.0,
+                         actions="vertical")  # fmt: skip
+
+
+@pytest.mark.parametrize(("cfg", "heights"), [(PlannerConfig(), (100, 140)), (CYLINDER, (40, 220))],
+                         ids=["sphere", "cylinder"])  # fmt: skip
+def test_culling_with_margins_never_changes_the_answer(cfg, heights):
     model = EncounterModel(cfg)
     rng = np.random.default_rng(12)
     goal = np.array([1000.0, 1000.0, 100.0])
     close = 0
     for _ in range(100):
         n = 20
-        pos = np.c_[rng.uniform(0, 2000, (n, 2)), rng.uniform(100, 140, n)]
+        pos = np.c_[rng.uniform(0, 2000, (n, 2)), rng.uniform(*heights, n)]
         heading, speed = rng.uniform(0, 2 * np.pi, n), rng.uniform(15, 30, n)
         vel = np.c_[speed * np.sin(heading), speed * np.cos(heading), np.zeros(n)]
         turn = rng.uniform(-0.3, 0.3, n)
@@ -171,9 +178,9 @@ def test_culling_with_margins_never_changes_the_answer():
         own = Ownship(*rng.uniform(100, 1900, 2), 120.0, rng.uniform(12, 30), rng.uniform(0, 6))
         state = ownship_state(own)
         fast = model.fly_all_actions(state, goal, 4.0, track)
-        exact = model.fly(
-            np.repeat(state[None], 9, 0), np.arange(9), goal, 4.0, track, cull=False, exact=True
-        )
+        k = model.actions.size
+        exact = model.fly(np.repeat(state[None], k, 0), model.actions, goal, 4.0, track,
+                          cull=False, exact=True)  # fmt: skip
         np.testing.assert_array_equal(fast.event, exact.event)
         hit = exact.event == COLLISION
         np.testing.assert_allclose(fast.min_sep[hit], exact.min_sep[hit], atol=1e-5)

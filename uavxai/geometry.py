@@ -78,6 +78,61 @@ def closest_on_pieces(r0: np.ndarray, dr: np.ndarray) -> tuple[np.ndarray, np.nd
     return np.sqrt(np.einsum("...k,...k->...", closest, closest)), s
 
 
+def cylinder_norm2(x, y, h):
+    """The squared cylinder norm ``max(x^2 + y^2, h^2)`` of relative positions whose height
+    is already scaled by the cylinder's aspect (radius / half-height): below ``R^2`` exactly
+    inside the cylinder of radius ``R`` (a tree planner's conflict volume,
+    ``PlannerConfig.conflict_volume``)."""
+    return np.maximum(x * x + y * y, h * h)
+
+
+def cylinder_closest(x0, y0, h0, dx, dy, dh) -> tuple[np.ndarray, np.ndarray]:
+    """(squared cylinder norm, s) of the closest approach, in :func:`cylinder_norm2`'s norm,
+    on linear pieces of relative motion from ``(x0, y0, h0)`` to that plus ``(dx, dy, dh)``
+    (heights scaled; arrays of one shape), at fraction ``s`` in [0, 1] of the piece.
+
+    Exact: the norm along a piece is the larger of two convex functions (the horizontal
+    distance, the height's absolute value), so its least value is at an end, at one
+    function's own minimum, or where the two are equal (a quadratic: up to two roots); every
+    candidate is evaluated and the least kept. Each root is also taken in its other algebraic
+    form so that a near-linear quadratic loses no precision; a spurious candidate is harmless
+    (any point of the piece bounds the minimum from above)."""
+    a = dx * dx + dy * dy
+    b = x0 * dx + y0 * dy
+    c = x0 * x0 + y0 * y0
+    qa, qb, qc = a - dh * dh, b - h0 * dh, c - h0 * h0
+    sq = np.sqrt(np.maximum(qb * qb - qa * qc, 0.0))
+    cands = [0.0 * a, 0.0 * a + 1.0, _safe_ratio(-b, a), _safe_ratio(-h0, dh),
+             _safe_ratio(-qb + sq, qa), _safe_ratio(-qb - sq, qa), _safe_ratio(qc, -qb - sq),
+             _safe_ratio(qc, -qb + sq)]  # fmt: skip
+    best = best_s = None
+    for s in cands:
+        s = clip(s, 0.0, 1.0)
+        n2 = cylinder_norm2(x0 + s * dx, y0 + s * dy, h0 + s * dh)
+        if best is None:
+            best, best_s = n2, s
+        else:
+            better = n2 < best
+            best, best_s = np.where(better, n2, best), np.where(better, s, best_s)
+    return best, best_s
+
+
+def _safe_ratio(num, den):
+    """num / den, 0 where den is 0 (a candidate fraction; 0 is always a valid one)."""
+    ok = den != 0
+    return np.where(ok, num / np.where(ok, den, 1.0), 0.0)
+
+
+def closest_on_pieces_cylinder(
+    r0: np.ndarray, dr: np.ndarray, aspect: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`closest_on_pieces` in the cylinder norm ``max(|r_xy|, aspect |r_h|)`` (a tree
+    planner's conflict cylinder, ``aspect`` its radius / half-height): (norm, s)."""
+    n2, s = cylinder_closest(r0[..., 0], r0[..., 1], aspect * r0[..., 2], dr[..., 0],
+                             dr[..., 1], aspect * dr[..., 2])  # fmt: skip
+    return np.sqrt(n2), s
+
+
 def closest_point_of_approach(
     rel: np.ndarray, rel_vel: np.ndarray, horizon_s: float
 ) -> tuple[np.ndarray, np.ndarray]:

@@ -90,6 +90,8 @@ _VERTICAL = (
 ACTIONS: tuple[Action, ...] = _table()
 # Action sets: how many of the table's first actions each offers (`avoidance.actions`).
 ACTION_SETS = {"paper": 9, "vertical": len(ACTIONS)}
+# A tree planner's conflict volume around each intruder (`avoidance.conflict_volume`).
+CONFLICT_VOLUMES = ("sphere", "cylinder")
 N_ACTIONS = ACTION_SETS["paper"]  # the paper's nine: the learned planners' output size
 HOLD = 4  # hold the bank command, hold speed: the reference every other option is compared to
 CLIMB, DESCEND = (next(a.index for a in ACTIONS if a.climb == c) for c in (+1, -1))

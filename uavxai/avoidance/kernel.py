@@ -30,7 +30,7 @@ ZRE, ZIM, DPSI, VEND, PHIEND, PHICMD, RISEEND = range(7)
 BALLRE, BALLIM, BALLR, OWNSTEP = range(4)
 # Entries of ``par``.
 (DMIN, GOALR, XB0, XB1, YB0, YB1, HB0, HB1, CLIMB, DUR, TLEFT, LATE, DMAX, VERT, TDOWN, TLEVEL,
- TUP, GX, GY, GH) = range(20)  # fmt: skip
+ TUP, GX, GY, GH, CULL, ASPECT) = range(22)  # fmt: skip
 _TAU = 2.0 * math.pi
 _NONE, _GOAL, _COLLISION, _OUT, _TIMEOUT = 0, 1, 2, 3, 4
 
@@ -60,9 +60,33 @@ def _chord(r0x, r0y, r0h, r1x, r1y, r1h, d2):
 
 
 @njit(cache=True)
-def _hits(xy, hs, txy, th, tm, lvl, ids, k, own_step, step_max, margined, dmin, k_hit):
+def _cylinder_chord(x0, y0, h0, x1, y1, h1):
+    """uavxai.geometry.cylinder_closest for one sub-step (heights scaled): (squared cylinder
+    norm of the closest approach, its fraction); the same candidates in the same order."""
+    dx, dy, dh = x1 - x0, y1 - y0, h1 - h0
+    a = dx * dx + dy * dy
+    b = x0 * dx + y0 * dy
+    c = x0 * x0 + y0 * y0
+    qa, qb, qc = a - dh * dh, b - h0 * dh, c - h0 * h0
+    sq = math.sqrt(max(qb * qb - qa * qc, 0.0))
+    nums = (0.0, 1.0, -b, -h0, -qb + sq, -qb - sq, qc, qc)
+    dens = (1.0, 1.0, a, dh, qa, qa, -qb - sq, -qb + sq)
+    best, best_s = np.inf, 0.0
+    for j in range(8):
+        s = nums[j] / dens[j] if dens[j] != 0 else 0.0
+        s = min(max(s, 0.0), 1.0)
+        px, py, ph = x0 + s * dx, y0 + s * dy, h0 + s * dh
+        n2 = max(px * px + py * py, ph * ph)
+        if n2 < best:
+            best, best_s = n2, s
+    return best, best_s
+
+
+@njit(cache=True)
+def _hits(xy, hs, txy, th, tm, lvl, ids, k, own_step, step_max, margined, dmin, aspect, k_hit):
     """EncounterModel._intruder_hits and _closest_approach's inputs for K rows against the
-    ``k`` intruders ``ids``: fills ``k_hit``; returns (sep2, frac, exact)."""
+    ``k`` intruders ``ids``: fills ``k_hit``; returns (sep2, frac, exact). ``aspect`` > 0:
+    in the conflict cylinder's norm (0: the sphere's 3-D distance)."""
     rows, m = xy.shape[0], xy.shape[1]
     n = m - 1
     sep2 = np.empty((rows, m, k))
@@ -72,8 +96,14 @@ def _hits(xy, hs, txy, th, tm, lvl, ids, k, own_step, step_max, margined, dmin, 
             for q in range(k):
                 rel = xy[a, i] - txy[lvl, i, ids[q]]
                 rh = ha[i] - th[lvl, i, ids[q]]
-                sep2[a, i, q] = rel.real**2 + rel.imag**2 + rh**2
+                if aspect > 0:
+                    rh = aspect * rh
+                    sep2[a, i, q] = max(rel.real**2 + rel.imag**2, rh**2)
+                else:
+                    sep2[a, i, q] = rel.real**2 + rel.imag**2 + rh**2
     slack = 0.5 * (own_step + step_max) + 1e-6
+    if aspect > 0:
+        slack = max(1.0, aspect) * (slack - 1e-6) + 1e-6
     lowest = np.inf
     for a in range(rows):
         for i in range(m):
@@ -95,8 +125,12 @@ def _hits(xy, hs, txy, th, tm, lvl, ids, k, own_step, step_max, margined, dmin, 
                 j = ids[q]
                 r0 = xy[a, i] - txy[lvl, i, j]
                 r1 = xy[a, i + 1] - txy[lvl, i + 1, j]
-                d2, s = _chord(r0.real, r0.imag, ha[i] - th[lvl, i, j], r1.real, r1.imag,
-                               ha[i + 1] - th[lvl, i + 1, j], sep2[a, i, q])  # fmt: skip
+                h0, h1 = ha[i] - th[lvl, i, j], ha[i + 1] - th[lvl, i + 1, j]
+                if aspect > 0:
+                    d2, s = _cylinder_chord(r0.real, r0.imag, aspect * h0, r1.real, r1.imag,
+                                            aspect * h1)  # fmt: skip
+                else:
+                    d2, s = _chord(r0.real, r0.imag, h0, r1.real, r1.imag, h1, sep2[a, i, q])
                 chords[a, i, q], frac[a, i, q] = d2, s
                 need = dmin + tm[lvl, i + 1, j] if margined else dmin
                 if k_hit[a] == n and d2 < need**2:
@@ -250,7 +284,7 @@ def _expand(node, tree, bz, brise, bend, bscal, child, tracks, climbs, drift, pa
                                           climbs, drift, par)  # fmt: skip
     h = state[node, 2]
     box = _box(h, origin, rot, kk, h_ends, bscal, drift)
-    k = _near(tc, tr, lvl, box[0], box[1], box[2], math.hypot(box[3], box[4]) + par[DMIN], near)
+    k = _near(tc, tr, lvl, box[0], box[1], box[2], math.hypot(box[3], box[4]) + par[CULL], near)
     walls, goal = _walls(box, par), _goal_near(box, par)
     dt = par[DUR] / n
     k_event = np.full(kn, n)
@@ -261,7 +295,8 @@ def _expand(node, tree, bz, brise, bend, bscal, child, tracks, climbs, drift, pa
         k_hit = np.full(kn, n)
         if k:
             sep2, frac, exact = _hits(xy, hs, txy, th, tm, lvl, near, k, bscal[kk, OWNSTEP],
-                                      tstep[lvl], tmargined[lvl], par[DMIN], k_hit)  # fmt: skip
+                                      tstep[lvl], tmargined[lvl], par[DMIN], par[ASPECT],
+                                      k_hit)  # fmt: skip
         k_out = _first_out(xy, hs, par) if walls else np.full(kn, n)
         k_goal = _first_goal(xy, hs, par) if goal else np.full(kn, n)
         for a in range(kn):  # the first event wins; collision, then the walls, then the goal
@@ -449,7 +484,8 @@ def _params(model: EncounterModel, goal: np.ndarray, hold_s: float, time_left_s:
         [cfg.d_min_m, cfg.goal_radius_m, *cfg.x_bounds, *cfg.y_bounds, *cfg.h_bounds,
          cfg.climb_rate_mps, hold_s, time_left_s, cfg.late_collision_value, cfg.d_max,
          float(model.vertical), cfg.height_target(-1, gh), cfg.height_target(0, gh),
-         cfg.height_target(1, gh), float(goal[0]), float(goal[1]), gh],  # fmt: skip
+         cfg.height_target(1, gh), float(goal[0]), float(goal[1]), gh, cfg.cull_m,
+         cfg.cylinder_aspect or 0.0],  # fmt: skip
         dtype=float,
     )
 

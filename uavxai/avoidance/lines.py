@@ -29,7 +29,7 @@ from uavxai.avoidance.model import (
     vertical_command,
 )
 from uavxai.avoidance.types import ChildStats, Meeting, Ownship, PlannerConfig, SearchTree
-from uavxai.geometry import closest_on_pieces
+from uavxai.geometry import closest_on_pieces, closest_on_pieces_cylinder
 from uavxai.vocabulary import ACTIONS
 
 # A speed change smaller than this share of what the action commands over one tree level
@@ -60,6 +60,7 @@ def measure_line(
     hold_s: float,
     d_min_m: float,
     chords: Sequence[tuple[np.ndarray, np.ndarray]] | None = None,
+    aspect: float | None = None,
 ) -> LineMeasure:
     """Measure a line of edges: ``samples[e]`` (n+1, 3) ownship positions at the sub-step
     instants of edge ``e``, flown at tree level ``levels[e]`` against ``tracks[level]``;
@@ -70,6 +71,8 @@ def measure_line(
     that event's sub-step (it stops there); one that collides is measured to the end of the
     edge, so that its miss is the closest approach, not where it first came too close.
     ``chords[e]``: edge ``e``'s :func:`chord_distances`, if computed already (in a batch).
+    ``aspect``: separations in the conflict cylinder's norm (``PlannerConfig.cylinder_aspect``;
+    None: 3-D distances, the sphere's).
     """
     n_int = tracks[0].count if tracks else 0
     used = next((e + 1 for e, (code, _) in enumerate(ends) if code != NONE), len(ends))
@@ -85,7 +88,8 @@ def measure_line(
     meets = None
     if n_int:
         if chords is None:
-            chords = [chord_distances(samples[e], tracks[levels[e]].pos) for e in range(used)]
+            chords = [chord_distances(samples[e], tracks[levels[e]].pos, aspect)
+                      for e in range(used)]  # fmt: skip
         dist = np.stack([chords[e][0] for e in range(used)])  # (E, n, N)
         frac = np.stack([chords[e][1] for e in range(used)])
         # the closest approach to each intruder over the kept sub-steps, the first if tied
@@ -114,12 +118,16 @@ def measure_line(
     return LineMeasure(float(best[j]), j, float(best_t[j]), met, horizon, unsure)
 
 
-def chord_distances(own: np.ndarray, intruders: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def chord_distances(
+    own: np.ndarray, intruders: np.ndarray, aspect: float | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """(..., n, N) closest distance on every sub-step to every intruder, and its fraction
     along the sub-step; ``own`` (..., n+1, 3), ``intruders`` (..., n+1, N, 3): one edge, or
-    a batch of them."""
+    a batch of them. ``aspect``: in the conflict cylinder's norm (None: 3-D distance)."""
     rel = own[..., :, None, :] - intruders
-    return closest_on_pieces(rel[..., :-1, :, :], np.diff(rel, axis=-3))
+    if aspect is None:
+        return closest_on_pieces(rel[..., :-1, :, :], np.diff(rel, axis=-3))
+    return closest_on_pieces_cylinder(rel[..., :-1, :, :], np.diff(rel, axis=-3), aspect)
 
 
 def _first_conflict(
@@ -154,7 +162,7 @@ def measured_children(
     """A tree planner's root options quoting what their lines predict (:func:`measure_line`)
     and which manoeuvre each flies (:func:`flies`); and how far ahead each line reaches."""
     out, horizons = [], {}
-    chords = _edge_chords(lines, tree, samples, tracks)
+    chords = _edge_chords(lines, tree, samples, tracks, config.cylinder_aspect)
     for c in children:
         line = lines[c.action]
         m = measure_line(
@@ -165,6 +173,7 @@ def measured_children(
             config.action_hold_s,
             config.d_min_m,
             None if chords is None else [chords[node] for node in line],
+            config.cylinder_aspect,
         )
         out.append(replace(with_measure(c, m, ids), effect=flies(c.action, own, config)))
         horizons[c.action] = m.horizon_s
@@ -176,6 +185,7 @@ def _edge_chords(
     tree: SearchTree,
     samples: dict[int, np.ndarray],
     tracks: Sequence[Track],
+    aspect: float | None = None,
 ) -> dict[int, tuple[np.ndarray, np.ndarray]] | None:
     """:func:`chord_distances` of every edge of ``lines``, by node, in one batch (one call
     per edge costs more than the rest of the explanation); None without intruders."""
@@ -184,7 +194,8 @@ def _edge_chords(
         return None
     levels = tree.depth[nodes] - 1
     dist, frac = chord_distances(
-        np.stack([samples[node] for node in nodes]), np.stack([t.pos for t in tracks])[levels]
+        np.stack([samples[node] for node in nodes]), np.stack([t.pos for t in tracks])[levels],
+        aspect,
     )
     return {node: (dist[e], frac[e]) for e, node in enumerate(nodes)}
 

@@ -36,6 +36,13 @@ arc), so separation is known at *every* instant:
   sub-step instants, which overstates the true minimum ``d`` by at most ``L^2 / (8 d)`` for a
   relative sub-step ``L``: under 2 m with the defaults (0.5 s sub-steps, 30 m/s, d > 65 m).
 
+"Separation" is the 3-D distance, the conflict volume a sphere of ``d_min``, unless
+``PlannerConfig.conflict_volume`` is "cylinder": then it is the cylinder's norm
+``max(|r_xy|, aspect |r_h|)`` (``aspect`` = ``d_min`` / half-height), below ``d_min`` exactly
+inside the cylinder, and everything above holds in that norm (its closest approach on a
+chord: :func:`uavxai.geometry.cylinder_closest`; a chord is up to ``aspect`` times longer in
+it, which the sampling's slack allows for; culling reaches the cylinder's corner).
+
 Speed (a tree search calls this hundreds of times per decision): the ownship's motion
 relative to its start, in its body frame, depends only on (speed, bank, bank command) and the
 action, so :meth:`EncounterModel.expand` memoises it together with a circle bounding all the
@@ -55,7 +62,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from uavxai.avoidance.types import Ownship, PlannerConfig
-from uavxai.geometry import clip, turn_positions, turn_rate_of_bank
+from uavxai.geometry import clip, cylinder_closest, turn_positions, turn_rate_of_bank
 from uavxai.vocabulary import ACTIONS, Outcome
 
 # Columns of a state row. VCMD: the vertical command of the vertical action set (+1 climb,
@@ -172,8 +179,14 @@ class Track:
 
     @classmethod
     def of(
-        cls, pos: np.ndarray, index_distance: float = 0.0, margin: np.ndarray | None = None
+        cls,
+        pos: np.ndarray,
+        index_distance: float = 0.0,
+        margin: np.ndarray | None = None,
+        grow: float = 1.0,
     ) -> Track:
+        """``grow``: the ball holds the margin times this (the conflict cylinder's corner
+        reaches ``PlannerConfig.cull_factor`` times its radius, margin included)."""
         pos = np.asarray(pos, dtype=float)
         if pos.ndim != 3 or pos.shape[2] != 3 or pos.shape[0] < 2:
             raise ValueError(f"intruder positions must be (n+1, N, 3) with n >= 1, got {pos.shape}")
@@ -186,7 +199,7 @@ class Track:
             if not np.any(margin):
                 margin = None
             else:
-                radius = radius + margin.max(axis=0, initial=0.0)
+                radius = radius + grow * margin.max(axis=0, initial=0.0)
         steps = np.sqrt(np.sum(np.diff(pos, axis=0) ** 2, axis=2))
         track = cls(
             pos=pos,
@@ -563,14 +576,15 @@ class EncounterModel:
         level, as :meth:`predict` says, and (levels, n+1) for several."""
         n = self.substeps(duration)
         t = np.array(starts, dtype=float)[:, None] + (duration / n) * np.arange(n + 1)
-        distance = self.reach(0.0, duration) + self.config.d_min_m if index else 0.0
+        distance = self.reach(0.0, duration) + self.config.cull_m if index else 0.0
         if margin is None:
             extra = [None] * len(starts)
         else:
             extra = margin(t[0])[None] if len(starts) == 1 else margin(t)
         wind = self.config.wind_mps
         pos = turn_positions(pos, vel, t.ravel(), turn_rate, wind).reshape(*t.shape, -1, 3)
-        return [Track.of(p, distance, m) for p, m in zip(pos, extra, strict=True)]
+        grow = self.config.cull_factor
+        return [Track.of(p, distance, m, grow) for p, m in zip(pos, extra, strict=True)]
 
     def reach(self, speed: float, duration: float) -> float:
         """The farthest (3-D) an ownship at ``speed`` can get from its start in ``duration``."""
@@ -612,7 +626,7 @@ class EncounterModel:
         """
         n = self._check(duration, track)
         body, xy, hs, end, box = self._place(states, actions, goal, duration, n)
-        reach = math.hypot(box[3], box[4]) + self.config.d_min_m
+        reach = math.hypot(box[3], box[4]) + self.config.cull_m
         near = track.near(box[:3], reach) if cull else np.arange(track.count)
         seen = _Intruders.of(track, near)
         own_step = self._own_step(body, duration / n)
@@ -690,7 +704,7 @@ class EncounterModel:
         c = origin + body.ball * rot + half
         h_lo, h_hi = min(h, *h_ends), max(h, *h_ends)
         box = (c.real, c.imag, 0.5 * (h_lo + h_hi), body.ball_r + abs(half), 0.5 * (h_hi - h_lo))
-        near = track.near(box[:3], math.hypot(box[3], box[4]) + cfg.d_min_m)
+        near = track.near(box[:3], math.hypot(box[3], box[4]) + cfg.cull_m)
         if not near.size and not self._near_goal(box, goal) and not self._near_wall(box):
             return placed, Segment(None, *self._quiet, xy=None, hs=None)  # no sample needed
         xy = origin + body.z * rot + drift
@@ -964,16 +978,25 @@ class EncounterModel:
         Squared distances at the sub-step instants first. No point of a sub-step's relative
         chord is farther than half its length from an end, so if every sampled distance clears
         d_min by that much there is no conflict, and the sampled minimum is within L^2 / (8 d)
-        of the true one; otherwise solve every chord.
+        of the true one; otherwise solve every chord. With the conflict cylinder
+        (``PlannerConfig.cylinder_aspect``) "distance" is its norm ``max(|r_xy|, aspect
+        |r_h|)``, below ``d_min`` exactly inside it; a chord is at most ``max(1, aspect)``
+        times longer in it.
         """
         cfg = self.config
+        aspect = cfg.cylinder_aspect
         k_hit, frac = never, None
         rel_xy = xy[:, :, None] - seen.xy  # (B, n+1, k)
         rel_h = hs[:, :, None] - seen.h  # (B or 1, n+1, k)
         sep2 = rel_xy.real**2
         sep2 += rel_xy.imag**2
-        sep2 += rel_h**2
         slack = 0.5 * (own_step + seen.step_max) + 1e-6
+        if aspect is None:
+            sep2 += rel_h**2
+        else:
+            rel_h = aspect * rel_h
+            sep2 = np.maximum(sep2, rel_h**2)
+            slack = max(1.0, aspect) * (slack - 1e-6) + 1e-6
         margin = seen.margin
         if margin is None:
             close = sep2.min() < (cfg.d_min_m + slack) ** 2
@@ -983,7 +1006,12 @@ class EncounterModel:
             ahead = np.concatenate([margin[:, 1:], margin[:, -1:]], axis=1)
             close = (np.sqrt(sep2) - np.maximum(margin, ahead)).min() < cfg.d_min_m + slack
         if exact or close:
-            sep2, frac = _closest_on_chords(rel_xy, rel_h, sep2)  # (B, n, k) per sub-step
+            if aspect is None:
+                sep2, frac = _closest_on_chords(rel_xy, rel_h, sep2)  # (B, n, k) per sub-step
+            else:
+                d_xy, d_h = np.diff(rel_xy, axis=1), np.diff(rel_h, axis=1)
+                sep2, frac = cylinder_closest(rel_xy.real[:, :-1], rel_xy.imag[:, :-1],
+                                              rel_h[:, :-1], d_xy.real, d_xy.imag, d_h)  # fmt: skip
             if margin is None:
                 k_hit = _first_true(sep2.min(axis=2) < cfg.d_min_m**2)
             else:

@@ -72,12 +72,23 @@ register("mcts_vertical")(
 
 # mcts_vertical behind an alerting stage: it searches only while traffic threatens well clear,
 # for lines clear of the NMAC cylinder, and leaves its route only when the route's line
-# conflicts. The tree's conflict volume is a sphere: the smallest that holds the cylinder
-# reaches its rim (152.4 m out, 30.48 m up: 155.4 m). A sphere of the cylinder's radius
-# alone let a line pass at 150 m and 30 m, inside the NMAC (kinematic encounter 1264).
+# conflicts. With the sphere (the default conflict volume) the smallest that holds the
+# cylinder reaches its rim (152.4 m out, 30.48 m up: 155.4 m). A sphere of the cylinder's
+# radius alone let a line pass at 150 m and 30 m, inside the NMAC (kinematic encounter 1264).
+# With `avoidance.conflict_volume: cylinder` the tree's volume is the smallest cylinder that
+# holds both the NMAC cylinder and the collision sphere (d_min_m): 152.4 m by
+# max(30.48, d_min_m) up and down, not the 155 m a sphere fences off above and below.
 def _daa_config(config: PlannerConfig) -> PlannerConfig:
+    h, v = config.nmac_m
+    if config.conflict_volume == "cylinder":
+        return dataclasses.replace(
+            config,
+            actions="vertical",
+            d_min_m=max(config.d_min_m, h),
+            conflict_half_height_m=max(config.d_min_m, v),
+        )
     return dataclasses.replace(
-        config, actions="vertical", d_min_m=max(config.d_min_m, math.hypot(*config.nmac_m))
+        config, actions="vertical", d_min_m=max(config.d_min_m, math.hypot(h, v))
     )
 
 

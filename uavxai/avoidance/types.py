@@ -16,7 +16,7 @@ import numpy as np
 
 from uavxai.errors import UserError
 from uavxai.scenario import Avoidance, World
-from uavxai.vocabulary import ACTION_SETS, N_ACTIONS, action_name
+from uavxai.vocabulary import ACTION_SETS, CONFLICT_VOLUMES, N_ACTIONS, action_name
 
 if TYPE_CHECKING:
     from uavxai.scenario import Scenario
@@ -92,7 +92,8 @@ def schema_settings(avoidance: Avoidance, world: World) -> dict[str, object]:
         "h_bounds": tuple(world.h),
         **{k: getattr(a, k) for k in ("d_min_m", "goal_radius_m", "decision_period_s",
                                        "max_steps", "bank_limit_deg", "bank_step_deg",
-                                       "accel_mps2", "actions")},  # fmt: skip
+                                       "accel_mps2", "actions",
+                                       "conflict_volume")},  # fmt: skip
         "speed_mps": tuple(a.speed_mps),
         **{k: getattr(m, k) for k in ("simulations", "depth", "c", "action_hold_s",
                                        "reach_horizon_s", "own_error_10s_m",
@@ -191,9 +192,24 @@ class PlannerConfig:
     # NMAC, the event detect-and-avoid is judged by, not only a collision.
     nmac_m: tuple[float, float] = _SCHEMA["nmac_m"]
     alert_hold_s: float = 5.0
+    # The tree's conflict volume around each intruder (avoidance.conflict_volume): "sphere",
+    # 3-D separation below d_min_m; "cylinder", horizontal separation below d_min_m and
+    # vertical below conflict_half_height_m (None: d_min_m, the cylinder holding that sphere).
+    # Margins (intruder_margin) grow the cylinder keeping its aspect: a margin m adds m
+    # horizontally and m * half-height / d_min_m vertically (the model's cylinder norm).
+    conflict_volume: str = _SCHEMA["conflict_volume"]
+    conflict_half_height_m: float | None = None
 
     def __post_init__(self) -> None:
         self._check_actions()
+        if self.conflict_volume not in CONFLICT_VOLUMES:
+            raise UserError(
+                f"PlannerConfig.conflict_volume must be one of {', '.join(CONFLICT_VOLUMES)}, "
+                f"got {self.conflict_volume!r}."
+            )
+        hh = self.conflict_half_height_m
+        if hh is not None and not hh > 0:
+            raise UserError(f"PlannerConfig.conflict_half_height_m must be > 0 or None, got {hh}.")
         if self.intruder_model not in INTRUDER_MODELS:
             raise UserError(
                 f"PlannerConfig.intruder_model must be one of {', '.join(INTRUDER_MODELS)}, "
@@ -300,6 +316,28 @@ class PlannerConfig:
             if abs(alt_target_m - self.height_target(vertical, math.nan)) < 1e-3:
                 return vertical
         return 0
+
+    @property
+    def cylinder_aspect(self) -> float | None:
+        """The conflict cylinder's radius / half-height, by which the model scales heights
+        into its cylinder norm ``max(|r_xy|, aspect |r_h|)``; None: the sphere."""
+        if self.conflict_volume != "cylinder":
+            return None
+        hh = self.conflict_half_height_m
+        return 1.0 if hh is None else self.d_min_m / hh
+
+    @property
+    def cull_factor(self) -> float:
+        """How much farther (3-D) than ``d_min_m`` plus margin an intruder may be and still
+        conflict: 1 for the sphere; for the cylinder its corner, ``hypot(1, 1 / aspect)``."""
+        aspect = self.cylinder_aspect
+        return 1.0 if aspect is None else math.hypot(1.0, 1.0 / aspect)
+
+    @property
+    def cull_m(self) -> float:
+        """The conflict distance culling uses: ``d_min_m`` (sphere) or the cylinder's
+        corner distance."""
+        return self.d_min_m if self.cylinder_aspect is None else self.d_min_m * self.cull_factor
 
     @property
     def bank_limit_rad(self) -> float:

@@ -31,6 +31,7 @@ from uavxai.vocabulary import (
     ACTION_SETS,
     CHANNEL_MODEL_NAMES,
     CHANNEL_MODELS,
+    CONFLICT_VOLUMES,
     SERVICE_PLANNERS,
     action_set_problem,
     avoidance_planners,
@@ -425,6 +426,9 @@ class Avoidance(_Model):
     actions: Literal[tuple(ACTION_SETS)] = "paper"  # type: ignore[valid-type]
     nmac: NMAC = NMAC()
     well_clear: WellClear = WellClear()
+    # The tree's conflict volume around each intruder (uavxai.avoidance.model): a sphere of
+    # d_min_m, or a cylinder of radius d_min_m and a half-height of its own (PlannerConfig).
+    conflict_volume: Literal[CONFLICT_VOLUMES] = "sphere"  # type: ignore[valid-type]
 
     @field_validator("planner")
     @classmethod
