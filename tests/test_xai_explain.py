@@ -247,6 +247,41 @@ def test_when_every_option_conflicts_the_rule_is_stated_and_applied():
     assert cornered_choice([*kids, _child(2, 1, 0.9)]) is None  # one option is clear
 
 
+def test_a_cornered_planner_stays_in_the_area_and_says_so():
+    """Every option conflicts, and the one meeting its intruder latest leaves the flight area:
+    the rule takes the latest meeting among the lines that stay in (leaving ends the flight
+    for certain), and the words say why."""
+    from dataclasses import replace
+
+    from uavxai.avoidance.lines import cornered_choice
+    from uavxai.avoidance.types import Decision
+
+    inside = _meeting_child(0, 50, 0.03, 6.0, 30.0)
+    later_out = replace(_meeting_child(4, 10, 0.04, 9.0, 10.0), outcome="out_of_bounds")
+    also_in = _meeting_child(8, 10, 0.04, 5.0, 25.0)
+    kids = [inside, later_out, also_in]
+    assert cornered_choice(kids).action == 0
+    d = Decision(0.0, 0.0, 0, kids, planner="mcts", cornered=True)
+    assert ("every option meets an intruder, so it took the one that stays in the flight area "
+            "(an option that meets later leaves it) and meets its intruder latest (in 6.0 s, the "
+            "next in 5.0 s)") in d.explanation  # fmt: skip
+    two = Decision(0.0, 0.0, 0, [inside, later_out], planner="mcts", cornered=True)
+    assert two.counterfactual.endswith("75 m needed) and leaves the flight area")
+    # with no line leaving, the latest meeting decides as before
+    assert cornered_choice([inside, replace(later_out, outcome="collision"), also_in]).action == 4
+
+
+def test_a_route_line_that_leaves_the_area_is_not_kept():
+    from dataclasses import replace
+
+    from uavxai.avoidance.mcts import _final_action
+
+    clear = replace(_child(4, 10, 0.5), outcome="")
+    leaving = replace(clear, outcome="out_of_bounds")
+    assert _final_action([_child(0, 30, 0.6), clear], 0, 4) == (4, False, True)
+    assert _final_action([_child(0, 30, 0.6), leaving], 0, 4) == (0, False, False)
+
+
 def test_steering_away_needs_holding_to_conflict():
     hold_clear = [_child(4, 30, 0.8), _meeting_child(0, 10, 0.05, 6.0, 5.0), _child(8, 40, 0.9)]
     assert not is_avoidance(hold_clear, 8, 50.0)  # another option conflicted, holding did not

@@ -30,7 +30,7 @@ from uavxai.avoidance.model import (
 )
 from uavxai.avoidance.types import ChildStats, Meeting, Ownship, PlannerConfig, SearchTree
 from uavxai.geometry import closest_on_pieces, closest_on_pieces_cylinder
-from uavxai.vocabulary import ACTIONS
+from uavxai.vocabulary import ACTIONS, Outcome
 
 # A speed change smaller than this share of what the action commands over one tree level
 # (accel_mps2 x action_hold_s) is no change: at the speed limit "faster" flies as "same".
@@ -248,10 +248,13 @@ def conflicts(c: ChildStats) -> bool:
 
 
 def cornered_key(c: ChildStats) -> tuple:
-    """How a cornered planner ranks options: the latest meeting, then the largest predicted
-    miss, then the search's preference (simulations, Q), then action order."""
+    """How a cornered planner ranks options: a line that stays in the area before one that
+    leaves it (leaving is a failure for certain, a predicted meeting may still be turned into
+    a miss by re-planning), then the latest meeting, then the largest predicted miss, then the
+    search's preference (simulations, Q), then action order."""
     m = c.meets
     return (
+        c.outcome != Outcome.OUT_OF_BOUNDS,
         -math.inf if m is None else round(m.time_s, 6),
         -math.inf if m is None else m.miss_m,
         c.visits,

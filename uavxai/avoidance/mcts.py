@@ -64,6 +64,7 @@ from uavxai.avoidance.types import (
     check_plan_inputs,
 )
 from uavxai.geometry import turn_rate_of_bank
+from uavxai.vocabulary import Outcome
 
 _VALUE_OF = np.array(TERMINAL_VALUE)
 
@@ -295,7 +296,8 @@ def _final_action(
         return cornered.action, True, False
     if route_action is not None:
         kept = next((c for c in children if c.action == route_action), None)
-        if kept is not None and kept.meets is None:
+        # a route line that leaves the area is no route to keep (the episode ends there)
+        if kept is not None and kept.meets is None and kept.outcome != Outcome.OUT_OF_BOUNDS:
             return route_action, False, route_action != action
     return action, False, False
 
