@@ -149,11 +149,14 @@ def test_local_search_scores_are_the_fleet_objective(access: str, model: str) ->
                                      [1000.0, 1200.0, 60.0]]),
                         rng.integers(0, 3, 9), rng.integers(0, 6, 9))
     inc = fl.Incumbent.of(p, plan, p.fleet.gains(plan.positions))
-    assoc, lev = fl.power_candidates(p, plan, pairs=True)
-    got = fl.power_scores(p, inc, assoc, lev)
-    want = [fl.make_plan(p, plan.positions, a, v).objective
-            for a, v in zip(assoc, lev, strict=True)]
-    np.testing.assert_allclose(got, want, rtol=1e-12)
+    groups = fl.edit_candidates(p, plan, pairs=True)
+    assert [g.users.shape[1] for g in groups] == [1, 2]
+    assert len(groups[0]) == 9 * (6 - 1) + 9 * (3 - 1)  # every other level, every other UAV
+    for edits in groups:
+        got = fl.edit_scores(p, inc, edits)
+        want = [fl.make_plan(p, plan.positions, *edits.applied(plan, c)).objective
+                for c in range(len(edits))]
+        np.testing.assert_allclose(got, want, rtol=1e-12)
     who, where = fl.move_candidates(p, plan, (1, 4))
     got = fl.move_scores(p, inc, who, fl.GainCache(p)(where))
     want = []

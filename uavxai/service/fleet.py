@@ -149,35 +149,51 @@ def kmeans_baseline(problem: FleetProblem, seed: int = 0) -> FleetPlan:
 # --------------------------------------------------------------------------- local search
 class GainCache:
     """Gains ``(K,)`` of lattice points, computed once per problem: every UAV has the same
-    gain function, and the local search asks for the same neighbours round after round."""
+    gain function, and the local search asks for the same neighbours round after round. A
+    lattice point's row is found through a dense index over the lattice (no Python loop per
+    point: the search asks for ~50 points a round)."""
 
     def __init__(self, problem: FleetProblem) -> None:
         self.channel = problem.fleet.channel
+        axes = problem.space.axes()
+        self.origin = np.array([ax[0] for ax in axes])
         self.step = problem.space.step_m
-        self.rows: dict[tuple[int, int, int], np.ndarray] = {}
+        self.shape = tuple(len(ax) for ax in axes)
+        self.slot = np.full(int(np.prod(self.shape)), -1, dtype=np.int64)
+        self.table = np.empty((64, self.channel.k))
+        self.size = 0
 
     def __call__(self, positions: np.ndarray) -> np.ndarray:
         """Gains ``(M, K)`` of lattice positions ``(M, 3)``."""
-        keys = [tuple(k) for k in np.rint(positions / self.step).astype(np.int64).tolist()]
-        missing = [i for i, key in enumerate(keys) if key not in self.rows]
-        if missing:
-            fresh = self.channel.mean_gain(positions[missing])
-            for i, row in zip(missing, fresh, strict=True):
-                self.rows[keys[i]] = row
-        return np.array([self.rows[key] for key in keys]).reshape(len(keys), self.channel.k)
+        index = np.rint((positions - self.origin) / self.step).astype(np.int64)
+        flat = np.ravel_multi_index(tuple(index.T), self.shape)
+        missing = self.slot[flat] < 0
+        if missing.any():
+            new, first = np.unique(flat[missing], return_index=True)
+            end = self.size + len(new)
+            if end > len(self.table):
+                self.table = np.vstack([self.table, np.empty((end + len(self.table),
+                                                              self.channel.k))])
+            self.table[self.size : end] = self.channel.mean_gain(positions[missing][first])
+            self.slot[new] = np.arange(self.size, end)
+            self.size = end
+        return self.table[self.slot[flat]]
 
 
 @dataclass(frozen=True)
 class Incumbent:
-    """What every candidate move of the local search is scored against (docs/service/fleet.md,
-    "Local search"): the plan, the gains ``G (N, K)`` of its positions, each UAV's watts per
-    level ``unit (N,)`` and power ``P (N,)``, and each user's total received power ``T (K,)``
-    from every UAV (its own UAV's included)."""
+    """What every candidate of the local search is scored against (docs/service/fleet.md,
+    "Local search"): the plan, the gains ``G (N, K)`` of its positions, each UAV's level total
+    ``S (N,)``, watts per level ``unit (N,)`` and power ``P (N,)``, each user's gain from its
+    own UAV ``served (K,)`` and total received power ``T (K,)`` from every UAV (its own
+    UAV's included)."""
 
     plan: FleetPlan
     gains: np.ndarray
+    totals: np.ndarray
     unit: np.ndarray
     power: np.ndarray
+    served: np.ndarray
     received: np.ndarray
 
     @classmethod
@@ -186,7 +202,8 @@ class Incumbent:
         totals = np.bincount(plan.association, weights=plan.levels, minlength=fleet.n)
         unit = fleet.p_max_w / np.maximum(totals, problem.power_levels - 1)
         power = unit * totals
-        return cls(plan, gains, unit, power, power @ gains)
+        served = gains[plan.association, np.arange(fleet.k)]
+        return cls(plan, gains, totals, unit, power, served, power @ gains)
 
 
 def scores(problem: FleetProblem, served: np.ndarray, own: np.ndarray, received: np.ndarray):
@@ -203,16 +220,44 @@ def scores(problem: FleetProblem, served: np.ndarray, own: np.ndarray, received:
     return rate.sum(axis=-1) / 2.0 ** (rate < c.qos_rate_bps).sum(axis=-1)
 
 
-def power_scores(problem: FleetProblem, inc: Incumbent, assoc: np.ndarray, lev: np.ndarray):
-    """Candidates that change associations and levels ``(C, K)``, positions fixed: each UAV's
-    level total, power and the power every user receives, recomputed per candidate."""
-    N, L = problem.fleet.n, problem.power_levels
-    member = assoc[:, None, :] == np.arange(N)[:, None]  # (C, N, K)
-    totals = np.einsum("cnk,ck->cn", member, lev.astype(float))
+@dataclass(frozen=True)
+class Edits:
+    """C candidates, each setting E users' serving UAV and level, positions fixed: user
+    ``users[c, e]`` to UAV ``uavs[c, e]`` at level ``levels[c, e]`` (``(C, E)`` each; the E
+    users of a candidate are distinct)."""
+
+    users: np.ndarray
+    uavs: np.ndarray
+    levels: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.users)
+
+    def applied(self, plan: FleetPlan, c: int) -> tuple[np.ndarray, np.ndarray]:
+        """Candidate ``c``'s association and levels."""
+        association, levels = plan.association.copy(), plan.levels.copy()
+        association[self.users[c]], levels[self.users[c]] = self.uavs[c], self.levels[c]
+        return association, levels
+
+
+def edit_scores(problem: FleetProblem, inc: Incumbent, edits: Edits) -> np.ndarray:
+    """The objective of every candidate of ``edits``: an edit changes the level totals of at
+    most two UAVs, so each candidate's totals, watts per level and powers are the incumbent's
+    with those entries changed, its received powers ``P' G`` a ``(C, N) x (N, K)`` product,
+    and only the edited users' served gains change."""
+    plan, L, C = inc.plan, problem.power_levels, len(edits)
+    rows = np.arange(C)
+    totals = np.repeat(inc.totals[None], C, axis=0)
+    for k, to, level in zip(edits.users.T, edits.uavs.T, edits.levels.T, strict=True):
+        totals[rows, plan.association[k]] -= plan.levels[k]
+        totals[rows, to] += level
     unit = problem.fleet.p_max_w / np.maximum(totals, L - 1)
     received = (unit * totals) @ inc.gains
-    own = np.take_along_axis(unit, assoc, axis=1) * lev
-    served = inc.gains[assoc, np.arange(assoc.shape[1])]
+    own = unit[:, plan.association] * plan.levels
+    served = np.repeat(inc.served[None], C, axis=0)
+    for k, to, level in zip(edits.users.T, edits.uavs.T, edits.levels.T, strict=True):
+        own[rows, k] = unit[rows, to] * level
+        served[rows, k] = inc.gains[to, k]
     return scores(problem, served, own, received)
 
 
@@ -222,30 +267,30 @@ def move_scores(problem: FleetProblem, inc: Incumbent, who: np.ndarray, moved: n
     plan = inc.plan
     received = inc.received + (moved - inc.gains[who]) * inc.power[who, None]
     mine = plan.association[None, :] == who[:, None]
-    served = np.where(mine, moved, inc.gains[plan.association, np.arange(len(plan.levels))])
+    served = np.where(mine, moved, inc.served)
     own = inc.unit[plan.association] * plan.levels
     return scores(problem, served, np.broadcast_to(own, served.shape), received)
 
 
-def power_candidates(problem: FleetProblem, plan: FleetPlan, pairs: bool):
-    """Associations and levels ``(C, K)`` one move away: one user's level set to any value,
-    one user moved to another UAV, and with ``pairs`` one level moved between two users."""
+def edit_candidates(problem: FleetProblem, plan: FleetPlan, pairs: bool) -> list[Edits]:
+    """The candidates one edit away: one user's level set to any other value, one user moved
+    to another UAV (its level kept), and with ``pairs`` one level moved between two users."""
     N, K, L = problem.fleet.n, problem.fleet.k, problem.power_levels
-    lev = np.repeat(plan.levels[None], K * L, axis=0)
-    lev[np.arange(K * L), np.repeat(np.arange(K), L)] = np.tile(np.arange(L), K)
-    levs = [lev]
-    if pairs:
-        i, j = np.nonzero(~np.eye(K, dtype=bool))
-        moved = np.repeat(plan.levels[None], len(i), axis=0)
-        moved[np.arange(len(i)), i] -= 1
-        moved[np.arange(len(i)), j] += 1
-        levs.append(moved[(moved >= 0).all(1) & (moved < L).all(1)])
-    lev = np.vstack(levs)
-    assoc = np.repeat(plan.association[None], len(lev), axis=0)
-    users, to = np.nonzero(plan.association[:, None] != np.arange(N)[None])
-    other = np.repeat(plan.association[None], len(users), axis=0)
-    other[np.arange(len(users)), users] = to
-    return np.vstack([assoc, other]), np.vstack([lev, np.repeat(plan.levels[None], len(users), 0)])
+    assoc, lev = plan.association, plan.levels
+    k, level = np.repeat(np.arange(K), L), np.tile(np.arange(L), K)
+    other = level != lev[k]
+    k, level = k[other], level[other]
+    users, to = np.nonzero(assoc[:, None] != np.arange(N)[None])
+    singles = Edits(np.concatenate([k, users])[:, None], np.concatenate([assoc[k], to])[:, None],
+                    np.concatenate([level, lev[users]])[:, None])
+    if not pairs:
+        return [singles]
+    i, j = np.nonzero(~np.eye(K, dtype=bool))
+    ok = (lev[i] > 0) & (lev[j] < L - 1)
+    i, j = i[ok], j[ok]
+    both = Edits(np.column_stack([i, j]), np.column_stack([assoc[i], assoc[j]]),
+                 np.column_stack([lev[i] - 1, lev[j] + 1]))
+    return [singles, both]
 
 
 def move_candidates(problem: FleetProblem, plan: FleetPlan, steps: tuple[int, ...]):
@@ -276,24 +321,28 @@ def local_search(
     current = plan
     for _ in range(max_rounds):
         inc = Incumbent.of(problem, current, gains)
-        assoc, lev = power_candidates(problem, current, pairs)
+        groups = edit_candidates(problem, current, pairs)
         who, where = move_candidates(problem, current, steps)
         moved = cache(where)
         values = np.concatenate(
-            [power_scores(problem, inc, assoc, lev), move_scores(problem, inc, who, moved)]
+            [*(edit_scores(problem, inc, e) for e in groups), move_scores(problem, inc, who, moved)]
         )
         i = int(np.argmax(values))
         if not values[i] > current.objective * IMPROVES:
             break
-        positions, association, levels = current.positions, current.association, current.levels
-        if i < len(assoc):
-            association, levels = assoc[i], lev[i]
+        value, positions = float(values[i]), current.positions
+        association, levels = current.association, current.levels
+        for edits in groups:
+            if i < len(edits):
+                association, levels = edits.applied(current, i)
+                break
+            i -= len(edits)
         else:
-            n, positions, gains = who[i - len(assoc)], positions.copy(), gains.copy()
-            positions[n], gains[n] = where[i - len(assoc)], moved[i - len(assoc)]
+            n, positions, gains = who[i], positions.copy(), gains.copy()
+            positions[n], gains[n] = where[i], moved[i]
         # the scored value stands in for the objective until the end (same SINR, summed in
         # another order: equal to rounding, far below IMPROVES)
-        current = FleetPlan(positions, association, levels, levels, float(values[i]))
+        current = FleetPlan(positions, association, levels, levels, value)
     if current is plan:
         return plan
     final = make_plan(problem, current.positions, current.association, current.levels)
