@@ -222,3 +222,4 @@ def test_benchmark_shards_cover_the_jobs_once_and_skip_done_rows() -> None:
     assert len(left) == 13 and (bench.ALL_CELLS[30], 1) not in left
     with pytest.raises(SystemExit, match="0-35"):
         bench.cell_indices("36")
+

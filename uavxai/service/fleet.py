@@ -22,6 +22,7 @@ power, for the fleet's objective ``sum_k R_k / 2^lambda`` over all K users
 
 from __future__ import annotations
 
+import functools
 import itertools
 from dataclasses import dataclass
 
@@ -206,17 +207,24 @@ class Incumbent:
         return cls(plan, gains, totals, unit, power, served, power @ gains)
 
 
+Terms = tuple[np.ndarray, np.ndarray, np.ndarray]  # served gain, own power, received power
+
+
 def scores(problem: FleetProblem, served: np.ndarray, own: np.ndarray, received: np.ndarray):
     """The objective ``(C,)`` of C candidates from each user's served gain, own power and
     total received power ``(C, K)``: in the shared band everything user k receives but its
     own signal interferes (``T_k - g_k p_k``, the fleet SINR of docs/service/fleet.md)."""
     c = problem.fleet.channel
-    signal = served * own
+    sinr = served * own  # the signal, turned into the SINR and the rate in place (no copies)
     if c.access == "shared":
-        sinr = signal / (received - signal + c.noise_w)
+        interference = received - sinr
+        interference += c.noise_w
+        sinr /= interference
     else:
-        sinr = signal / (c.noise_w / c.k)
-    rate = c.user_bandwidth_hz() * np.log2(1.0 + sinr)
+        sinr /= c.noise_w / c.k
+    sinr += 1.0
+    rate = np.log2(sinr, out=sinr)
+    rate *= c.user_bandwidth_hz()
     return rate.sum(axis=-1) / 2.0 ** (rate < c.qos_rate_bps).sum(axis=-1)
 
 
@@ -241,7 +249,13 @@ class Edits:
 
 
 def edit_scores(problem: FleetProblem, inc: Incumbent, edits: Edits) -> np.ndarray:
-    """The objective of every candidate of ``edits``: an edit changes the level totals of at
+    """The objective of every candidate of ``edits`` (``edit_terms``)."""
+    return scores(problem, *edit_terms(problem, inc, edits))
+
+
+def edit_terms(problem: FleetProblem, inc: Incumbent, edits: Edits) -> Terms:
+    """Each user's served gain, own power and received power ``(C, K)`` for every candidate
+    of ``edits``: an edit changes the level totals of at
     most two UAVs, so each candidate's totals, watts per level and powers are the incumbent's
     with those entries changed, its received powers ``P' G`` a ``(C, N) x (N, K)`` product,
     and only the edited users' served gains change."""
@@ -258,18 +272,24 @@ def edit_scores(problem: FleetProblem, inc: Incumbent, edits: Edits) -> np.ndarr
     for k, to, level in zip(edits.users.T, edits.uavs.T, edits.levels.T, strict=True):
         own[rows, k] = unit[rows, to] * level
         served[rows, k] = inc.gains[to, k]
-    return scores(problem, served, own, received)
+    return served, own, received
 
 
 def move_scores(problem: FleetProblem, inc: Incumbent, who: np.ndarray, moved: np.ndarray):
-    """Candidates that move UAV ``who[c]`` to gains ``moved (C, K)``: only that UAV's gains
-    change, so every user's received power changes by ``(G' - G) P`` of that UAV."""
+    """The objective of every move candidate (``move_terms``)."""
+    return scores(problem, *move_terms(inc, who, moved))
+
+
+def move_terms(inc: Incumbent, who: np.ndarray, moved: np.ndarray) -> Terms:
+    """The terms of ``scores`` ``(C, K)`` for candidates that move UAV ``who[c]`` to gains
+    ``moved (C, K)``: only that UAV's gains change, so every user's received power changes
+    by ``(G' - G) P`` of that UAV."""
     plan = inc.plan
     received = inc.received + (moved - inc.gains[who]) * inc.power[who, None]
     mine = plan.association[None, :] == who[:, None]
     served = np.where(mine, moved, inc.served)
     own = inc.unit[plan.association] * plan.levels
-    return scores(problem, served, np.broadcast_to(own, served.shape), received)
+    return served, np.broadcast_to(own, served.shape), received
 
 
 def edit_candidates(problem: FleetProblem, plan: FleetPlan, pairs: bool) -> list[Edits]:
@@ -293,13 +313,20 @@ def edit_candidates(problem: FleetProblem, plan: FleetPlan, pairs: bool) -> list
     return [singles, both]
 
 
+@functools.lru_cache(maxsize=16)
+def move_offsets(step_m: float, steps: tuple[int, ...]) -> np.ndarray:
+    """Every axis move of ``steps`` lattice steps ``(6 len(steps), 3)``, m (built once: the
+    search asks every round)."""
+    return (MOVES[:6, None, :] * np.array(steps)[None, :, None]).reshape(-1, 3) * step_m
+
+
 def move_candidates(problem: FleetProblem, plan: FleetPlan, steps: tuple[int, ...]):
     """Each UAV moved by each of ``steps`` lattice steps along each axis, inside the box:
     which UAV ``(C,)`` and where ``(C, 3)``."""
     N, space = problem.fleet.n, problem.space
-    moves = (MOVES[:6, None, :] * np.array(steps)[None, :, None]).reshape(-1, 3) * space.step_m
+    moves = move_offsets(space.step_m, steps)
     who = np.repeat(np.arange(N), len(moves))
-    where = plan.positions[who] + np.tile(moves, (N, 1))
+    where = (plan.positions[:, None, :] + moves[None]).reshape(-1, 3)
     keep = space.contains(where)
     return who[keep], where[keep]
 
@@ -324,9 +351,8 @@ def local_search(
         groups = edit_candidates(problem, current, pairs)
         who, where = move_candidates(problem, current, steps)
         moved = cache(where)
-        values = np.concatenate(
-            [*(edit_scores(problem, inc, e) for e in groups), move_scores(problem, inc, who, moved)]
-        )
+        terms = [edit_terms(problem, inc, e) for e in groups] + [move_terms(inc, who, moved)]
+        values = scores(problem, *(np.concatenate(t) for t in zip(*terms, strict=True)))
         i = int(np.argmax(values))
         if not values[i] > current.objective * IMPROVES:
             break
