@@ -456,8 +456,20 @@ def plan_fleet(problem: FleetProblem, starts: int = PLANNER_STARTS) -> FleetPlan
     descent (local search, exact per-UAV power in the shared band), the best of them, then
     the coarse relocations."""
     cache = GainCache(problem)
-    plans = [descend(problem, kmeans_baseline(problem, seed), cache) for seed in range(starts)]
+    firsts: dict[frozenset, FleetPlan] = {}
+    for seed in range(starts):
+        # a seed whose clusters an earlier seed found starts the same descent (its UAVs
+        # numbered otherwise): one descent per distinct partition of the users
+        start = kmeans_baseline(problem, seed)
+        firsts.setdefault(partition(start), start)
+    plans = [descend(problem, start, cache) for start in firsts.values()]
     return relocate(problem, max(plans, key=lambda p: p.objective), cache)
+
+
+def partition(plan: FleetPlan) -> frozenset[tuple[int, ...]]:
+    """The users each UAV serves, whatever the UAVs' numbering."""
+    n = int(plan.association.max()) + 1
+    return frozenset(tuple(np.flatnonzero(plan.association == i)) for i in range(n))
 
 
 # --------------------------------------------------------------------------- the reference
