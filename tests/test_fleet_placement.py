@@ -140,18 +140,27 @@ def test_reference_is_at_least_every_other_planner(access: str) -> None:
 
 @pytest.mark.parametrize("access", ["shared", "ofdma"])
 @pytest.mark.parametrize("model", ["al_hourani", "uma_av"])
-def test_local_search_scores_are_the_fleet_objective(access: str, model: str) -> None:
+@pytest.mark.parametrize("levels", ["random", "one_loud_user_per_uav"])
+def test_local_search_scores_are_the_fleet_objective(access: str, model: str,
+                                                     levels: str) -> None:
     """Every candidate's score (from the incumbent's received powers) is the objective the
-    channel gives that candidate fleet, for level, pair, reassignment and move candidates."""
+    channel gives that candidate fleet, for level, pair, reassignment and move candidates.
+    With one user holding most of its UAV's levels, lowering its level takes the UAV's total
+    below its old level (the case level_scores must not read from its shared states)."""
     p = problem(3, 9, access, model)
     rng = np.random.default_rng(1)
-    plan = fl.make_plan(p, np.array([[900.0, 900.0, 80.0], [1100.0, 1000.0, 120.0],
-                                     [1000.0, 1200.0, 60.0]]),
-                        rng.integers(0, 3, 9), rng.integers(0, 6, 9))
+    assoc = rng.integers(0, 3, 9) if levels == "random" else np.array([0, 1, 2] * 3)
+    lev = rng.integers(0, 6, 9) if levels == "random" else np.array([5, 4, 5, 0, 0, 1, 0, 1, 0])
+    pos = np.array([[900.0, 900.0, 80.0], [1100.0, 1000.0, 120.0], [1000.0, 1200.0, 60.0]])
+    if levels != "random":  # each UAV 60 m above its loud user: its signal beats the rest
+        pos = np.column_stack([p.fleet.channel.users[:3, :2], np.full(3, 60.0)])
+    plan = fl.make_plan(p, pos, assoc, lev)
     inc = fl.Incumbent.of(p, plan, p.fleet.gains(plan.positions))
     groups = fl.edit_candidates(p, plan, pairs=True)
-    assert [g.users.shape[1] for g in groups] == [1, 2]
-    assert len(groups[0]) == 9 * (6 - 1) + 9 * (3 - 1)  # every other level, every other UAV
+    assert [g.users.shape[1] for g in groups] == [1, 1, 2]
+    assert [g.levels_only for g in groups] == [True, False, False]
+    assert (len(groups[0]), len(groups[1])) == (9 * (6 - 1), 9 * (3 - 1))  # every other
+    # level of each user (scored per UAV and level total: level_scores), every other UAV
     for edits in groups:
         got = fl.edit_scores(p, inc, edits)
         want = [fl.make_plan(p, plan.positions, *edits.applied(plan, c)).objective
