@@ -232,3 +232,9 @@ def test_benchmark_shards_cover_the_jobs_once_and_skip_done_rows() -> None:
     with pytest.raises(SystemExit, match="0-35"):
         bench.cell_indices("36")
 
+
+
+def test_small_fleets_start_from_more_kmeans_seeds() -> None:
+    small, large = problem(3, 10, "shared", "uma_av"), problem(4, 20, "shared", "uma_av")
+    assert fl.planner_starts(small) == fl.SMALL_STARTS > fl.planner_starts(large)
+    assert fl.plan_fleet(small).objective == fl.plan_fleet(small, fl.SMALL_STARTS).objective

@@ -40,6 +40,8 @@ COARSE_EVERY = 5  # the relocation's coarse lattice: every 5th point per axis (5
 RELOCATIONS = 3  # at most this many coarse jumps per plan
 POWER_ROUNDS = 1  # exact per-UAV power passes per descent
 PLANNER_STARTS = 2  # k-means seeds the planner searches from
+SMALL_STARTS = 5  # ... where N K <= SMALL_FLEET: a descent there costs a few ms
+SMALL_FLEET = 40
 EXACT_POWER_K = 12  # the planner's exact per-UAV power DP up to this many users (5-25 ms)
 REFERENCE_STARTS = 4  # k-means seeds the reference starts from, besides the planner's answer
 EXHAUSTIVE_LIMIT = 2_000_000  # fleets the reference enumerates before it searches instead
@@ -485,19 +487,27 @@ def descend(problem: FleetProblem, plan: FleetPlan, cache: GainCache) -> FleetPl
     return plan
 
 
-def plan_fleet(problem: FleetProblem, starts: int = PLANNER_STARTS) -> FleetPlan:
-    """The fleet planner (module docstring): from each of ``starts`` k-means starts the
-    descent (local search, exact per-UAV power in the shared band), the best of them, then
-    the coarse relocations."""
+def plan_fleet(problem: FleetProblem, starts: int | None = None) -> FleetPlan:
+    """The fleet planner (module docstring): from each of ``starts`` k-means starts (default
+    ``planner_starts``) the descent (local search, exact per-UAV power in the shared band),
+    the best of them, then the coarse relocations."""
     cache = GainCache(problem)
     firsts: dict[frozenset, FleetPlan] = {}
-    for seed in range(starts):
+    for seed in range(planner_starts(problem) if starts is None else starts):
         # a seed whose clusters an earlier seed found starts the same descent (its UAVs
         # numbered otherwise): one descent per distinct partition of the users
         start = kmeans_baseline(problem, seed)
         firsts.setdefault(partition(start), start)
     plans = [descend(problem, start, cache) for start in firsts.values()]
     return relocate(problem, max(plans, key=lambda p: p.objective), cache)
+
+
+def planner_starts(problem: FleetProblem) -> int:
+    """How many k-means seeds the planner starts from: in the shared band the descents of
+    different partitions end in optima a factor 2 apart (each more user below QoS halves
+    the objective), and the best partition is often not the first seeds' (N = 3, K = 10:
+    the 5th seed's); small fleets try more, where a descent costs a few ms."""
+    return SMALL_STARTS if problem.fleet.n * problem.fleet.k <= SMALL_FLEET else PLANNER_STARTS
 
 
 def partition(plan: FleetPlan) -> frozenset[tuple[int, ...]]:
