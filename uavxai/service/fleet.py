@@ -24,13 +24,20 @@ from __future__ import annotations
 
 import functools
 import itertools
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from uavxai.comms.channel import Channel
 from uavxai.comms.fleet import FleetChannel
-from uavxai.service.grid import MAX_DP_COST, dp_cost, optimal_levels, solve_grid
+from uavxai.service.grid import (
+    MAX_DP_COST,
+    dp_cost,
+    optimal_levels,
+    rate_ceiling,
+    solve_grid,
+)
 from uavxai.service.layouts import problem_scenario
 from uavxai.service.service_env import MOVES, SearchSpace
 
@@ -584,6 +591,32 @@ def reference_fleet(
         if plan.objective > best.objective:
             best = plan
     return best
+
+
+# --------------------------------------------------------------------------- the upper bound
+def best_gains(problem: FleetProblem, chunk: int = 4096) -> np.ndarray:
+    """Each user's highest gain ``(K,)`` from any lattice point (every point of the lattice,
+    in chunks: no assumption on how the gain varies with position)."""
+    points = np.stack(np.meshgrid(*problem.space.axes(), indexing="ij"), -1).reshape(-1, 3)
+    best = np.zeros(problem.fleet.k)
+    for i in range(0, len(points), chunk):
+        best = np.maximum(best, problem.fleet.channel.mean_gain(points[i : i + chunk]).max(0))
+    return best
+
+
+def upper_bound(problem: FleetProblem) -> float:
+    """A certified upper bound on the objective of every fleet (docs/service/fleet.md, "Upper
+    bound"). OFDMA: every user served from its best lattice point, the N budgets pooled and
+    split continuously by water-filling, nobody below QoS: each fleet is one of the
+    allocations this maximises over (its user's gain is at most the best, its powers split at
+    most the pooled budget, and failures only halve), so none beats it. Shared band: no
+    bound is built (the other UAVs' interference and the association do not relax to a
+    tractable problem that is still tight), ``inf``."""
+    c = problem.fleet.channel
+    if c.access != "ofdma":
+        return math.inf
+    pooled = replace(c, p_max_w=float(problem.fleet.p_max_w.sum()))
+    return float(rate_ceiling(pooled, best_gains(problem)[None])[0])
 
 
 # The fleet's planners by name (the one-UAV planners of ``service.stage.PLANNERS`` place one
