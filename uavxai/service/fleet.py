@@ -129,19 +129,24 @@ def kmeans(xy: np.ndarray, n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
 
 def best_heights(problem: FleetProblem, xy: np.ndarray, labels: np.ndarray) -> np.ndarray:
     """Positions ``(N, 3)`` at ``xy`` each at the lattice height best for its own users alone
-    (no other UAV transmitting) at equal power."""
+    (no other UAV transmitting) at equal power. The gains of every UAV's column are one
+    call; with nobody else transmitting each UAV's channel is its users' own (no
+    interference folded in), so its rates are the one-UAV channel's of those gains."""
     fleet = problem.fleet
     hs = problem.space.axes()[2]
-    silent = np.zeros(fleet.k)
+    columns = np.concatenate([np.repeat(xy[:, None, :], len(hs), axis=1),
+                              np.broadcast_to(hs[None, :, None], (len(xy), len(hs), 1))], -1)
+    gains = fleet.channel.mean_gain(columns.reshape(-1, 3)).reshape(len(xy), len(hs), -1)
+    silent, nobody = np.zeros(fleet.k), np.zeros((fleet.n, fleet.k))
     out = []
     for n in range(fleet.n):
-        column = np.column_stack([np.repeat(xy[n : n + 1], len(hs), axis=0), hs])
-        if not np.any(labels == n):
-            out.append(column[0])
+        mine = labels == n
+        if not np.any(mine):
+            out.append(columns[n, 0])
             continue
-        own = fleet.uav_channel(n, fleet.gains(column[:1].repeat(fleet.n, 0)), labels, silent)
-        values = own.evaluate(column, own.equal_power()).objective
-        out.append(column[int(np.argmax(values))])
+        own = fleet.uav_channel(n, nobody, labels, silent)
+        values = own.objective(own.rate(gains[n][:, mine], own.equal_power()))
+        out.append(columns[n, int(np.argmax(values))])
     return np.array(out)
 
 
