@@ -224,10 +224,10 @@ class Incumbent:
 Terms = tuple[np.ndarray, np.ndarray, np.ndarray]  # served gain, own power, received power
 
 
-def rates(problem: FleetProblem, served: np.ndarray, own: np.ndarray, received: np.ndarray):
-    """Each user's rate ``(C, K)`` from its served gain, own power and total received power
-    ``(C, K)``: in the shared band everything user k receives but its own signal interferes
-    (``T_k - g_k p_k``, the fleet SINR of docs/service/fleet.md)."""
+def scores(problem: FleetProblem, served: np.ndarray, own: np.ndarray, received: np.ndarray):
+    """The objective ``(C,)`` of C candidates from each user's served gain, own power and
+    total received power ``(C, K)``: in the shared band everything user k receives but its
+    own signal interferes (``T_k - g_k p_k``, the fleet SINR of docs/service/fleet.md)."""
     c = problem.fleet.channel
     sinr = served * own  # the signal, turned into the SINR and the rate in place (no copies)
     if c.access == "shared":
@@ -239,13 +239,7 @@ def rates(problem: FleetProblem, served: np.ndarray, own: np.ndarray, received: 
     sinr += 1.0
     rate = np.log2(sinr, out=sinr)
     rate *= c.user_bandwidth_hz()
-    return rate
-
-
-def scores(problem: FleetProblem, served: np.ndarray, own: np.ndarray, received: np.ndarray):
-    """The objective ``(C,)`` of C candidates from the terms of ``rates``."""
-    rate = rates(problem, served, own, received)
-    return rate.sum(axis=-1) / 2.0 ** (rate < problem.fleet.channel.qos_rate_bps).sum(axis=-1)
+    return rate.sum(axis=-1) / 2.0 ** (rate < c.qos_rate_bps).sum(axis=-1)
 
 
 @dataclass(frozen=True)
@@ -257,7 +251,6 @@ class Edits:
     users: np.ndarray
     uavs: np.ndarray
     levels: np.ndarray
-    levels_only: bool = False  # every edit keeps its user's UAV (``level_scores``)
 
     def __len__(self) -> int:
         return len(self.users)
@@ -270,40 +263,8 @@ class Edits:
 
 
 def edit_scores(problem: FleetProblem, inc: Incumbent, edits: Edits) -> np.ndarray:
-    """The objective of every candidate of ``edits`` (``level_scores`` for one user's level,
-    else ``edit_terms``)."""
-    if edits.levels_only:
-        return level_scores(problem, inc, edits.users[:, 0], edits.levels[:, 0])
+    """The objective of every candidate of ``edits`` (``edit_terms``)."""
     return scores(problem, *edit_terms(problem, inc, edits))
-
-
-def level_scores(problem: FleetProblem, inc: Incumbent, users: np.ndarray, levels: np.ndarray):
-    """The objective of setting user ``users[c]``'s level to ``levels[c]`` (its UAV kept).
-    Such a candidate changes only its UAV's level total, and candidates with the same UAV
-    and new total share every user's received power and every other user's own power: their
-    rates are computed once per (UAV, total) state (at most 2L - 1 per UAV instead of K L
-    candidates), then only the edited user's rate is replaced."""
-    plan, L = inc.plan, problem.power_levels
-    uav = plan.association[users]
-    total = inc.totals[uav].astype(np.int64) - plan.levels[users] + levels  # sums of levels
-    key, state = np.unique(uav * (problem.fleet.k * L) + total, return_inverse=True)
-    s_uav, s_total = key // (problem.fleet.k * L), (key % (problem.fleet.k * L)).astype(float)
-    unit = problem.fleet.p_max_w[s_uav] / np.maximum(s_total, L - 1)
-    received = inc.received + (unit * s_total - inc.power[s_uav])[:, None] * inc.gains[s_uav]
-    mine = plan.association[None, :] == s_uav[:, None]
-    own = np.where(mine, unit[:, None] * plan.levels, inc.unit[plan.association] * plan.levels)
-    # A state's row has each user at its old level; the edited user's entry is replaced
-    # below, and is meaningless where its old level exceeds the state's total (NaN): zeroed.
-    with np.errstate(invalid="ignore"):
-        rate = rates(problem, np.broadcast_to(inc.served, own.shape), own, received)
-    rate[~np.isfinite(rate)] = 0.0
-    qos = problem.fleet.channel.qos_rate_bps
-    new = rates(problem, inc.served[users, None], (unit[state] * levels)[:, None],
-                received[state, users, None])[:, 0]
-    old = rate[state, users]
-    total_rate = rate.sum(axis=1)[state] - old + new
-    failing = (rate < qos).sum(axis=1)[state] - (old < qos) + (new < qos)
-    return total_rate / 2.0**failing
 
 
 def edit_terms(problem: FleetProblem, inc: Incumbent, edits: Edits) -> Terms:
@@ -329,15 +290,20 @@ def edit_terms(problem: FleetProblem, inc: Incumbent, edits: Edits) -> Terms:
 
 
 def move_scores(problem: FleetProblem, inc: Incumbent, who: np.ndarray, moved: np.ndarray):
-    """The objective of candidates that move UAV ``who[c]`` to gains ``moved (C, K)``: only
-    that UAV's gains change, so every user's received power changes by ``(G' - G) P`` of
-    that UAV."""
+    """The objective of every move candidate (``move_terms``)."""
+    return scores(problem, *move_terms(inc, who, moved))
+
+
+def move_terms(inc: Incumbent, who: np.ndarray, moved: np.ndarray) -> Terms:
+    """The terms of ``scores`` ``(C, K)`` for candidates that move UAV ``who[c]`` to gains
+    ``moved (C, K)``: only that UAV's gains change, so every user's received power changes
+    by ``(G' - G) P`` of that UAV."""
     plan = inc.plan
     received = inc.received + (moved - inc.gains[who]) * inc.power[who, None]
     mine = plan.association[None, :] == who[:, None]
     served = np.where(mine, moved, inc.served)
     own = inc.unit[plan.association] * plan.levels
-    return scores(problem, served, np.broadcast_to(own, served.shape), received)
+    return served, np.broadcast_to(own, served.shape), received
 
 
 def edit_candidates(problem: FleetProblem, plan: FleetPlan, pairs: bool) -> list[Edits]:
@@ -349,16 +315,16 @@ def edit_candidates(problem: FleetProblem, plan: FleetPlan, pairs: bool) -> list
     other = level != lev[k]
     k, level = k[other], level[other]
     users, to = np.nonzero(assoc[:, None] != np.arange(N)[None])
-    groups = [Edits(k[:, None], assoc[k][:, None], level[:, None], levels_only=True),
-              Edits(users[:, None], to[:, None], lev[users][:, None])]
+    singles = Edits(np.concatenate([k, users])[:, None], np.concatenate([assoc[k], to])[:, None],
+                    np.concatenate([level, lev[users]])[:, None])
     if not pairs:
-        return groups
+        return [singles]
     i, j = np.nonzero(~np.eye(K, dtype=bool))
     ok = (lev[i] > 0) & (lev[j] < L - 1)
     i, j = i[ok], j[ok]
     both = Edits(np.column_stack([i, j]), np.column_stack([assoc[i], assoc[j]]),
                  np.column_stack([lev[i] - 1, lev[j] + 1]))
-    return [*groups, both]
+    return [singles, both]
 
 
 @functools.lru_cache(maxsize=16)
@@ -399,8 +365,8 @@ def local_search(
         groups = edit_candidates(problem, current, pairs)
         who, where = move_candidates(problem, current, steps)
         moved = cache(where)
-        values = np.concatenate([*(edit_scores(problem, inc, e) for e in groups),
-                                 move_scores(problem, inc, who, moved)])
+        terms = [edit_terms(problem, inc, e) for e in groups] + [move_terms(inc, who, moved)]
+        values = scores(problem, *(np.concatenate(t) for t in zip(*terms, strict=True)))
         i = int(np.argmax(values))
         if not values[i] > current.objective * IMPROVES:
             break
