@@ -6,11 +6,12 @@ power, for the fleet's objective ``sum_k R_k / 2^lambda`` over all K users
 - ``kmeans_baseline``: k-means of the users into N clusters (seeded), one UAV per cluster above
   the cluster's centroid (the nearest lattice column) at the lattice height that is best for
   its own users alone at equal power; association = cluster; equal power (levels all L-1).
-- ``plan_fleet`` (the ``fleet`` planner): from the k-means baselines of seeds 0 and 1 a
-  descent: a vectorised best-improvement local search over the whole fleet (a UAV moves 1 or 4
-  lattice steps, a user's level changes, a user changes UAV; candidates scored from the
-  incumbent's received powers), in the shared band ``block_power`` (each UAV's best levels
-  with the others fixed, ``grid.optimal_levels``) and the local search again; the better
+- ``plan_fleet`` (the ``fleet`` planner): from the k-means baselines of seeds 0 and 1 (0-4
+  where N K <= 40; one per distinct partition of the users) a descent: a vectorised
+  best-improvement local search over the whole fleet (a UAV moves 1 or 4 lattice steps, a
+  user's level changes, a user changes UAV; candidates scored from the incumbent's received
+  powers), in the shared band ``block_power`` (each UAV's best levels
+  with the others fixed, ``grid.optimal_levels``) and the local search again; the best
   descent, then ``relocate`` (one UAV jumps on a coarse lattice) while it improves.
 - ``reference_fleet``: exact by enumeration where the problem is tiny; otherwise the best of
   many starts (the planner's answer and k-means starts of several seeds) of a block-coordinate
@@ -18,6 +19,8 @@ power, for the fleet's objective ``sum_k R_k / 2^lambda`` over all K users
   (their interference folded into its users' gains), then the fleet local search with a wider
   neighbourhood (steps 1-8, level moves between users), until a round improves nothing. What
   it certifies is in docs/service/fleet.md.
+- ``upper_bound``: in OFDMA a certified bound on every fleet's objective (each user from its
+  best lattice point, the budgets pooled, water-filled); none in the shared band.
 """
 
 from __future__ import annotations
