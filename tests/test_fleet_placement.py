@@ -140,20 +140,30 @@ def test_reference_is_at_least_every_other_planner(access: str) -> None:
 
 @pytest.mark.parametrize("access", ["shared", "ofdma"])
 @pytest.mark.parametrize("model", ["al_hourani", "uma_av"])
-def test_local_search_scores_are_the_fleet_objective(access: str, model: str) -> None:
+@pytest.mark.parametrize("levels", ["random", "one_loud_user_per_uav"])
+def test_local_search_scores_are_the_fleet_objective(access: str, model: str,
+                                                     levels: str) -> None:
     """Every candidate's score (from the incumbent's received powers) is the objective the
-    channel gives that candidate fleet, for level, pair, reassignment and move candidates."""
+    channel gives that candidate fleet, for level, pair, reassignment and move candidates.
+    With one user holding most of its UAV's levels, lowering its level takes the UAV's total
+    below its old level."""
     p = problem(3, 9, access, model)
     rng = np.random.default_rng(1)
-    plan = fl.make_plan(p, np.array([[900.0, 900.0, 80.0], [1100.0, 1000.0, 120.0],
-                                     [1000.0, 1200.0, 60.0]]),
-                        rng.integers(0, 3, 9), rng.integers(0, 6, 9))
+    assoc = rng.integers(0, 3, 9) if levels == "random" else np.array([0, 1, 2] * 3)
+    lev = rng.integers(0, 6, 9) if levels == "random" else np.array([5, 4, 5, 0, 0, 1, 0, 1, 0])
+    pos = np.array([[900.0, 900.0, 80.0], [1100.0, 1000.0, 120.0], [1000.0, 1200.0, 60.0]])
+    if levels != "random":  # each UAV 60 m above its loud user: its signal beats the rest
+        pos = np.column_stack([p.fleet.channel.users[:3, :2], np.full(3, 60.0)])
+    plan = fl.make_plan(p, pos, assoc, lev)
     inc = fl.Incumbent.of(p, plan, p.fleet.gains(plan.positions))
-    assoc, lev = fl.power_candidates(p, plan, pairs=True)
-    got = fl.power_scores(p, inc, assoc, lev)
-    want = [fl.make_plan(p, plan.positions, a, v).objective
-            for a, v in zip(assoc, lev, strict=True)]
-    np.testing.assert_allclose(got, want, rtol=1e-12)
+    groups = fl.edit_candidates(p, plan, pairs=True)
+    assert [g.users.shape[1] for g in groups] == [1, 2]
+    assert len(groups[0]) == 9 * (6 - 1) + 9 * (3 - 1)  # every other level, every other UAV
+    for edits in groups:
+        got = fl.edit_scores(p, inc, edits)
+        want = [fl.make_plan(p, plan.positions, *edits.applied(plan, c)).objective
+                for c in range(len(edits))]
+        np.testing.assert_allclose(got, want, rtol=1e-12)
     who, where = fl.move_candidates(p, plan, (1, 4))
     got = fl.move_scores(p, inc, who, fl.GainCache(p)(where))
     want = []
@@ -219,3 +229,31 @@ def test_benchmark_shards_cover_the_jobs_once_and_skip_done_rows() -> None:
     assert len(left) == 13 and (bench.ALL_CELLS[30], 1) not in left
     with pytest.raises(SystemExit, match="0-35"):
         bench.cell_indices("36")
+
+
+
+def test_small_fleets_start_from_more_kmeans_seeds() -> None:
+    small, large = problem(3, 10, "shared", "uma_av"), problem(4, 20, "shared", "uma_av")
+    assert fl.planner_starts(small) == fl.SMALL_STARTS > fl.planner_starts(large)
+    assert fl.plan_fleet(small).objective == fl.plan_fleet(small, fl.SMALL_STARTS).objective
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_ofdma_upper_bound_is_above_the_brute_force_optimum_and_close(seed: int) -> None:
+    p = problem(2, 3, "ofdma", seed=seed, step_m=250.0)
+    p = fl.FleetProblem(p.fleet, p.space, 3)
+    want = brute_force(p)
+    bound = fl.upper_bound(p)
+    assert bound >= want
+    assert bound <= 1.05 * want  # measured 1.005-1.021 on these three layouts
+
+
+def test_ofdma_upper_bound_is_above_every_fleet_found() -> None:
+    p = problem(3, 10, "ofdma", "uma_av")
+    bound = fl.upper_bound(p)
+    found = [fl.reference_fleet(p, starts=1), fl.plan_fleet(p), fl.kmeans_baseline(p)]
+    assert all(bound >= plan.objective for plan in found)
+    # each user's best lattice gain bounds its gain from every UAV of every found fleet
+    best = fl.best_gains(p)
+    assert all(np.all(p.fleet.gains(plan.positions) <= best) for plan in found)
+    assert fl.upper_bound(problem(3, 10, "shared", "uma_av")) == np.inf  # none built

@@ -137,7 +137,7 @@ def test_hinted_branch_and_bound_is_still_the_lattice_optimum(access, k):
 def test_ofdma_water_filling_ceiling_is_above_every_allocation():
     # The cheap first filter of the branch-and-bound: no split of P_max, continuous or on the
     # levels, beats the water-filling sum rate.
-    from uavxai.service.grid import _rate_ceiling
+    from uavxai.service.grid import rate_ceiling
 
     sc = default_scenario(seed=5, comms={"users": {"count": 4}, "access": "ofdma"})
     ch = Channel.from_scenario(sc)
@@ -146,7 +146,7 @@ def test_ofdma_water_filling_ceiling_is_above_every_allocation():
         [rng.uniform(750, 1250, 30), rng.uniform(750, 1250, 30), rng.uniform(50, 300, 30)]
     )
     gains = ch.mean_gain(positions)
-    ceiling = _rate_ceiling(ch, gains)
+    ceiling = rate_ceiling(ch, gains)
     split = rng.dirichlet(np.ones(4), size=5000) * ch.p_max_w
     rates = ch.user_bandwidth_hz() * np.log2(1 + gains[:, None] * split[None] * 4 / ch.noise_w)
     assert np.all(ceiling >= rates.sum(-1).max(axis=1))

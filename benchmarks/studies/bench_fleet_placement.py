@@ -6,7 +6,10 @@ uma_av} (urban), ``--layouts`` unseen layouts per cell (even indices uniform, od
 ``uavxai.service.layouts.draw_layout`` from ``default_rng([BENCH_SEED, cell, i])``; no seed of
 these was used to tune anything). Per cell: planner / reference (mean, p5), planner / k-means
 (mean), the planner's wall time (p50, max, ms) and the reference's (mean, s); then the worst
-cell. Rows are appended to ``--out`` (JSON lines) as they finish, so a run cut short by
+cell; in OFDMA also the certified upper bound (``upper_bound``): ``ref/ub`` the worst
+reference / bound of the cell (the best known fleet is at least that fraction of the
+optimum) and ``ub/km`` the mean bound / k-means (no fleet gains more over the baseline). Rows
+are appended to ``--out`` (JSON lines) as they finish, so a run cut short by
 ``timeout`` keeps what it did; a run with the same ``--out`` skips the (cell, layout) pairs
 already there, so the full table can be run over several sessions, and ``--shard i/n`` takes
 every n-th of the remaining (cell, layout) jobs, so n processes can share it.
@@ -33,7 +36,13 @@ from pathlib import Path
 
 import numpy as np
 
-from uavxai.service.fleet import fleet_problem, kmeans_baseline, plan_fleet, reference_fleet
+from uavxai.service.fleet import (
+    fleet_problem,
+    kmeans_baseline,
+    plan_fleet,
+    reference_fleet,
+    upper_bound,
+)
 from uavxai.service.layouts import draw_layout
 
 BENCH_SEED = 32_000  # tests draw from small seeds; nothing was tuned on these
@@ -66,6 +75,9 @@ def run_one(cell: tuple[int, int, str, str], i: int, reference: bool = True) -> 
         t0 = time.process_time()
         row["reference"] = reference_fleet(problem, hint=plan).objective
         row["reference_s"] = time.process_time() - t0
+        bound = upper_bound(problem)  # OFDMA only (inf: none built)
+        if np.isfinite(bound):
+            row["bound"] = bound
     return row
 
 
@@ -75,20 +87,25 @@ def summarise(rows: list[dict]) -> dict:
     gain = np.array([r["planner"] / r["kmeans"] for r in rows])
     out = {"layouts": len(rows), "vs_kmeans": gain.mean(), "vs_kmeans_median": np.median(gain),
            "ms_p50": np.median(ms), "ms_max": ms.max(), "mean": np.nan, "p5": np.nan,
-           "ref_vs_kmeans": np.nan, "ref_s": np.nan}
+           "ref_vs_kmeans": np.nan, "ref_s": np.nan, "ref_vs_bound": np.nan,
+           "bound_vs_kmeans": np.nan}
     ref = [r for r in rows if "reference" in r]
     if ref:
         ratio = np.array([r["planner"] / r["reference"] for r in ref])
         out.update(mean=ratio.mean(), p5=np.percentile(ratio, 5),
                    ref_vs_kmeans=np.mean([r["reference"] / r["kmeans"] for r in ref]),
                    ref_s=np.mean([r["reference_s"] for r in ref]))
+    bounded = [r for r in ref if "bound" in r]
+    if bounded:  # how far the best known fleet can be from the optimum; the most over k-means
+        out.update(ref_vs_bound=np.min([r["reference"] / r["bound"] for r in bounded]),
+                   bound_vs_kmeans=np.mean([r["bound"] / r["kmeans"] for r in bounded]))
     return out
 
 
 def report(rows: list[dict]) -> None:
     print(f"{'N':>2} {'K':>3} {'access':6} {'channel':10} {'n':>3} {'p/ref':>7} {'p5':>7} "
           f"{'p/kmeans':>9} {'(median)':>9} {'ref/km':>7} {'ms p50':>7} {'ms max':>7} "
-          f"{'ref s':>6}")
+          f"{'ref s':>6} {'ref/ub':>7} {'ub/km':>6}")
     table = []
     for cell in ALL_CELLS:
         mine = [r for r in rows if (r["n"], r["k"], r["access"], r["model"]) == cell]
@@ -99,7 +116,8 @@ def report(rows: list[dict]) -> None:
         print(f"{cell[0]:>2} {cell[1]:>3} {cell[2]:6} {cell[3]:10} {s['layouts']:>3} "
               f"{s['mean']:7.4f} {s['p5']:7.4f} {s['vs_kmeans']:9.3g} "
               f"{s['vs_kmeans_median']:9.3g} {s['ref_vs_kmeans']:7.3g} {s['ms_p50']:7.0f} "
-              f"{s['ms_max']:7.0f} {s['ref_s']:6.1f}")
+              f"{s['ms_max']:7.0f} {s['ref_s']:6.1f} {s['ref_vs_bound']:7.4f} "
+              f"{s['bound_vs_kmeans']:6.3f}")
     if not table:
         return
     whole = summarise(rows)

@@ -6,11 +6,12 @@ power, for the fleet's objective ``sum_k R_k / 2^lambda`` over all K users
 - ``kmeans_baseline``: k-means of the users into N clusters (seeded), one UAV per cluster above
   the cluster's centroid (the nearest lattice column) at the lattice height that is best for
   its own users alone at equal power; association = cluster; equal power (levels all L-1).
-- ``plan_fleet`` (the ``fleet`` planner): from the k-means baselines of seeds 0 and 1 a
-  descent: a vectorised best-improvement local search over the whole fleet (a UAV moves 1 or 4
-  lattice steps, a user's level changes, a user changes UAV; candidates scored from the
-  incumbent's received powers), in the shared band ``block_power`` (each UAV's best levels
-  with the others fixed, ``grid.optimal_levels``) and the local search again; the better
+- ``plan_fleet`` (the ``fleet`` planner): from the k-means baselines of seeds 0 and 1 (0-4
+  where N K <= 40; one per distinct partition of the users) a descent: a vectorised
+  best-improvement local search over the whole fleet (a UAV moves 1 or 4 lattice steps, a
+  user's level changes, a user changes UAV; candidates scored from the incumbent's received
+  powers), in the shared band ``block_power`` (each UAV's best levels
+  with the others fixed, ``grid.optimal_levels``) and the local search again; the best
   descent, then ``relocate`` (one UAV jumps on a coarse lattice) while it improves.
 - ``reference_fleet``: exact by enumeration where the problem is tiny; otherwise the best of
   many starts (the planner's answer and k-means starts of several seeds) of a block-coordinate
@@ -18,18 +19,28 @@ power, for the fleet's objective ``sum_k R_k / 2^lambda`` over all K users
   (their interference folded into its users' gains), then the fleet local search with a wider
   neighbourhood (steps 1-8, level moves between users), until a round improves nothing. What
   it certifies is in docs/service/fleet.md.
+- ``upper_bound``: in OFDMA a certified bound on every fleet's objective (each user from its
+  best lattice point, the budgets pooled, water-filled); none in the shared band.
 """
 
 from __future__ import annotations
 
+import functools
 import itertools
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from uavxai.comms.channel import Channel
 from uavxai.comms.fleet import FleetChannel
-from uavxai.service.grid import MAX_DP_COST, dp_cost, optimal_levels, solve_grid
+from uavxai.service.grid import (
+    MAX_DP_COST,
+    dp_cost,
+    optimal_levels,
+    rate_ceiling,
+    solve_grid,
+)
 from uavxai.service.layouts import problem_scenario
 from uavxai.service.service_env import MOVES, SearchSpace
 
@@ -39,6 +50,8 @@ COARSE_EVERY = 5  # the relocation's coarse lattice: every 5th point per axis (5
 RELOCATIONS = 3  # at most this many coarse jumps per plan
 POWER_ROUNDS = 1  # exact per-UAV power passes per descent
 PLANNER_STARTS = 2  # k-means seeds the planner searches from
+SMALL_STARTS = 5  # ... where N K <= SMALL_FLEET: a descent there costs a few ms
+SMALL_FLEET = 40
 EXACT_POWER_K = 12  # the planner's exact per-UAV power DP up to this many users (5-25 ms)
 REFERENCE_STARTS = 4  # k-means seeds the reference starts from, besides the planner's answer
 EXHAUSTIVE_LIMIT = 2_000_000  # fleets the reference enumerates before it searches instead
@@ -119,19 +132,24 @@ def kmeans(xy: np.ndarray, n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
 
 def best_heights(problem: FleetProblem, xy: np.ndarray, labels: np.ndarray) -> np.ndarray:
     """Positions ``(N, 3)`` at ``xy`` each at the lattice height best for its own users alone
-    (no other UAV transmitting) at equal power."""
+    (no other UAV transmitting) at equal power. The gains of every UAV's column are one
+    call; with nobody else transmitting each UAV's channel is its users' own (no
+    interference folded in), so its rates are the one-UAV channel's of those gains."""
     fleet = problem.fleet
     hs = problem.space.axes()[2]
-    silent = np.zeros(fleet.k)
+    columns = np.concatenate([np.repeat(xy[:, None, :], len(hs), axis=1),
+                              np.broadcast_to(hs[None, :, None], (len(xy), len(hs), 1))], -1)
+    gains = fleet.channel.mean_gain(columns.reshape(-1, 3)).reshape(len(xy), len(hs), -1)
+    silent, nobody = np.zeros(fleet.k), np.zeros((fleet.n, fleet.k))
     out = []
     for n in range(fleet.n):
-        column = np.column_stack([np.repeat(xy[n : n + 1], len(hs), axis=0), hs])
-        if not np.any(labels == n):
-            out.append(column[0])
+        mine = labels == n
+        if not np.any(mine):
+            out.append(columns[n, 0])
             continue
-        own = fleet.uav_channel(n, fleet.gains(column[:1].repeat(fleet.n, 0)), labels, silent)
-        values = own.evaluate(column, own.equal_power()).objective
-        out.append(column[int(np.argmax(values))])
+        own = fleet.uav_channel(n, nobody, labels, silent)
+        values = own.objective(own.rate(gains[n][:, mine], own.equal_power()))
+        out.append(columns[n, int(np.argmax(values))])
     return np.array(out)
 
 
@@ -149,35 +167,51 @@ def kmeans_baseline(problem: FleetProblem, seed: int = 0) -> FleetPlan:
 # --------------------------------------------------------------------------- local search
 class GainCache:
     """Gains ``(K,)`` of lattice points, computed once per problem: every UAV has the same
-    gain function, and the local search asks for the same neighbours round after round."""
+    gain function, and the local search asks for the same neighbours round after round. A
+    lattice point's row is found through a dense index over the lattice (no Python loop per
+    point: the search asks for ~50 points a round)."""
 
     def __init__(self, problem: FleetProblem) -> None:
         self.channel = problem.fleet.channel
+        axes = problem.space.axes()
+        self.origin = np.array([ax[0] for ax in axes])
         self.step = problem.space.step_m
-        self.rows: dict[tuple[int, int, int], np.ndarray] = {}
+        self.shape = tuple(len(ax) for ax in axes)
+        self.slot = np.full(int(np.prod(self.shape)), -1, dtype=np.int64)
+        self.table = np.empty((64, self.channel.k))
+        self.size = 0
 
     def __call__(self, positions: np.ndarray) -> np.ndarray:
         """Gains ``(M, K)`` of lattice positions ``(M, 3)``."""
-        keys = [tuple(k) for k in np.rint(positions / self.step).astype(np.int64).tolist()]
-        missing = [i for i, key in enumerate(keys) if key not in self.rows]
-        if missing:
-            fresh = self.channel.mean_gain(positions[missing])
-            for i, row in zip(missing, fresh, strict=True):
-                self.rows[keys[i]] = row
-        return np.array([self.rows[key] for key in keys]).reshape(len(keys), self.channel.k)
+        index = np.rint((positions - self.origin) / self.step).astype(np.int64)
+        flat = np.ravel_multi_index(tuple(index.T), self.shape)
+        missing = self.slot[flat] < 0
+        if missing.any():
+            new, first = np.unique(flat[missing], return_index=True)
+            end = self.size + len(new)
+            if end > len(self.table):
+                self.table = np.vstack([self.table, np.empty((end + len(self.table),
+                                                              self.channel.k))])
+            self.table[self.size : end] = self.channel.mean_gain(positions[missing][first])
+            self.slot[new] = np.arange(self.size, end)
+            self.size = end
+        return self.table[self.slot[flat]]
 
 
 @dataclass(frozen=True)
 class Incumbent:
-    """What every candidate move of the local search is scored against (docs/service/fleet.md,
-    "Local search"): the plan, the gains ``G (N, K)`` of its positions, each UAV's watts per
-    level ``unit (N,)`` and power ``P (N,)``, and each user's total received power ``T (K,)``
-    from every UAV (its own UAV's included)."""
+    """What every candidate of the local search is scored against (docs/service/fleet.md,
+    "Local search"): the plan, the gains ``G (N, K)`` of its positions, each UAV's level total
+    ``S (N,)``, watts per level ``unit (N,)`` and power ``P (N,)``, each user's gain from its
+    own UAV ``served (K,)`` and total received power ``T (K,)`` from every UAV (its own
+    UAV's included)."""
 
     plan: FleetPlan
     gains: np.ndarray
+    totals: np.ndarray
     unit: np.ndarray
     power: np.ndarray
+    served: np.ndarray
     received: np.ndarray
 
     @classmethod
@@ -186,7 +220,11 @@ class Incumbent:
         totals = np.bincount(plan.association, weights=plan.levels, minlength=fleet.n)
         unit = fleet.p_max_w / np.maximum(totals, problem.power_levels - 1)
         power = unit * totals
-        return cls(plan, gains, unit, power, power @ gains)
+        served = gains[plan.association, np.arange(fleet.k)]
+        return cls(plan, gains, totals, unit, power, served, power @ gains)
+
+
+Terms = tuple[np.ndarray, np.ndarray, np.ndarray]  # served gain, own power, received power
 
 
 def scores(problem: FleetProblem, served: np.ndarray, own: np.ndarray, received: np.ndarray):
@@ -194,67 +232,118 @@ def scores(problem: FleetProblem, served: np.ndarray, own: np.ndarray, received:
     total received power ``(C, K)``: in the shared band everything user k receives but its
     own signal interferes (``T_k - g_k p_k``, the fleet SINR of docs/service/fleet.md)."""
     c = problem.fleet.channel
-    signal = served * own
+    sinr = served * own  # the signal, turned into the SINR and the rate in place (no copies)
     if c.access == "shared":
-        sinr = signal / (received - signal + c.noise_w)
+        interference = received - sinr
+        interference += c.noise_w
+        sinr /= interference
     else:
-        sinr = signal / (c.noise_w / c.k)
-    rate = c.user_bandwidth_hz() * np.log2(1.0 + sinr)
+        sinr /= c.noise_w / c.k
+    sinr += 1.0
+    rate = np.log2(sinr, out=sinr)
+    rate *= c.user_bandwidth_hz()
     return rate.sum(axis=-1) / 2.0 ** (rate < c.qos_rate_bps).sum(axis=-1)
 
 
-def power_scores(problem: FleetProblem, inc: Incumbent, assoc: np.ndarray, lev: np.ndarray):
-    """Candidates that change associations and levels ``(C, K)``, positions fixed: each UAV's
-    level total, power and the power every user receives, recomputed per candidate."""
-    N, L = problem.fleet.n, problem.power_levels
-    member = assoc[:, None, :] == np.arange(N)[:, None]  # (C, N, K)
-    totals = np.einsum("cnk,ck->cn", member, lev.astype(float))
+@dataclass(frozen=True)
+class Edits:
+    """C candidates, each setting E users' serving UAV and level, positions fixed: user
+    ``users[c, e]`` to UAV ``uavs[c, e]`` at level ``levels[c, e]`` (``(C, E)`` each; the E
+    users of a candidate are distinct)."""
+
+    users: np.ndarray
+    uavs: np.ndarray
+    levels: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.users)
+
+    def applied(self, plan: FleetPlan, c: int) -> tuple[np.ndarray, np.ndarray]:
+        """Candidate ``c``'s association and levels."""
+        association, levels = plan.association.copy(), plan.levels.copy()
+        association[self.users[c]], levels[self.users[c]] = self.uavs[c], self.levels[c]
+        return association, levels
+
+
+def edit_scores(problem: FleetProblem, inc: Incumbent, edits: Edits) -> np.ndarray:
+    """The objective of every candidate of ``edits`` (``edit_terms``)."""
+    return scores(problem, *edit_terms(problem, inc, edits))
+
+
+def edit_terms(problem: FleetProblem, inc: Incumbent, edits: Edits) -> Terms:
+    """Each user's served gain, own power and received power ``(C, K)`` for every candidate
+    of ``edits``: an edit changes the level totals of at
+    most two UAVs, so each candidate's totals, watts per level and powers are the incumbent's
+    with those entries changed, its received powers ``P' G`` a ``(C, N) x (N, K)`` product,
+    and only the edited users' served gains change."""
+    plan, L, C = inc.plan, problem.power_levels, len(edits)
+    rows = np.arange(C)
+    totals = np.repeat(inc.totals[None], C, axis=0)
+    for k, to, level in zip(edits.users.T, edits.uavs.T, edits.levels.T, strict=True):
+        totals[rows, plan.association[k]] -= plan.levels[k]
+        totals[rows, to] += level
     unit = problem.fleet.p_max_w / np.maximum(totals, L - 1)
     received = (unit * totals) @ inc.gains
-    own = np.take_along_axis(unit, assoc, axis=1) * lev
-    served = inc.gains[assoc, np.arange(assoc.shape[1])]
-    return scores(problem, served, own, received)
+    own = unit[:, plan.association] * plan.levels
+    served = np.repeat(inc.served[None], C, axis=0)
+    for k, to, level in zip(edits.users.T, edits.uavs.T, edits.levels.T, strict=True):
+        own[rows, k] = unit[rows, to] * level
+        served[rows, k] = inc.gains[to, k]
+    return served, own, received
 
 
 def move_scores(problem: FleetProblem, inc: Incumbent, who: np.ndarray, moved: np.ndarray):
-    """Candidates that move UAV ``who[c]`` to gains ``moved (C, K)``: only that UAV's gains
-    change, so every user's received power changes by ``(G' - G) P`` of that UAV."""
+    """The objective of every move candidate (``move_terms``)."""
+    return scores(problem, *move_terms(inc, who, moved))
+
+
+def move_terms(inc: Incumbent, who: np.ndarray, moved: np.ndarray) -> Terms:
+    """The terms of ``scores`` ``(C, K)`` for candidates that move UAV ``who[c]`` to gains
+    ``moved (C, K)``: only that UAV's gains change, so every user's received power changes
+    by ``(G' - G) P`` of that UAV."""
     plan = inc.plan
     received = inc.received + (moved - inc.gains[who]) * inc.power[who, None]
     mine = plan.association[None, :] == who[:, None]
-    served = np.where(mine, moved, inc.gains[plan.association, np.arange(len(plan.levels))])
+    served = np.where(mine, moved, inc.served)
     own = inc.unit[plan.association] * plan.levels
-    return scores(problem, served, np.broadcast_to(own, served.shape), received)
+    return served, np.broadcast_to(own, served.shape), received
 
 
-def power_candidates(problem: FleetProblem, plan: FleetPlan, pairs: bool):
-    """Associations and levels ``(C, K)`` one move away: one user's level set to any value,
-    one user moved to another UAV, and with ``pairs`` one level moved between two users."""
+def edit_candidates(problem: FleetProblem, plan: FleetPlan, pairs: bool) -> list[Edits]:
+    """The candidates one edit away: one user's level set to any other value, one user moved
+    to another UAV (its level kept), and with ``pairs`` one level moved between two users."""
     N, K, L = problem.fleet.n, problem.fleet.k, problem.power_levels
-    lev = np.repeat(plan.levels[None], K * L, axis=0)
-    lev[np.arange(K * L), np.repeat(np.arange(K), L)] = np.tile(np.arange(L), K)
-    levs = [lev]
-    if pairs:
-        i, j = np.nonzero(~np.eye(K, dtype=bool))
-        moved = np.repeat(plan.levels[None], len(i), axis=0)
-        moved[np.arange(len(i)), i] -= 1
-        moved[np.arange(len(i)), j] += 1
-        levs.append(moved[(moved >= 0).all(1) & (moved < L).all(1)])
-    lev = np.vstack(levs)
-    assoc = np.repeat(plan.association[None], len(lev), axis=0)
-    users, to = np.nonzero(plan.association[:, None] != np.arange(N)[None])
-    other = np.repeat(plan.association[None], len(users), axis=0)
-    other[np.arange(len(users)), users] = to
-    return np.vstack([assoc, other]), np.vstack([lev, np.repeat(plan.levels[None], len(users), 0)])
+    assoc, lev = plan.association, plan.levels
+    k, level = np.repeat(np.arange(K), L), np.tile(np.arange(L), K)
+    other = level != lev[k]
+    k, level = k[other], level[other]
+    users, to = np.nonzero(assoc[:, None] != np.arange(N)[None])
+    singles = Edits(np.concatenate([k, users])[:, None], np.concatenate([assoc[k], to])[:, None],
+                    np.concatenate([level, lev[users]])[:, None])
+    if not pairs:
+        return [singles]
+    i, j = np.nonzero(~np.eye(K, dtype=bool))
+    ok = (lev[i] > 0) & (lev[j] < L - 1)
+    i, j = i[ok], j[ok]
+    both = Edits(np.column_stack([i, j]), np.column_stack([assoc[i], assoc[j]]),
+                 np.column_stack([lev[i] - 1, lev[j] + 1]))
+    return [singles, both]
+
+
+@functools.lru_cache(maxsize=16)
+def move_offsets(step_m: float, steps: tuple[int, ...]) -> np.ndarray:
+    """Every axis move of ``steps`` lattice steps ``(6 len(steps), 3)``, m (built once: the
+    search asks every round)."""
+    return (MOVES[:6, None, :] * np.array(steps)[None, :, None]).reshape(-1, 3) * step_m
 
 
 def move_candidates(problem: FleetProblem, plan: FleetPlan, steps: tuple[int, ...]):
     """Each UAV moved by each of ``steps`` lattice steps along each axis, inside the box:
     which UAV ``(C,)`` and where ``(C, 3)``."""
     N, space = problem.fleet.n, problem.space
-    moves = (MOVES[:6, None, :] * np.array(steps)[None, :, None]).reshape(-1, 3) * space.step_m
+    moves = move_offsets(space.step_m, steps)
     who = np.repeat(np.arange(N), len(moves))
-    where = plan.positions[who] + np.tile(moves, (N, 1))
+    where = (plan.positions[:, None, :] + moves[None]).reshape(-1, 3)
     keep = space.contains(where)
     return who[keep], where[keep]
 
@@ -276,24 +365,27 @@ def local_search(
     current = plan
     for _ in range(max_rounds):
         inc = Incumbent.of(problem, current, gains)
-        assoc, lev = power_candidates(problem, current, pairs)
+        groups = edit_candidates(problem, current, pairs)
         who, where = move_candidates(problem, current, steps)
         moved = cache(where)
-        values = np.concatenate(
-            [power_scores(problem, inc, assoc, lev), move_scores(problem, inc, who, moved)]
-        )
+        terms = [edit_terms(problem, inc, e) for e in groups] + [move_terms(inc, who, moved)]
+        values = scores(problem, *(np.concatenate(t) for t in zip(*terms, strict=True)))
         i = int(np.argmax(values))
         if not values[i] > current.objective * IMPROVES:
             break
-        positions, association, levels = current.positions, current.association, current.levels
-        if i < len(assoc):
-            association, levels = assoc[i], lev[i]
+        value, positions = float(values[i]), current.positions
+        association, levels = current.association, current.levels
+        for edits in groups:
+            if i < len(edits):
+                association, levels = edits.applied(current, i)
+                break
+            i -= len(edits)
         else:
-            n, positions, gains = who[i - len(assoc)], positions.copy(), gains.copy()
-            positions[n], gains[n] = where[i - len(assoc)], moved[i - len(assoc)]
+            n, positions, gains = who[i], positions.copy(), gains.copy()
+            positions[n], gains[n] = where[i], moved[i]
         # the scored value stands in for the objective until the end (same SINR, summed in
         # another order: equal to rounding, far below IMPROVES)
-        current = FleetPlan(positions, association, levels, levels, float(values[i]))
+        current = FleetPlan(positions, association, levels, levels, value)
     if current is plan:
         return plan
     final = make_plan(problem, current.positions, current.association, current.levels)
@@ -376,13 +468,33 @@ def descend(problem: FleetProblem, plan: FleetPlan, cache: GainCache) -> FleetPl
     return plan
 
 
-def plan_fleet(problem: FleetProblem, starts: int = PLANNER_STARTS) -> FleetPlan:
-    """The fleet planner (module docstring): from each of ``starts`` k-means starts the
-    descent (local search, exact per-UAV power in the shared band), the best of them, then
-    the coarse relocations."""
+def plan_fleet(problem: FleetProblem, starts: int | None = None) -> FleetPlan:
+    """The fleet planner (module docstring): from each of ``starts`` k-means starts (default
+    ``planner_starts``) the descent (local search, exact per-UAV power in the shared band),
+    the best of them, then the coarse relocations."""
     cache = GainCache(problem)
-    plans = [descend(problem, kmeans_baseline(problem, seed), cache) for seed in range(starts)]
+    firsts: dict[frozenset, FleetPlan] = {}
+    for seed in range(planner_starts(problem) if starts is None else starts):
+        # a seed whose clusters an earlier seed found starts the same descent (its UAVs
+        # numbered otherwise): one descent per distinct partition of the users
+        start = kmeans_baseline(problem, seed)
+        firsts.setdefault(partition(start), start)
+    plans = [descend(problem, start, cache) for start in firsts.values()]
     return relocate(problem, max(plans, key=lambda p: p.objective), cache)
+
+
+def planner_starts(problem: FleetProblem) -> int:
+    """How many k-means seeds the planner starts from: in the shared band the descents of
+    different partitions end in optima a factor 2 apart (each more user below QoS halves
+    the objective), and the best partition is often not the first seeds' (N = 3, K = 10:
+    the 5th seed's); small fleets try more, where a descent costs a few ms."""
+    return SMALL_STARTS if problem.fleet.n * problem.fleet.k <= SMALL_FLEET else PLANNER_STARTS
+
+
+def partition(plan: FleetPlan) -> frozenset[tuple[int, ...]]:
+    """The users each UAV serves, whatever the UAVs' numbering."""
+    n = int(plan.association.max()) + 1
+    return frozenset(tuple(np.flatnonzero(plan.association == i)) for i in range(n))
 
 
 # --------------------------------------------------------------------------- the reference
@@ -453,6 +565,32 @@ def reference_fleet(
         if plan.objective > best.objective:
             best = plan
     return best
+
+
+# --------------------------------------------------------------------------- the upper bound
+def best_gains(problem: FleetProblem, chunk: int = 4096) -> np.ndarray:
+    """Each user's highest gain ``(K,)`` from any lattice point (every point of the lattice,
+    in chunks: no assumption on how the gain varies with position)."""
+    points = np.stack(np.meshgrid(*problem.space.axes(), indexing="ij"), -1).reshape(-1, 3)
+    best = np.zeros(problem.fleet.k)
+    for i in range(0, len(points), chunk):
+        best = np.maximum(best, problem.fleet.channel.mean_gain(points[i : i + chunk]).max(0))
+    return best
+
+
+def upper_bound(problem: FleetProblem) -> float:
+    """A certified upper bound on the objective of every fleet (docs/service/fleet.md, "Upper
+    bound"). OFDMA: every user served from its best lattice point, the N budgets pooled and
+    split continuously by water-filling, nobody below QoS: each fleet is one of the
+    allocations this maximises over (its user's gain is at most the best, its powers split at
+    most the pooled budget, and failures only halve), so none beats it. Shared band: no
+    bound is built (the other UAVs' interference and the association do not relax to a
+    tractable problem that is still tight), ``inf``."""
+    c = problem.fleet.channel
+    if c.access != "ofdma":
+        return math.inf
+    pooled = replace(c, p_max_w=float(problem.fleet.p_max_w.sum()))
+    return float(rate_ceiling(pooled, best_gains(problem)[None])[0])
 
 
 # The fleet's planners by name (the one-UAV planners of ``service.stage.PLANNERS`` place one
