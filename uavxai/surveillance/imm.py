@@ -59,20 +59,8 @@ class ImmTrack:
         w = cfg.imm_turn_rate  # straight; right and left at w and 2 w (positive: right)
         self.rates = np.array([0.0, w, -w, 2.0 * w, -2.0 * w])
         m = len(self.rates)
-        sh, sv = report.sigma_pos
-        x = np.zeros(DIM)
-        x[[X, Y, H]] = report.pos
-        var = np.zeros(DIM)
-        var[X] = var[Y] = sh**2 + 1e-6
-        var[H] = sv**2 + 1e-6
-        if report.vel is not None and math.isfinite(report.sigma_vel[0]):
-            x[[VX, VY, VH]] = report.vel
-            vh_, vv_ = report.sigma_vel
-            var[VX] = var[VY] = vh_**2 + 1e-6
-            var[VH] = vv_**2 + 1e-6
-        else:
-            var[VX] = var[VY] = cfg.init_vel_sigma_mps**2
-            var[VH] = (cfg.init_vel_sigma_mps / 5.0) ** 2
+        x7, var7 = ekf.initial_state(report, cfg)  # the EKF's first belief, less its turn rate
+        x, var = x7[_OF_EKF], var7[_OF_EKF]
         self.x = np.repeat(x[None, :], m, axis=0)
         self.P = np.repeat(np.diag(var)[None, :, :], m, axis=0)
         self.mu = np.full(m, 0.4 / (m - 1))

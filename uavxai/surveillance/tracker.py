@@ -153,6 +153,28 @@ def largest_sd(P: np.ndarray, i: int, j: int) -> float:
     return math.sqrt(max(lam, 0.0))
 
 
+def initial_state(report: Report, cfg: TrackerConfig) -> tuple[np.ndarray, np.ndarray]:
+    """A new track's mean and variances (this module's state layout) from its first report:
+    the report's position and velocity with their errors, or a velocity unknown to
+    ``init_vel_sigma_mps`` for a position-only report."""
+    sh, sv = report.sigma_pos
+    x = np.zeros(DIM)
+    x[X], x[Y], x[H] = report.pos
+    var = np.zeros(DIM)
+    var[X] = var[Y] = sh**2 + 1e-6
+    var[H] = sv**2 + 1e-6
+    if report.vel is not None and math.isfinite(report.sigma_vel[0]):
+        x[VX], x[VY], x[VH] = report.vel
+        vh_, vv_ = report.sigma_vel
+        var[VX] = var[VY] = vh_**2 + 1e-6
+        var[VH] = vv_**2 + 1e-6
+    else:
+        var[VX] = var[VY] = cfg.init_vel_sigma_mps**2
+        var[VH] = (cfg.init_vel_sigma_mps / 5.0) ** 2
+    var[W] = cfg.init_turn_rate_sigma**2
+    return x, var
+
+
 class Track:
     """One intruder's filter: mean ``x`` and covariance ``P`` at time ``t`` (its last
     measurement)."""
@@ -163,21 +185,7 @@ class Track:
         self.t = report.t_measured
         self.t_first = report.t_measured
         self.updates = 1
-        sh, sv = report.sigma_pos
-        x = np.zeros(DIM)
-        x[X], x[Y], x[H] = report.pos
-        var = np.zeros(DIM)
-        var[X] = var[Y] = sh**2 + 1e-6
-        var[H] = sv**2 + 1e-6
-        if report.vel is not None and math.isfinite(report.sigma_vel[0]):
-            x[VX], x[VY], x[VH] = report.vel
-            vh_, vv_ = report.sigma_vel
-            var[VX] = var[VY] = vh_**2 + 1e-6
-            var[VH] = vv_**2 + 1e-6
-        else:
-            var[VX] = var[VY] = cfg.init_vel_sigma_mps**2
-            var[VH] = (cfg.init_vel_sigma_mps / 5.0) ** 2
-        var[W] = cfg.init_turn_rate_sigma**2
+        x, var = initial_state(report, cfg)
         self.x = x
         self.P = np.diag(var)
 
