@@ -40,10 +40,14 @@ def _legs(own: Ownship, n: int, horizon_s: float) -> tuple[np.ndarray, np.ndarra
     return psi, xy
 
 
-def leg_costs(own: Ownship, intruders: Sequence[Intruder], goal: Goal, cfg) -> np.ndarray:
+def leg_costs(
+    own: Ownship, intruders: Sequence[Intruder], goal: Goal, cfg, xy: np.ndarray | None = None
+) -> np.ndarray:
     """(HEADINGS,) cost of each leg in seconds: flight time to the goal through the leg's end,
-    a conflict cost per intruder predicted too near, infinity for a leg leaving the area."""
-    _, xy = _legs(own, HEADINGS, ROUTE_HORIZON_S)
+    a conflict cost per intruder predicted too near, infinity for a leg leaving the area.
+    ``xy``: the legs' positions when the caller has them (:func:`_legs`)."""
+    if xy is None:
+        _, xy = _legs(own, HEADINGS, ROUTE_HORIZON_S)
     end = xy[:, -1]
     speed = max(own.speed, 1.0)
     cost = ROUTE_HORIZON_S + np.hypot(goal[0] - end[:, 0], goal[1] - end[:, 1]) / speed
@@ -68,9 +72,9 @@ def route_goal(own: Ownship, intruders: Sequence[Intruder], goal: Goal, cfg) -> 
     speed = max(own.speed, 1.0)
     if math.hypot(goal[0] - own.x, goal[1] - own.y) <= speed * ROUTE_HORIZON_S:
         return goal
-    cost = leg_costs(own, intruders, goal, cfg)
-    best = int(np.argmin(cost))
     psi, xy = _legs(own, HEADINGS, ROUTE_HORIZON_S)
+    cost = leg_costs(own, intruders, goal, cfg, xy)
+    best = int(np.argmin(cost))
     to_goal = math.atan2(goal[0] - own.x, goal[1] - own.y)
     straight = int(np.argmin(np.abs(np.angle(np.exp(1j * (psi - to_goal))))))
     if not np.isfinite(cost[best]) or cost[straight] <= cost[best]:

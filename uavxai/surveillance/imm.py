@@ -37,9 +37,7 @@ _OF_EKF = [ekf.X, ekf.Y, ekf.VX, ekf.VY, ekf.H, ekf.VH]  # this state in the EKF
 def _transition(w: float, T: float) -> np.ndarray:
     """The linear state transition of a constant turn at ``w`` rad/s (clockwise) over ``T``
     (the EKF's coordinated turn with its turn rate held)."""
-    x = np.zeros(ekf.DIM)
-    x[ekf.W] = w
-    return ekf.ct_jacobian(x, T)[np.ix_(_OF_EKF, _OF_EKF)]
+    return ekf.ct_transition(w, T)[np.ix_(_OF_EKF, _OF_EKF)]
 
 
 def _noise(T: float, cfg: ekf.TrackerConfig) -> np.ndarray:

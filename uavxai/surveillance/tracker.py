@@ -114,14 +114,23 @@ def ct_predict_state(x: np.ndarray, T: float) -> np.ndarray:
     return out
 
 
-def ct_jacobian(x: np.ndarray, T: float) -> np.ndarray:
-    so, co, c, s = _ct_terms(x[W], T)
+def ct_transition(w: float, T: float) -> np.ndarray:
+    """The CT model's transition over ``T`` with the turn rate ``w`` held (linear in the rest
+    of the state); the turn rate's own column is the identity's."""
+    so, co, c, s = _ct_terms(w, T)
     F = np.eye(DIM)
     F[X, VX], F[X, VY] = so, co
     F[Y, VX], F[Y, VY] = -co, so
     F[VX, VX], F[VX, VY] = c, s
     F[VY, VX], F[VY, VY] = -s, c
     F[H, VH] = T
+    return F
+
+
+def ct_jacobian(x: np.ndarray, T: float) -> np.ndarray:
+    """The CT model's Jacobian at ``x``: its transition, and the turn rate's column by central
+    differences of the prediction."""
+    F = ct_transition(x[W], T)
     eps = 1e-6
     xp, xm = x.copy(), x.copy()
     xp[W] += eps
