@@ -204,3 +204,21 @@ def test_nonsense_inputs_are_user_errors():
         planner.plan(own, intruders, (1.0, math.nan, 3.0))
     with pytest.raises(UserError, match="intruder 9 has a non-finite field"):
         planner.plan(own, [Intruder(9, math.inf, 0, 120, 0, 0)], GOAL)
+
+
+def test_a_memo_past_its_bound_between_decisions_changes_no_decision(monkeypatch):
+    """The body-motion memo is bounded between searches: a planner whose memo passes the bound
+    while it plans (a long campaign) decides what a fresh one decides. Cleared in mid-search,
+    the search lost keys it held (a KeyError hundreds of JSBSim encounters into a campaign)."""
+    import uavxai.avoidance.model as model
+
+    own, intruders = random_encounter(6)
+    fresh = [MCTSPlanner(PlannerConfig(seed=7)) for _ in range(3)]
+    monkeypatch.setattr(model, "MEMO_LIMIT", 3)  # every search passes it
+    planner = MCTSPlanner(PlannerConfig(seed=7))
+    for speed, p in zip((14.0, 20.0, 26.0), fresh, strict=True):
+        o = Ownship(own.x, own.y, own.h, speed, own.heading, bank=own.bank)
+        planner.reset(7)
+        bounded = planner.plan(o, intruders, (1000, 1000, 100))
+        np.testing.assert_array_equal(bounded.tree.visits, p.plan(o, intruders,
+                                                                   (1000, 1000, 100)).tree.visits)

@@ -260,6 +260,7 @@ class Track:
         return np.flatnonzero(np.einsum("ij,ij->i", d, d) <= (distance + self.radius) ** 2)
 
 
+MEMO_LIMIT = 50_000  # body motions kept from one search to the next (memory)
 _BATCH_MEMO = 4096  # EncounterModel._body's entries before it starts afresh ...
 _BATCH_CELLS = 256  # ... each of at most this many rows x sample instants: at most ~25 MB
 _INDEX_MIN = 6  # below this many intruders a plain distance test is as fast as the grid
@@ -718,8 +719,6 @@ class EncounterModel:
 
     def _remember(self, keys: Sequence[_MotionKey], n: int) -> list[_BodyMotion]:
         """Compute and memoise the body motions of ``keys`` (not yet memoised), one batch."""
-        if len(self._memo) > 50_000:
-            self._memo.clear()
         k = self.actions.size
         v_, phi_, cmd_ = (np.repeat(np.array([key[i] for key in keys]), k) for i in range(3))
         actions = np.tile(self.actions, len(keys))
@@ -735,6 +734,11 @@ class EncounterModel:
         (M, K) table of the keys' indices that each key's children have (-1 on the last
         level, whose children are never expanded). A search needs a few dozen; one at a time
         they cost more than the rest of the search."""
+        if len(self._memo) > MEMO_LIMIT:
+            # Bounded between searches, never within one: a search holds the keys it was given
+            # (a clear in mid-search lost them: a KeyError some hundred JSBSim encounters into
+            # a campaign, when the memo first passed its bound).
+            self._memo.clear()
         n = self.substeps(duration)
         keys = [motion_key(state[V], state[PHI], state[PHI_CMD], duration)]
         index = {keys[0]: 0}
