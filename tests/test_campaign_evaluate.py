@@ -14,6 +14,8 @@ import numpy as np
 import pytest
 
 from uavxai.campaign import (
+    DAA_COLUMNS,
+    DAA_EPISODE_COLUMNS,
     EPISODE_COLUMNS,
     FLIGHT_COLUMNS,
     FLIGHT_RESULTS,
@@ -67,7 +69,7 @@ def test_evaluate_writes_results_episodes_and_plots(tmp_path: Path) -> None:
     )
     assert report["episodes"] == 12
     columns, results = _read(tmp_path / "results.csv")
-    assert columns == list(RESULT_COLUMNS + FLIGHT_RESULTS)
+    assert columns == list(RESULT_COLUMNS + FLIGHT_RESULTS + DAA_COLUMNS)
     assert columns[:9] == [
         "method",
         "intruders",
@@ -92,8 +94,12 @@ def test_evaluate_writes_results_episodes_and_plots(tmp_path: Path) -> None:
             assert float(r[f"{k}_lo"]) <= float(r[k]) <= float(r[f"{k}_hi"])
         assert float(r["mean_steps"]) >= 1 and float(r["decision_ms_p50"]) > 0
     columns, episodes = _read(tmp_path / "episodes.csv")
-    assert columns == list(EPISODE_COLUMNS + FLIGHT_COLUMNS)
+    assert columns == list(EPISODE_COLUMNS + FLIGHT_COLUMNS + DAA_EPISODE_COLUMNS)
     assert len(episodes) == 12
+    for e in episodes:  # random traffic: every seed weighs 1; an NMAC is inside well clear
+        assert float(e["weight"]) == 1.0 and int(e["lowc"]) >= int(e["nmac"])
+        if e["method"] == "none":
+            assert int(e["alert"]) == int(e["manoeuvre"]) == 0
     assert {e["outcome"] for e in episodes} <= {"goal", "collision", "timeout", "out_of_bounds"}
     assert [int(e["seed"]) for e in episodes[:3]] == [SCENARIO.seed + i for i in range(3)]
     for name in ("goal_rate.png", "collision_rate.png", "steps.png"):
@@ -169,13 +175,16 @@ def test_merge_campaigns_of_different_methods(tmp_path: Path) -> None:
     merged = merge_campaigns([tmp_path / "a", tmp_path / "b"], tmp_path / "ab")
     assert [r["method"] for r in merged] == ["none", "mcts_fast"]
     columns, rows = _read(tmp_path / "ab" / "results.csv")
-    assert columns == list(RESULT_COLUMNS + FLIGHT_RESULTS) and len(rows) == 2
+    assert columns == list(RESULT_COLUMNS + FLIGHT_RESULTS + DAA_COLUMNS) and len(rows) == 2
     _, a_rows = _read(tmp_path / "a" / "results.csv")
     assert rows[0] == a_rows[0]
     # flown apart, mcts_fast had no `none` to compare with; merged, it has (seed 1 is an NMAC
     # for `none`)
     _, b_rows = _read(tmp_path / "b" / "results.csv")
     assert b_rows[0]["risk_ratio"] == "" and rows[1]["risk_ratio"] != ""
+    # weight 1 each, the weighted NMAC risk ratio is the plain one
+    assert b_rows[0]["nmac_risk_ratio"] == ""
+    assert rows[1]["nmac_risk_ratio"] == rows[1]["risk_ratio"]
     assert rows[1]["decision_ms_p50"] == b_rows[0]["decision_ms_p50"]
     _, episodes = _read(tmp_path / "ab" / "episodes.csv")
     assert len(episodes) == 4
@@ -190,6 +199,12 @@ def test_merge_campaigns_of_different_methods(tmp_path: Path) -> None:
     merge_campaigns([tmp_path / "a", tmp_path / "b"], tmp_path / "old")
     _, merged_rows = _read(tmp_path / "old" / "episodes.csv")
     assert [r["path_excess"] == "" for r in merged_rows] == [True, True, False, False]
+    # one written before random traffic carried the detect-and-avoid record is refused
+    head, *body = (ln.split(",") for ln in old.read_text().splitlines())
+    keep = [i for i, c in enumerate(head) if c not in DAA_EPISODE_COLUMNS]
+    old.write_text("".join(",".join(r[i] for i in keep) + "\n" for r in [head, *body]))
+    with pytest.raises(UserError, match="without it"):
+        merge_campaigns([tmp_path / "a", tmp_path / "b"], tmp_path / "older")
 
 
 def test_merge_pools_seeds_into_the_campaign_flown_at_once(tmp_path: Path) -> None:

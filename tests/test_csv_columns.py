@@ -9,7 +9,14 @@ from pathlib import Path
 
 import pytest
 
-from uavxai.campaign import EPISODE_COLUMNS, FLIGHT_COLUMNS, FLIGHT_RESULTS, RESULT_COLUMNS
+from uavxai.campaign import (
+    DAA_COLUMNS,
+    DAA_EPISODE_COLUMNS,
+    EPISODE_COLUMNS,
+    FLIGHT_COLUMNS,
+    FLIGHT_RESULTS,
+    RESULT_COLUMNS,
+)
 from uavxai.comms.delivery import SERVICE_COLUMNS, USERS_COLUMNS
 from uavxai.sim.observers import TRAJECTORY_FIELDS
 
@@ -40,12 +47,13 @@ def test_the_readme_lists_each_run_csv_as_declared(name, columns):
 def test_the_readme_lists_the_campaign_csvs_as_declared():
     # episodes.csv: the per-episode columns, then the goal's
     listed = _column_lists(_readme_row("episodes.csv"))
-    assert tuple(c for cols in listed for c in cols) == EPISODE_COLUMNS + FLIGHT_COLUMNS
+    assert tuple(c for cols in listed for c in cols) == (EPISODE_COLUMNS + FLIGHT_COLUMNS
+                                                         + DAA_EPISODE_COLUMNS)
     # results.csv: its leading list, then the named interval and ratio columns in prose
     row = _readme_row("results.csv")
     head = _column_lists(row)[0]
     n = len(head)
     assert head == RESULT_COLUMNS[:n]
-    for column in RESULT_COLUMNS[n:] + FLIGHT_RESULTS:
+    for column in RESULT_COLUMNS[n:] + FLIGHT_RESULTS + DAA_COLUMNS:
         base = re.sub(r"_(lo|hi)$", "", column)
         assert f"`{base}`" in row, column

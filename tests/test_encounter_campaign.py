@@ -129,17 +129,18 @@ def short(duration: int = 60, window: tuple[int, int] = (20, 30), **encounters):
 def _fly(sc, method: str, seed: int, dynamics: str = "kinematic"):
     from uavxai.avoidance.planners import make_planner
     from uavxai.avoidance.types import PlannerConfig
-    from uavxai.sim.encounter import EncounterObserver, fly_encounter, route
+    from uavxai.sim.daa_record import DaaObserver
+    from uavxai.sim.encounter import fly_encounter, route
     from uavxai.sim.flight_quality import FlightQuality
 
     start, _ = route(sc)
     quality = FlightQuality((start, sc.ownship.goal))  # the ownship's samples
-    keep = EncounterObserver(PlannerConfig.from_scenario(sc))  # a second recorder: the intruder
+    keep = DaaObserver(PlannerConfig.from_scenario(sc))  # a second recorder: the intruder
     r, rec, enc = fly_encounter(sc, make_planner(method, PlannerConfig.from_scenario(sc)), seed,
                                 dynamics, quality, observers=[keep])
     import numpy as np
 
-    return r, rec, enc, np.array(quality.own), np.array(keep.intruder), quality.result()
+    return r, rec, enc, np.array(quality.own), keep.tracks()[:, 0], quality.result()
 
 
 def test_the_same_encounter_seed_is_the_same_flight() -> None:
@@ -190,7 +191,7 @@ def test_a_small_kinematic_encounter_campaign_writes_the_daa_columns(tmp_path) -
     import csv
     import math
 
-    from uavxai.campaign import DAA_COLUMNS, ENCOUNTER_COLUMNS, evaluate_command
+    from uavxai.campaign import DAA_COLUMNS, DAA_EPISODE_COLUMNS, evaluate_command
     from uavxai.errors import UserError
     from uavxai.sim.encounter import draw_encounter
 
@@ -201,7 +202,7 @@ def test_a_small_kinematic_encounter_campaign_writes_the_daa_columns(tmp_path) -
         episodes = list(csv.DictReader(f))
     with (out / "results.csv").open() as f:
         results = {r["method"]: r for r in csv.DictReader(f)}
-    assert len(episodes) == 12 and set(ENCOUNTER_COLUMNS) <= set(episodes[0])
+    assert len(episodes) == 12 and set(DAA_EPISODE_COLUMNS) <= set(episodes[0])
     for r in episodes:
         seed = int(r["seed"])
         assert seed == sc.seed + int(r["episode"]) and r["intruders"] == "1"
@@ -276,7 +277,7 @@ def test_a_jsbsim_encounter_with_a_cessna_flies_to_its_end_and_records_its_colum
     column."""
     import math
 
-    from uavxai.campaign import ENCOUNTER_COLUMNS, run_campaign_episode
+    from uavxai.campaign import DAA_EPISODE_COLUMNS, run_campaign_episode
     from uavxai.sim.encounter import draw_encounter
 
     sc = short(duration=30, window=(10, 20))
@@ -290,7 +291,7 @@ def test_a_jsbsim_encounter_with_a_cessna_flies_to_its_end_and_records_its_colum
     row = run_campaign_episode(sc, "mcts_vertical", 1, 2, "jsbsim")
     assert row["outcome"] in ("timeout", "collision")
     assert row["weight"] == pytest.approx(enc.weight)
-    for k in ENCOUNTER_COLUMNS:
+    for k in DAA_EPISODE_COLUMNS:
         assert math.isfinite(float(row[k])), k
     assert row["manoeuvre"] == 1 and row["alert"] == 1  # an NMAC ahead: it does something
 

@@ -21,8 +21,10 @@ says), the same for every episode and as ``uavxai run``.
 
 A scenario with an ``encounters`` section (docs/scenario.md "encounters") flies episode ``i`` as
 encounter ``i`` (:func:`uavxai.sim.encounter.fly_encounter`, seed ``scenario.seed + i``, one
-intruder: intruder counts are refused); its rows gain ``ENCOUNTER_COLUMNS`` and its results the
-weighted ``DAA_COLUMNS`` against ``none`` on the same seeds (docs/daa-metrics.md).
+intruder: intruder counts are refused), weighted by its importance weight. Every campaign's
+rows carry the detect-and-avoid record ``DAA_EPISODE_COLUMNS`` (weight 1 for random traffic)
+and its results the weighted ``DAA_COLUMNS`` against ``none`` on the same seeds
+(docs/daa-metrics.md).
 
 Episodes run in this process (``workers=1``), in local worker processes (``workers>1``; the
 ``forkserver`` context, one torch thread each) or as Ray tasks (``ray_address``: ``local``
@@ -46,8 +48,8 @@ from uavxai.campaign.command import daa_table, evaluate_command, results_table
 from uavxai.campaign.episode import campaign_spec, rerun_row, run_campaign_episode
 from uavxai.campaign.files import (
     DAA_COLUMNS,
+    DAA_EPISODE_COLUMNS,
     DAA_RATES,
-    ENCOUNTER_COLUMNS,
     EPISODE_COLUMNS,
     FLIGHT_COLUMNS,
     FLIGHT_RESULTS,
@@ -66,7 +68,7 @@ __all__ = [
     "DAA_COLUMNS",
     "DAA_RATES",
     "DYNAMICS",
-    "ENCOUNTER_COLUMNS",
+    "DAA_EPISODE_COLUMNS",
     "EPISODE_COLUMNS",
     "FLIGHT_COLUMNS",
     "FLIGHT_RESULTS",

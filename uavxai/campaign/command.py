@@ -104,7 +104,7 @@ def evaluate_command(
     results, plots = _save(rows, out, f"{scenario.name}, {dynamics}, {episodes} episodes")
     wall = time.perf_counter() - wall0
     console.print(results_table(results))
-    if scenario.encounters is not None:
+    if any(math.isfinite(cell_number(r.get("nmac_prob"))) for r in results):
         console.print(daa_table(results))
     console.print(f"wrote {out / 'results.csv'}, {out / 'episodes.csv'} and {len(plots)} plots")
     return {"episodes": len(rows), "wall_s": wall, "results": results}
@@ -170,19 +170,21 @@ def results_table(results: Sequence[dict]):
 
 
 def daa_table(results: Sequence[dict]):
-    """The weighted detect-and-avoid columns of an encounter campaign, one row per method."""
+    """The weighted detect-and-avoid columns of a campaign, one row per method and intruder
+    count (an encounter campaign's: one intruder each)."""
     from rich.table import Table
 
     def ci(r: dict, key: str) -> str:
         v, lo, hi = (cell_number(r.get(k)) for k in (key, f"{key}_lo", f"{key}_hi"))
         return "-" if math.isnan(v) else f"{v:.3g} [{lo:.3g}, {hi:.3g}]"
 
-    t = Table("method", "encounters", "P(NMAC)", "NMAC risk ratio", "induced", "P(LoWC)",
+    t = Table("method", "intruders", "episodes", "P(NMAC)", "NMAC risk ratio", "induced", "P(LoWC)",
               "LoWC ratio", "alert rate", "unnecessary manoeuvre", "reversals", "path excess",
               "CI check", title="detect and avoid (weighted, 95 % bootstrap)")  # fmt: skip
     for r in results:
-        t.add_row(r["method"], str(r["episodes"]), ci(r, "nmac_prob"), ci(r, "nmac_risk_ratio"),
-                  ci(r, "induced_risk_ratio"), ci(r, "lowc_prob"), ci(r, "lowc_ratio"),
+        t.add_row(r["method"], str(r["intruders"]), str(r["episodes"]), ci(r, "nmac_prob"),
+                  ci(r, "nmac_risk_ratio"), ci(r, "induced_risk_ratio"), ci(r, "lowc_prob"),
+                  ci(r, "lowc_ratio"),
                   ci(r, "alert_rate"), ci(r, "unnecessary_manoeuvre_rate"),
                   f"{cell_number(r.get('mean_reversals')):.2f}",
                   f"{cell_number(r.get('mean_path_excess')):.4f}", str(r.get("ci_check", "")))

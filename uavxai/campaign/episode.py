@@ -66,16 +66,18 @@ def run_campaign_episode(
     goal: Sequence[float] | None = None,
 ) -> dict:
     """Fly one campaign episode on the episode engine (the commands go straight to the
-    autopilot, no recording) and return its ``episodes.csv`` row (without ``episode``), plus
+    autopilot, no recording) and return its ``episodes.csv`` row (without ``episode``: with
+    its detect-and-avoid record, uavxai.sim.daa_record, weighted 1 for random traffic), plus
     ``decision_ms`` (every decision's planner time, for the pooled median). ``goal``: the
     campaign's goal (None: the scenario's, see :func:`campaign_spec`)."""
+    from uavxai.avoidance.types import PlannerConfig
     from uavxai.sim.build import fly
+    from uavxai.sim.daa_record import DaaObserver
     from uavxai.sim.flight_quality import FlightQuality
 
     if method not in avoidance_planners():
         raise UserError(f"method '{method}' is not one of {', '.join(avoidance_planners())}.")
     spec = campaign_spec(scenario, n_intruders, seed, dynamics, goal)
-    extra: dict = {}
     start = (spec.start.x, spec.start.y, spec.start.h)
     quality = FlightQuality(None if spec.mission else (start, spec.goal))
     if scenario.encounters is not None:  # episode i is encounter i, with its one intruder
@@ -83,17 +85,10 @@ def run_campaign_episode(
 
         r, rec, _ = fly_encounter(scenario, planner_for(scenario, method), seed, dynamics, quality)
         n_intruders = 1
-        extra = {
-            "weight": float(rec.weight),
-            "hmd_m": round(rec.hmd_m, 3),
-            "vmd_m": round(rec.vmd_m, 3),
-            "lowc": int(rec.lowc),
-            "alert": int(rec.alert),
-            "manoeuvre": int(rec.manoeuvre),
-            "reversals": int(rec.reversals),
-        }
     else:
-        r = fly(spec, planner_for(scenario, method), observers=[quality])
+        daa = DaaObserver(PlannerConfig.from_scenario(scenario))
+        r = fly(spec, planner_for(scenario, method), observers=[quality, daa])
+        rec = daa.record(quality, scenario.avoidance.well_clear)
     if r.outcome is Outcome.INTERRUPTED:
         # a signal to this process: the campaign stops here (its caller keeps the finished
         # episodes), and a flight cut short is no episode of its results
@@ -113,7 +108,7 @@ def run_campaign_episode(
         "decision_ms_p50": round(float(np.median(ms)), 4) if ms else math.nan,
         **{k: round(float(v), 3) for k, v in zip(GOAL_COLUMNS, spec.goal, strict=True)},
         **quality.result().row(),
-        **extra,
+        **rec.columns(),
         "decision_ms": ms,
     }
 

@@ -56,10 +56,11 @@ EPISODE_COLUMNS = (
     "goal_h",
 )
 GOAL_COLUMNS = EPISODE_COLUMNS[-3:]
-# Encounter campaigns (a scenario with `encounters`; docs/daa-metrics.md) add these:
-# per episode (uavxai.sim.encounter), and per method the weighted DAA estimates of
-# uavxai.daa_metrics.daa_summary against `none` on the same encounters.
-ENCOUNTER_COLUMNS = ("weight", "hmd_m", "vmd_m", "lowc", "alert", "manoeuvre", "reversals")
+# Every episode's detect-and-avoid record (uavxai.sim.daa_record; docs/daa-metrics.md), weighted
+# by the encounter's importance weight (1 for random traffic); per method the weighted DAA
+# estimates of uavxai.daa_metrics.daa_summary against `none` on the same seeds. Campaigns
+# written before random traffic carried them have none of these columns.
+DAA_EPISODE_COLUMNS = ("weight", "hmd_m", "vmd_m", "lowc", "alert", "manoeuvre", "reversals")
 # How each episode was flown (uavxai.sim.flight_quality), after the goal's columns; results
 # gain their median / means. Files written before they existed are merged with them empty.
 FLIGHT_COLUMNS = ("path_excess", "reversals_per_min", "bank_over_25_s")
@@ -76,16 +77,17 @@ DAA_COLUMNS = (
 TIMING_COLUMNS = ("decision_ms_p50",)
 
 
-def is_encounter_row(r: dict) -> bool:
-    """A row of an encounter campaign (it has a weight)."""
+def has_daa_columns(r: dict) -> bool:
+    """A row with the detect-and-avoid record (it has a weight): an encounter campaign's, or
+    a random-traffic one written since it carried the record."""
     return str(r.get("weight", "")) != ""
 
 
 def columns_of(rows: Sequence[dict]) -> tuple[tuple[str, ...], tuple[str, ...]]:
-    """The (episodes.csv, results.csv) columns of a campaign's rows: with the encounter
-    columns when every row is an encounter's."""
-    if rows and all(is_encounter_row(r) for r in rows):
-        return (EPISODE_COLUMNS + FLIGHT_COLUMNS + ENCOUNTER_COLUMNS,
+    """The (episodes.csv, results.csv) columns of a campaign's rows: with the detect-and-avoid
+    columns when every row has its record."""
+    if rows and all(has_daa_columns(r) for r in rows):
+        return (EPISODE_COLUMNS + FLIGHT_COLUMNS + DAA_EPISODE_COLUMNS,
                 RESULT_COLUMNS + FLIGHT_RESULTS + DAA_COLUMNS)  # fmt: skip
     return EPISODE_COLUMNS + FLIGHT_COLUMNS, RESULT_COLUMNS + FLIGHT_RESULTS
 

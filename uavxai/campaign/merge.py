@@ -10,14 +10,14 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from uavxai.campaign.files import (
-    ENCOUNTER_COLUMNS,
+    DAA_EPISODE_COLUMNS,
     EPISODE_COLUMNS,
     FLIGHT_COLUMNS,
     GOAL_COLUMNS,
     RESULT_COLUMNS,
     checked_row,
     columns_of,
-    is_encounter_row,
+    has_daa_columns,
     read_rows,
     write_csv,
 )
@@ -48,15 +48,15 @@ def merge_campaigns(sources: Sequence[str | Path], out: str | Path, title: str =
         rows = [checked_row(r, src / "episodes.csv", i) for i, r in enumerate(rows, start=2)]
         for i, r in enumerate(rows, start=2):
             try:
-                if is_encounter_row(r):  # an encounter campaign's columns
+                if has_daa_columns(r):  # the detect-and-avoid record's columns
                     if not 0 < float(r["weight"]) < math.inf:
                         raise ValueError
-                    for column in ENCOUNTER_COLUMNS[1:]:
+                    for column in DAA_EPISODE_COLUMNS[1:]:
                         cell_number(r.get(column))
             except (TypeError, ValueError):
                 raise UserError(
-                    f"{src / 'episodes.csv'} line {i}: in an encounter campaign "
-                    f"{', '.join(ENCOUNTER_COLUMNS)} must be numbers, the weight > 0."
+                    f"{src / 'episodes.csv'} line {i}: in a detect-and-avoid record "
+                    f"{', '.join(DAA_EPISODE_COLUMNS)} must be numbers, the weight > 0."
                 ) from None
         for r in rows:
             for column in FLIGHT_COLUMNS:  # not in files written before they existed
@@ -79,10 +79,12 @@ def merge_campaigns(sources: Sequence[str | Path], out: str | Path, title: str =
                 ms = float(r["decision_ms_p50"] or "nan")
                 if math.isfinite(ms) and ms >= 0:
                     p50[(r["method"], int(r["intruders"]))] = ms
-    if len({is_encounter_row(r) for r in episodes}) > 1:
+    if len({has_daa_columns(r) for r in episodes}) > 1:
         raise UserError(
-            "these campaigns mix encounter campaigns (episodes.csv with weight, hmd_m, ...) and "
-            "random-traffic ones; merge campaigns of the same scenario."
+            "these campaigns mix episodes with the detect-and-avoid record (episodes.csv with "
+            "weight, hmd_m, ...) and episodes without it (a random-traffic campaign written "
+            "before it was recorded); merge campaigns of the same scenario flown by the same "
+            "version, or fly the older one again."
         )
     if len(goals) > 1:
         what = "; ".join(f"{src}: ({', '.join(map(str, g))})" for g, src in goals.items())

@@ -34,7 +34,7 @@ _STYLE = {
 
 
 def plot_campaign(results: Sequence[dict], out: Path, title: str = "") -> list[Path]:
-    """Every figure of a campaign (its rates; an encounter campaign's estimates too)."""
+    """Every figure of a campaign (its rates and its detect-and-avoid estimates)."""
     return plot_results(results, out, title) + plot_daa(results, out, title)
 
 
@@ -90,7 +90,8 @@ DAA_FIGURE = "daa_metrics.png"
 
 
 def plot_daa(results: Sequence[dict], out: Path, title: str = "") -> list[Path]:
-    """An encounter campaign's estimates: one panel per metric, each method's weighted point
+    """A campaign's detect-and-avoid estimates: one panel per metric, each method's (and
+    intruder count's) weighted point
     estimate with its 95 % bootstrap interval, the goals dashed (point) and dotted (upper
     bound). Nothing when the results have no encounter estimates."""
     rows = [r for r in results if _finite(r.get("nmac_risk_ratio"))]
@@ -103,7 +104,9 @@ def plot_daa(results: Sequence[dict], out: Path, title: str = "") -> list[Path]:
 
     fig, axes = plt.subplots(len(DAA_PLOTTED), 1, figsize=(6.5, 1.3 + 1.15 * len(DAA_PLOTTED)
                              * max(1, len(rows)) ** 0.5 / 1.6), dpi=120)  # fmt: skip
-    labels = [f"{r['method']} (n={int(r['episodes'])})" for r in rows]
+    counts = len({int(r["intruders"]) for r in rows}) > 1  # random traffic at several counts
+    labels = [f"{r['method']}" + (f" @{int(r['intruders'])}" if counts else "")
+              + f" (n={int(r['episodes'])})" for r in rows]
     for ax, (key, label, goal) in zip(axes, DAA_PLOTTED, strict=True):
         for y, r in enumerate(rows):
             if key.endswith("ratio") and r["method"] == "none":

@@ -10,7 +10,7 @@ from collections.abc import Iterable, Sequence
 
 import numpy as np
 
-from uavxai.campaign.files import DAA_COLUMNS, FLIGHT_COLUMNS, is_encounter_row
+from uavxai.campaign.files import DAA_COLUMNS, FLIGHT_COLUMNS, has_daa_columns
 from uavxai.errors import UserError
 from uavxai.outputs import cell_number
 
@@ -28,7 +28,7 @@ def summarise(rows: Iterable[dict]) -> list[dict]:
         groups.setdefault((r["method"], int(r["intruders"])), []).append(r)
     out = [_summary_row(method, n, rs, groups.get(("none", n))) for (method, n), rs in
            groups.items()]  # fmt: skip
-    if rows and all(is_encounter_row(r) for r in rows):
+    if rows and all(has_daa_columns(r) for r in rows):
         for row in out:
             n = row["intruders"]
             row.update(_daa_row(row["method"], groups[(row["method"], n)], groups.get(("none", n))))

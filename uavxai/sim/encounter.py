@@ -8,25 +8,8 @@ intruder following the encounter's track (the `track` pilot) on
 ``encounters.intruder_aircraft``, for ``encounters.duration_s``, and returns the episode
 result with the per-encounter detect-and-avoid record (:class:`EncounterRecord`).
 
-The record's definitions (docs/daa-metrics.md, "In campaigns"):
-
-* ``hmd_m``, ``vmd_m``: :func:`uavxai.daa_metrics.hmd_vmd` of the flown ownship and intruder
-  positions, sampled at ``dynamics.trajectory_hz``;
-* ``lowc``: :func:`uavxai.daa_metrics.loss_of_well_clear` of the same, with
-  ``avoidance.well_clear``; ``nmac``: the judge's (``avoidance.nmac``), as every campaign;
-* ``alert``: at some decision, the planner predicted a conflict on the line it would have
-  flown toward the goal: the root option of the action the ``none`` planner takes in that
-  state (same ownship, same picture, same goal) has a ``meets`` (its predicted line comes
-  inside ``d_min_m`` plus the intruder's margin within the planner's look-ahead). A planner
-  that reports no options (``none``) never alerts;
-* ``manoeuvre``: at some decision, the command sent differs from what ``none`` would have sent
-  in that state: another bank command (by more than 1e-6 rad), another acceleration as flown
-  (a speed-up at the top speed, a slow-down at the bottom one, is none), or a height target
-  more than 1 m off the leg's height. ``none`` never manoeuvres;
-* ``reversals``: :func:`uavxai.daa_metrics.reversals` of the bank commands sent.
-
-The ownship's samples, its bank commands and its path excess are :class:`FlightQuality`'s
-(every campaign episode's), which the encounter's observer reads rather than records again.
+The record's columns are every campaign episode's (:mod:`uavxai.sim.daa_record`), with the
+encounter's importance weight and the geometry it was drawn with.
 """
 
 from __future__ import annotations
@@ -37,10 +20,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from uavxai.avoidance import direct
-from uavxai.avoidance.model import accel_command, bank_command
 from uavxai.avoidance.types import Planner, PlannerConfig
-from uavxai.daa_metrics import hmd_vmd, loss_of_well_clear, reversals
 from uavxai.encounters import (
     Encounter,
     EncounterConfig,
@@ -55,11 +35,10 @@ from uavxai.encounters.tracks import MIN_FIXED_WING_SPEED
 from uavxai.errors import UserError
 from uavxai.geometry import bearing
 from uavxai.scenario import IntruderSpec, Scenario, aircraft_height_loop, aircraft_speed_range
-from uavxai.sim.episode import Episode, EpisodeResult, Observer
+from uavxai.sim.daa_record import DaaObserver, DaaRecord
+from uavxai.sim.episode import EpisodeResult
 from uavxai.sim.flight_quality import FlightQuality
 
-BANK_TOL_RAD = 1e-6
-HEIGHT_TOL_M = 1.0
 # A track's turns need at most this share of the intruder's bank limit, leaving the track
 # pilot the rest to correct its errors.
 TRACK_BANK_SHARE = 0.8
@@ -144,66 +123,14 @@ def flight_scenario(scenario: Scenario) -> Scenario:
 
 
 @dataclass
-class EncounterRecord:
-    """One flown encounter's detect-and-avoid columns (episodes.csv)."""
+@dataclass
+class EncounterRecord(DaaRecord):
+    """One flown encounter's detect-and-avoid columns (:class:`DaaRecord`) and the geometry the
+    encounter was drawn with."""
 
-    weight: float
-    hmd_m: float
-    vmd_m: float
-    lowc: bool
-    alert: bool
-    manoeuvre: bool
-    reversals: int
-    sampled_hmd_m: float  # the encounter's, at TCA
-    sampled_vmd_m: float
-    tca_s: float
-
-
-class EncounterObserver(Observer):
-    """Records what the DAA columns need beyond the ownship's flight (``FlightQuality``'s): the
-    intruder's position at every sample, and per decision whether the command sent differs from
-    what ``none`` would have sent in that state."""
-
-    def __init__(self, config: PlannerConfig) -> None:
-        self.config = config
-        self.intruder: list[np.ndarray] = []
-        self.alert = False
-        self.manoeuvre = False
-
-    def _keep(self, state) -> None:
-        self.intruder.append(state.pos[1].copy() if state.n > 1 else np.full(3, np.nan))
-
-    def on_start(self, ep: Episode) -> None:
-        self._keep(ep.state)
-
-    def on_sample(self, ep: Episode, state) -> None:
-        self._keep(state)
-
-    def on_decision(self, ep: Episode, event) -> None:
-        d = event.decision
-        if d.planner == direct.NAME:
-            return  # the baseline neither alerts nor manoeuvres
-        goal = ep.aim()
-        base = direct.heading_action(event.own, goal, self.config)
-        if not self.alert:
-            child = next((c for c in d.children if c.action == base), None)
-            self.alert = child is not None and child.meets is not None
-        if not self.manoeuvre:
-            cfg = self.config
-            high = d.alt_target_m is not None and abs(d.alt_target_m - goal[2]) > HEIGHT_TOL_M
-            accel = self._effective(event.own, d.accel_mps2)
-            bank = float(bank_command(event.own.bank, base, cfg))
-            base_accel = self._effective(event.own, float(accel_command(base, cfg)))
-            self.manoeuvre = (abs(d.bank_cmd_rad - bank) > BANK_TOL_RAD
-                              or abs(accel - base_accel) > 1e-9 or high)
-
-    def _effective(self, own, accel: float) -> float:
-        """An acceleration command as flown: none beyond the speed limits (a speed-up at the
-        top speed holds the speed, as the autopilot's speed limits make it)."""
-        lo, hi = own.speed_band or self.config.speed_mps
-        if (accel > 0 and own.speed >= hi - 1e-6) or (accel < 0 and own.speed <= lo + 1e-6):
-            return 0.0
-        return float(accel)
+    sampled_hmd_m: float = math.nan  # the encounter's, at TCA
+    sampled_vmd_m: float = math.nan
+    tca_s: float = math.nan
 
 
 def fly_encounter(
@@ -221,24 +148,14 @@ def fly_encounter(
 
     sc = flight_scenario(scenario.with_seed(seed))
     enc = draw_encounter(scenario, seed)
-    config = PlannerConfig.from_scenario(sc)
-    rec = EncounterObserver(config)
+    rec = DaaObserver(PlannerConfig.from_scenario(sc))
     spec = episode_spec(sc, dynamics=dynamics, intruders=[intruder_spec(enc)],
                         tracks={0: enc.intruder})  # fmt: skip
     if quality is None:
         quality = FlightQuality(((spec.start.x, spec.start.y, spec.start.h), spec.goal))
     r = fly(spec, planner, observers=[quality, rec, *observers])
-    own, intr = np.array(quality.own), np.array(rec.intruder)
-    hmd, vmd = hmd_vmd(own, intr)
-    wc = sc.avoidance.well_clear
     record = EncounterRecord(
-        weight=float(enc.weight),
-        hmd_m=hmd,
-        vmd_m=vmd,
-        lowc=loss_of_well_clear(own, intr, wc.horizontal_m, wc.vertical_m),
-        alert=rec.alert,
-        manoeuvre=rec.manoeuvre,
-        reversals=reversals(quality.bank_cmd),
+        **vars(rec.record(quality, sc.avoidance.well_clear, enc.weight)),
         sampled_hmd_m=float(enc.hmd),
         sampled_vmd_m=float(enc.vmd),
         tca_s=float(enc.tca),
@@ -247,6 +164,6 @@ def fly_encounter(
 
 
 __all__ = [
-    "EncounterObserver", "EncounterRecord", "draw_encounter", "encounter_config",
+    "EncounterRecord", "draw_encounter", "encounter_config",
     "encounter_model", "fly_encounter", "flight_scenario", "intruder_spec", "route",
 ]
