@@ -36,6 +36,7 @@ from uavxai.scenario.loader import (
 )
 from uavxai.scenario.messages import (
     REFERENCE,
+    checked,
 )
 from uavxai.scenario.schema import (
     ENCOUNTER_AIRCRAFT,
@@ -139,6 +140,7 @@ __all__ = [
     "aircraft_speed_range",
     "check_mavlink_url",
     "check_slug",
+    "checked",
     "clock_ticks",
     "default_scenario",
     "load_scenario",

@@ -392,6 +392,10 @@ class MCTSConfig(_Model):
     # (uavxai.avoidance.model.intruder_margin); null: over the whole search. With a poor
     # picture a shorter one keeps the mission going (docs/scenario.md has what it measured).
     uncertainty_horizon_s: Annotated[float, Field(gt=0, le=60)] | None = None
+    # How many sigmas of a track's predicted position error (and of the ownship's own, above)
+    # the tree planners and mcts_daa's alerting add to the separation they ask of it
+    # (uavxai.avoidance.model.intruder_margin); 0: the tracks are taken as exact.
+    uncertainty_k: Annotated[float, Field(ge=0, le=10)] = 2.0
 
 
 class NMAC(_Model):
