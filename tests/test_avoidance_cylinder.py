@@ -103,7 +103,8 @@ def test_mcts_daa_with_the_cylinder_holds_the_nmac_and_the_collision_sphere():
 
 
 def test_a_bad_conflict_volume_is_refused():
-    with pytest.raises(UserError, match="conflict_volume must be one of sphere, cylinder"):
+    allowed = r"PlannerConfig\.conflict_volume' = 'cone': Input should be 'sphere' or 'cylinder'"
+    with pytest.raises(UserError, match=allowed):
         PlannerConfig(conflict_volume="cone")
     with pytest.raises(UserError, match="conflict_half_height_m must be > 0"):
         PlannerConfig(conflict_volume="cylinder", conflict_half_height_m=0.0)

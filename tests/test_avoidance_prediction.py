@@ -358,10 +358,11 @@ def test_the_scenario_sets_the_ownship_models_own_error():
     ("field", "value", "message"),
     [
         ("intruder_model", "psychic", "intruder_model must be one of cv, ct, reachable"),
-        ("uncertainty_k", -1.0, "uncertainty_k must be >= 0"),
+        # the schema's settings, checked by the schema (avoidance.mcts)
+        ("uncertainty_k", -1.0, r"PlannerConfig\.uncertainty_k' = -1\.0: .* or equal to 0"),
         ("intruder_bank_limit_deg", 95.0, "intruder_bank_limit_deg must be in"),
         ("late_collision_value", 0.2, "below the time-out"),
-        ("own_error_10s_m", -5.0, "own_error_10s_m must be >= 0"),
+        ("own_error_10s_m", -5.0, r"PlannerConfig\.own_error_10s_m' = -5\.0: .* or equal to 0"),
     ],
 )
 def test_bad_prediction_settings_are_user_errors(field, value, message):

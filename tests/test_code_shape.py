@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import ast
+import dataclasses
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -94,12 +95,15 @@ def test_the_bridge_imports_only_the_layers_below_it() -> None:
 
 
 def test_planner_settings_are_declared_once_in_the_schema() -> None:
-    """PlannerConfig's defaults for what the scenario declares are the schema's, through the
-    one mapping (schema_settings) that from_scenario applies too: a default changed in the
-    schema changes the planner's."""
-    from uavxai.avoidance.types import PlannerConfig, schema_settings
+    """PlannerConfig's fields for what the scenario declares are the schema's, generated from
+    it with its defaults (uavxai.avoidance.settings); PlannerConfig's own body declares none of
+    them again (a field declared there would silently override the schema's default)."""
+    from uavxai.avoidance.settings import SCHEMA_PATHS, SchemaSettings, schema_settings
+    from uavxai.avoidance.types import PlannerConfig
     from uavxai.scenario import Avoidance, World
 
+    assert set(PlannerConfig.__annotations__).isdisjoint(SCHEMA_PATHS)
+    assert [f.name for f in dataclasses.fields(SchemaSettings)] == list(SCHEMA_PATHS)
     mapped = schema_settings(Avoidance(), World())
     assert len(mapped) >= 20
     default = PlannerConfig()

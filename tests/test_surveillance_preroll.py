@@ -166,5 +166,6 @@ def test_tracks_heard_before_t0_coast_and_drop_on_the_same_rule() -> None:
 def test_preroll_must_not_be_negative() -> None:
     with pytest.raises(UserError, match=r"surveillance\.preroll_s"):
         default_scenario("neg", surveillance={"preroll_s": -1})
-    with pytest.raises(UserError, match="preroll_s must be >= 0"):
+    allowed = r"surveillance\.preroll_s' = -0\.5: Input should be greater than or equal to 0"
+    with pytest.raises(UserError, match=allowed):
         SurveillanceConfig(preroll_s=-0.5)

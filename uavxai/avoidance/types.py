@@ -14,9 +14,14 @@ from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import numpy as np
 
+from uavxai.avoidance.settings import (
+    SCHEMA_PATHS,
+    SchemaSettings,
+    check_schema_settings,
+    schema_settings,
+)
 from uavxai.errors import UserError
-from uavxai.scenario import Avoidance, World
-from uavxai.vocabulary import ACTION_SETS, CONFLICT_VOLUMES, N_ACTIONS, action_name
+from uavxai.vocabulary import ACTION_SETS, N_ACTIONS, action_name
 
 if TYPE_CHECKING:
     from uavxai.scenario import Scenario
@@ -80,52 +85,15 @@ def climb_speed_band(gust_sigma_mps: float) -> tuple[float, float]:
     return lo, hi + gust_sigma_mps
 
 
-def schema_settings(avoidance: Avoidance, world: World) -> dict[str, object]:
-    """The planner settings the scenario schema declares (its `avoidance` section and the
-    world's bounds), by PlannerConfig field: the one mapping between the two. PlannerConfig's
-    defaults are this mapping of the schema's defaults, so a default is declared once, in the
-    schema; :meth:`PlannerConfig.from_scenario` applies it to a scenario."""
-    a, m = avoidance, avoidance.mcts
-    return {
-        "x_bounds": tuple(world.x),
-        "y_bounds": tuple(world.y),
-        "h_bounds": tuple(world.h),
-        **{k: getattr(a, k) for k in ("d_min_m", "goal_radius_m", "decision_period_s",
-                                       "max_steps", "bank_limit_deg", "bank_step_deg",
-                                       "accel_mps2", "actions",
-                                       "conflict_volume")},  # fmt: skip
-        "speed_mps": tuple(a.speed_mps),
-        **{k: getattr(m, k) for k in ("simulations", "depth", "c", "action_hold_s",
-                                       "reach_horizon_s", "own_error_10s_m",
-                                       "uncertainty_horizon_s")},  # fmt: skip
-        "alert_well_clear_m": (a.well_clear.horizontal_m, a.well_clear.vertical_m),
-        "nmac_m": (a.nmac.horizontal_m, a.nmac.vertical_m),
-    }
-
-
-_SCHEMA = schema_settings(Avoidance(), World())  # the schema's defaults
-
-
 @dataclass(frozen=True)
-class PlannerConfig:
-    """Fields as the scenario's `avoidance` section, plus the flight-area bounds; the defaults
-    of those the schema declares are the schema's (:func:`schema_settings`)."""
+class PlannerConfig(SchemaSettings):  # type: ignore[misc,valid-type]
+    """The planner's settings. Those the scenario declares (every key of its `avoidance`
+    section and of `avoidance.mcts` by the same name, the world's bounds as ``x_bounds``,
+    ``y_bounds``, ``h_bounds``, the cylinders as ``nmac_m``, ``alert_well_clear_m``) are
+    the fields of :data:`uavxai.avoidance.settings.SchemaSettings`, taken from the schema with
+    its defaults and checked by its models (docs/scenario.md says what each is); the fields
+    below are the planner's own, each with its check in ``__post_init__``."""
 
-    x_bounds: tuple[float, float] = _SCHEMA["x_bounds"]
-    y_bounds: tuple[float, float] = _SCHEMA["y_bounds"]
-    h_bounds: tuple[float, float] = _SCHEMA["h_bounds"]
-    d_min_m: float = _SCHEMA["d_min_m"]
-    goal_radius_m: float = _SCHEMA["goal_radius_m"]
-    decision_period_s: float = _SCHEMA["decision_period_s"]
-    max_steps: int = _SCHEMA["max_steps"]
-    bank_limit_deg: float = _SCHEMA["bank_limit_deg"]
-    bank_step_deg: float = _SCHEMA["bank_step_deg"]
-    accel_mps2: float = _SCHEMA["accel_mps2"]
-    speed_mps: tuple[float, float] = _SCHEMA["speed_mps"]
-    simulations: int = _SCHEMA["simulations"]
-    depth: int = _SCHEMA["depth"]
-    c: float = _SCHEMA["c"]
-    action_hold_s: float = _SCHEMA["action_hold_s"]
     # The ownship autopilot's limits: from_scenario reads them from its aircraft's XML.
     roll_rate_limit_deg_s: float = 30.0
     # The JSBSim autopilot holds the altitude target it is given (the goal's altitude) and
@@ -148,20 +116,7 @@ class PlannerConfig:
     # "reachable" that turn, with the separation needed grown by how far the intruder could
     # stray from it within reach_horizon_s by banking anywhere within intruder_bank_limit_deg.
     intruder_model: str = "reachable"
-    reach_horizon_s: float = _SCHEMA["reach_horizon_s"]
     intruder_bank_limit_deg: float = 30.0
-    # The separation needed grows by uncertainty_k sigmas of the track's position error,
-    # sqrt(sigma_m^2 + (sigma_v t)^2) at t seconds ahead.
-    uncertainty_k: float = 2.0
-    # How far ahead a track's velocity error keeps growing that position error (None: over
-    # the whole search). Re-planning every decision period, on fresh reports, answers what
-    # lies beyond; a vague track otherwise fences off hundreds of metres 16 s ahead.
-    uncertainty_horizon_s: float | None = _SCHEMA["uncertainty_horizon_s"]
-    # The ownship's own path is not exact either: the JSBSim aircraft strays from the model's
-    # prediction of the same commands like a random acceleration, sigma (per axis) growing as
-    # t^1.5; this is that sigma 10 s ahead, added to the intruders' track error (the same
-    # uncertainty_k). 0: the model's path is taken as flown (as the kinematic dynamics fly it).
-    own_error_10s_m: float = _SCHEMA["own_error_10s_m"]
     # Value of a line that collides at the end of the search horizon (linear from 0 at once):
     # when every line meets someone, the search still prefers the one that meets them later,
     # which re-planning can still turn into a miss. 0: every collision is worth 0 (the paper).
@@ -175,38 +130,31 @@ class PlannerConfig:
     # In steady air the measured drift is only where the model's air velocity (airspeed
     # along the heading) differs from the aircraft's (sideslip, climb), not moving air.
     gusts: bool = False
-    # The action set (uavxai.vocabulary.ACTION_SETS): "paper" the nine, "vertical" adds climb
-    # and descend, which step a persistent vertical command; climbing (descending) the
-    # autopilot's height target is this far below the flight area's ceiling (above its
-    # floor), where it levels off, reached at climb_rate_mps.
-    actions: str = _SCHEMA["actions"]
+    # With the vertical action set (`actions`), climbing (descending) the autopilot's height
+    # target is this far below the flight area's ceiling (above its floor), where it levels
+    # off, reached at climb_rate_mps.
     vertical_margin_m: float = 20.0
     # The alerting stage of `mcts_daa` (uavxai.avoidance.alerting): the tree decides only while
-    # an intruder is predicted inside the well-clear cylinder (horizontal, vertical m; the
-    # small-UAS 2000 ft / 250 ft) within alert_horizon_s (DO-365's 55 s), and for alert_hold_s
-    # after the last such prediction; otherwise the ownship flies its route.
+    # an intruder is predicted inside the well-clear cylinder (alert_well_clear_m) within
+    # alert_horizon_s (DO-365's 55 s), and for alert_hold_s after the last such prediction;
+    # otherwise the ownship flies its route.
     alert_horizon_s: float = 55.0
-    alert_well_clear_m: tuple[float, float] = _SCHEMA["alert_well_clear_m"]
-    # The near-mid-air-collision cylinder (horizontal, vertical m; avoidance.nmac): `mcts_daa`
-    # searches with d_min_m at least its horizontal radius, so that a line it keeps clears an
-    # NMAC, the event detect-and-avoid is judged by, not only a collision.
-    nmac_m: tuple[float, float] = _SCHEMA["nmac_m"]
     alert_hold_s: float = 5.0
-    # The tree's conflict volume around each intruder (avoidance.conflict_volume): "sphere",
-    # 3-D separation below d_min_m; "cylinder", horizontal separation below d_min_m and
-    # vertical below conflict_half_height_m (None: d_min_m, the cylinder holding that sphere).
+    # The tree's conflict volume around each intruder (`conflict_volume`): "sphere", 3-D
+    # separation below d_min_m; "cylinder", horizontal separation below d_min_m and vertical
+    # below conflict_half_height_m (None: d_min_m, the cylinder holding that sphere).
     # Margins (intruder_margin) grow the cylinder keeping its aspect: a margin m adds m
     # horizontally and m * half-height / d_min_m vertically (the model's cylinder norm).
-    conflict_volume: str = _SCHEMA["conflict_volume"]
     conflict_half_height_m: float | None = None
 
     def __post_init__(self) -> None:
-        self._check_actions()
-        if self.conflict_volume not in CONFLICT_VOLUMES:
-            raise UserError(
-                f"PlannerConfig.conflict_volume must be one of {', '.join(CONFLICT_VOLUMES)}, "
-                f"got {self.conflict_volume!r}."
-            )
+        values = {name: getattr(self, name) for name in SCHEMA_PATHS}
+        for name, value in check_schema_settings(values, "PlannerConfig").items():
+            object.__setattr__(self, name, value)  # as the schema keeps it (tuples, floats)
+        self._check_own_settings()
+
+    def _check_own_settings(self) -> None:
+        """The planner-only settings' checks (the schema checked its own)."""
         hh = self.conflict_half_height_m
         if hh is not None and not hh > 0:
             raise UserError(f"PlannerConfig.conflict_half_height_m must be > 0 or None, got {hh}.")
@@ -215,14 +163,9 @@ class PlannerConfig:
                 f"PlannerConfig.intruder_model must be one of {', '.join(INTRUDER_MODELS)}, "
                 f"got {self.intruder_model!r}."
             )
-        checked = ("reach_horizon_s", "uncertainty_k", "late_collision_value", "own_error_10s_m",
-                   "alert_horizon_s", "alert_hold_s")  # fmt: skip
-        for name in checked:
+        for name in ("late_collision_value", "alert_horizon_s", "alert_hold_s"):
             if not getattr(self, name) >= 0:
                 raise UserError(f"PlannerConfig.{name} must be >= 0, got {getattr(self, name)}.")
-        h = self.uncertainty_horizon_s
-        if h is not None and not h > 0:
-            raise UserError(f"PlannerConfig.uncertainty_horizon_s must be > 0 or None, got {h}.")
         if not 0 < self.intruder_bank_limit_deg < 90:
             raise UserError(
                 "PlannerConfig.intruder_bank_limit_deg must be in (0, 90), "
@@ -233,36 +176,12 @@ class PlannerConfig:
                 "PlannerConfig.late_collision_value must be below the time-out's value 0.1, "
                 f"got {self.late_collision_value}."
             )
-        for name in ("x_bounds", "y_bounds", "h_bounds", "speed_mps", "climb_speed_band_mps"):
-            lo, hi = getattr(self, name)
-            if not lo < hi:
-                raise UserError(f"PlannerConfig.{name} must be (min, max) with min < max.")
-        positive = [
-            "d_min_m",
-            "goal_radius_m",
-            "decision_period_s",
-            "bank_limit_deg",
-            "bank_step_deg",
-            "action_hold_s",
-            "roll_rate_limit_deg_s",
-            "climb_rate_mps",
-            "substep_s",
-        ]
-        for name in positive:
+        lo, hi = self.climb_speed_band_mps
+        if not lo < hi:
+            raise UserError("PlannerConfig.climb_speed_band_mps must be (min, max) with min < max.")
+        for name in ("roll_rate_limit_deg_s", "climb_rate_mps", "substep_s"):
             if not getattr(self, name) > 0:
                 raise UserError(f"PlannerConfig.{name} must be > 0, got {getattr(self, name)}.")
-        for name in ("simulations", "depth", "max_steps"):
-            if int(getattr(self, name)) < 1:
-                raise UserError(f"PlannerConfig.{name} must be >= 1, got {getattr(self, name)}.")
-        if self.accel_mps2 < 0 or self.c < 0:
-            raise UserError("PlannerConfig.accel_mps2 and PlannerConfig.c must be >= 0.")
-
-    def _check_actions(self) -> None:
-        if self.actions not in ACTION_SETS:
-            raise UserError(
-                f"PlannerConfig.actions must be one of {', '.join(ACTION_SETS)}, "
-                f"got {self.actions!r}."
-            )
         lo, hi = self.h_bounds
         if not 0 <= self.vertical_margin_m < 0.5 * (hi - lo):
             raise UserError(

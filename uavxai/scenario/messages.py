@@ -5,13 +5,15 @@ error as a sentence (an unknown key with the nearest valid one), the reference t
 from __future__ import annotations
 
 import difflib
-from typing import Any
+from collections.abc import Callable
+from typing import Any, TypeVar
 
-from pydantic import BaseModel
+from pydantic import BaseModel, ValidationError
 
-from uavxai.errors import short_repr
+from uavxai.errors import UserError, short_repr
 
 REFERENCE = "docs/scenario.md"
+M = TypeVar("M", bound=BaseModel)
 
 
 def _allowed_keys(model: type[BaseModel], loc: tuple[Any, ...]) -> list[str]:
@@ -101,3 +103,23 @@ def invalid_scenario(source: str, errors: list[Any], model: type[BaseModel]) -> 
         + later
         + f"\nSee the scenario reference {REFERENCE} (units: m, s; *_deg in degrees)."
     )
+
+
+def checked(model: type[M], data: dict[str, Any], owner: str,
+            name_of: Callable[[tuple[Any, ...]], str] | None = None) -> M:  # fmt: skip
+    """``data`` validated by the schema's ``model`` (its bounds, its validators: the one check
+    of those settings) for a config built in code rather than read from a scenario (a
+    :class:`uavxai.avoidance.types.PlannerConfig`, say). A problem is a :class:`UserError`
+    naming ``owner.field`` (``name_of`` turns a validation error's location into the owner's
+    field name; by default the dotted location) and what is allowed."""
+    try:
+        return model.model_validate(data)
+    except ValidationError as exc:
+        problems = []
+        for err in exc.errors():
+            name = name_of(err["loc"]) if name_of else ".".join(str(p) for p in err["loc"])
+            if name:
+                problems.append(describe({**err, "loc": (f"{owner}.{name}",)}, model))
+            else:  # a check across fields: its message names them
+                problems.append(f"{owner}: {describe({**err, 'loc': ()}, model)}")
+        raise UserError(" ".join(problems)) from None

@@ -28,14 +28,15 @@ from __future__ import annotations
 
 import math
 import zlib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 
 from uavxai.dynamics.geodesy import LocalFrame
 from uavxai.dynamics.state import TrafficState
 from uavxai.errors import UserError
-from uavxai.scenario import Scenario, Surveillance
+from uavxai.scenario import Scenario, checked
+from uavxai.scenario import Surveillance as SurveillanceSection
 from uavxai.surveillance.sensor import SensorConfig, sensor_sees
 
 # 95 % horizontal position bound (EPU) per NACp, m (DO-260B Table 2-14). 8 = 0.05 NM.
@@ -59,8 +60,6 @@ NACV_VFOM_MPS: dict[int, float] = {1: 15.24, 2: 4.572, 3: 1.524, 4: 0.4572}
 # 95 % radius of a circular 2-D Gaussian / its per-axis sigma, and the 1-D 95 % factor.
 R95_PER_SIGMA_2D = math.sqrt(-2.0 * math.log(0.05))  # 2.4477
 R95_PER_SIGMA_1D = 1.959963984540054
-
-MODELS = ("adsb", "truth")
 
 # spawn keys of the random streams, apart from every other stream of a run
 _NOISE_STREAM = 0x414453  # "ADS"
@@ -90,7 +89,7 @@ def nacv_sigmas(nacv: int) -> tuple[float, float]:
     return sigma_from_r95(NACV_HFOM_MPS[nacv]), NACV_VFOM_MPS[nacv] / R95_PER_SIGMA_1D
 
 
-_DEFAULT = Surveillance()  # the schema's defaults (surveillance:), declared there once
+_DEFAULT = SurveillanceSection()  # the schema's defaults (surveillance:), declared there once
 
 
 @dataclass(frozen=True)
@@ -112,24 +111,10 @@ class SurveillanceConfig:
     tracker: str = _DEFAULT.tracker  # ekf | imm (uavxai.surveillance.tracker, .imm)
 
     def __post_init__(self) -> None:
-        if self.model not in MODELS:
-            raise UserError(f"surveillance.model = {self.model!r}; allowed: {', '.join(MODELS)}")
-        if not self.rate_hz > 0:
-            raise UserError(f"surveillance.rate_hz must be > 0, got {self.rate_hz}")
-        nacp_sigmas(self.nacp)
-        nacv_sigmas(self.nacv)
-        if not self.latency_s >= 0:
-            raise UserError(f"surveillance.latency_s must be >= 0, got {self.latency_s}")
-        if not 0 <= self.dropout < 1:
-            raise UserError(f"surveillance.dropout must be in [0, 1), got {self.dropout}")
-        if not 0 <= self.noncooperative <= 1:
-            raise UserError(
-                f"surveillance.noncooperative must be in [0, 1], got {self.noncooperative}"
-            )
-        if self.tracker not in ("ekf", "imm"):
-            raise UserError(f"surveillance.tracker = {self.tracker!r}; allowed: ekf, imm")
-        if not self.preroll_s >= 0:
-            raise UserError(f"surveillance.preroll_s must be >= 0, got {self.preroll_s}")
+        # The schema's section checks every field (bounds, the model's and the tracker's names):
+        # one rule for a scenario's and for a config built in code. The sensor checks its own.
+        values = {f.name: getattr(self, f.name) for f in fields(self) if f.name != "sensor"}
+        checked(SurveillanceSection, values, "surveillance")
 
     @classmethod
     def from_scenario(cls, scenario: Scenario) -> SurveillanceConfig:
