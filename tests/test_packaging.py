@@ -123,3 +123,30 @@ def test_installed_wheel_imports_every_module(wheel: zipfile.ZipFile, tmp_path: 
     where = json.loads(proc.stdout.splitlines()[-1])
     elsewhere = {m: f for m, f in where.items() if not Path(f).is_relative_to(site)}
     assert sorted(where) == modules and not elsewhere, elsewhere
+
+
+def test_the_installed_wheel_trains_the_avoidance_stage(wheel: zipfile.ZipFile,
+                                                        tmp_path: Path) -> None:
+    """Issue 29: after installing, `uavxai train --stage avoidance` runs from the installed
+    copy (outside the repository, without PYTHONPATH) and writes its checkpoint."""
+    site = tmp_path / "site"
+    subprocess.run(
+        [sys.executable, "-m", "pip", "install", "--no-deps", "--no-compile", "-q",
+         "--target", str(site), wheel.filename],
+        check=True,
+        capture_output=True,
+    )  # fmt: skip
+    scenario = tmp_path / "tiny.yaml"
+    scenario.write_text("name: tiny\nintruders: {count: 2}\n")
+    train = ("import sys; sys.path.insert(0, sys.argv[1]); import uavxai.cli as c; "
+             "print('FROM', c.__file__); sys.exit(c.main(sys.argv[2:]))")  # fmt: skip
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    proc = subprocess.run(
+        [sys.executable, "-c", train, str(site), "train", str(scenario), "--stage",
+         "avoidance", "--algo", "dqn", "--episodes", "1", "--out", str(tmp_path / "out")],
+        cwd=tmp_path, env=env, capture_output=True, text=True, check=False,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    where = next(ln for ln in proc.stdout.splitlines() if ln.startswith("FROM "))
+    assert Path(where.removeprefix("FROM ")).is_relative_to(site)
+    assert any((tmp_path / "out").rglob("*.pt")), sorted((tmp_path / "out").rglob("*"))
