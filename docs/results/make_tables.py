@@ -2,10 +2,14 @@
 
     .venv/bin/python docs/results/make_tables.py docs/results/kinematic/results.csv
     .venv/bin/python docs/results/make_tables.py --daa KINEMATIC/results.csv [JSBSIM/results.csv]
+    .venv/bin/python docs/results/make_tables.py --multi RESULTS.csv [RESULTS.csv ...]
 
 The second form is the detect-and-avoid table of issue 27: every weighted metric with its 95 %
 interval per method (and dynamics), then the kinematic and JSBSim NMAC risk ratios side by
-side. Prints to stdout; README.md in this folder pastes its output.
+side. The third is its multi-threat table (random traffic, one file per dynamics): the mission
+(goal, out of bounds, time-out), the safety (collision with its Wilson interval, the NMAC risk
+ratio and its induced part) and the flight (reversals per minute, median path excess) beside
+LoWC and alerts. Prints to stdout; README.md in this folder pastes its output.
 """
 
 from __future__ import annotations
@@ -106,9 +110,35 @@ def daa_table(paths: list[Path]) -> str:
     return "\n".join(lines)
 
 
+def multi_threat_table(paths: list[Path]) -> str:
+    """Issue 27's multi-threat table: one row per file (dynamics), method and intruder count."""
+    lines = ["| method | file | intruders | episodes | goal | out of bounds | time-out | "
+             "collision | NMAC risk ratio | induced | LoWC ratio | alert rate | reversals / min "
+             "| median path excess |", "|" + "---|" * 14]  # fmt: skip
+    for path in paths:
+        with path.open() as f:
+            rows = list(csv.DictReader(f))
+        rank = {m: i for i, m in enumerate(DAA_ORDER)}
+        rows.sort(key=lambda r: (int(r["intruders"]), rank.get(r["method"], len(rank))))
+        for r in rows:
+            lines.append(
+                f"| {r['method']} | {path.parent.name} | {r['intruders']} | {r['episodes']} | "
+                f"{float(r['goal_rate']):.3f} | {float(r['out_of_bounds_rate']):.3f} | "
+                f"{float(r['timeout_rate']):.3f} | {_ci(r, 'collision_rate', 3)} | "
+                f"{_ci(r, 'nmac_risk_ratio', 3)} | {_ci(r, 'induced_risk_ratio', 3)} | "
+                f"{float(r['lowc_ratio']):.3g} | {float(r['alert_rate']):.3f} | "
+                f"{float(r['mean_reversals_per_min']):.1f} | "
+                f"{100 * float(r['median_path_excess']):.0f} % |"
+            )  # fmt: skip
+    return "\n".join(lines)
+
+
 if __name__ == "__main__":
     if sys.argv[1:2] == ["--daa"]:
         print(daa_table([Path(a) for a in sys.argv[2:]]))
+        sys.exit(0)
+    if sys.argv[1:2] == ["--multi"]:
+        print(multi_threat_table([Path(a) for a in sys.argv[2:]]))
         sys.exit(0)
     for arg in sys.argv[1:]:
         print(f"<!-- {arg} -->")

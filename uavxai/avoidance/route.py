@@ -23,6 +23,7 @@ import numpy as np
 
 from uavxai.avoidance.mcts import intruder_arrays
 from uavxai.avoidance.types import Decision, Goal, Intruder, Ownship
+from uavxai.geometry import wrap_angle
 
 ROUTE_HORIZON_S = 30.0  # one leg's flight time, s: twice the tree's reach
 HEADINGS = 16  # legs every 22.5 deg around the ownship
@@ -76,7 +77,7 @@ def route_goal(own: Ownship, intruders: Sequence[Intruder], goal: Goal, cfg) -> 
     cost = leg_costs(own, intruders, goal, cfg, xy)
     best = int(np.argmin(cost))
     to_goal = math.atan2(goal[0] - own.x, goal[1] - own.y)
-    straight = int(np.argmin(np.abs(np.angle(np.exp(1j * (psi - to_goal))))))
+    straight = int(np.argmin(np.abs(wrap_angle(psi - to_goal))))
     if not np.isfinite(cost[best]) or cost[straight] <= cost[best]:
         return goal
     return (float(xy[best, -1, 0]), float(xy[best, -1, 1]), float(goal[2]))
