@@ -14,9 +14,10 @@ import numpy as np
 
 from uavxai.avoidance.types import Planner
 from uavxai.dynamics.orbit import scenario_orbit_radius
+from uavxai.dynamics.protocol import Dynamics
 from uavxai.scenario import Scenario
 from uavxai.sim.clock import Clock
-from uavxai.sim.command import CommandPath, DirectPath, Dynamics
+from uavxai.sim.command import CommandPath, DirectPath
 from uavxai.sim.episode import (
     TRUTH,
     EngineStep,

@@ -22,10 +22,11 @@ from typing import Protocol
 import numpy as np
 
 from uavxai.avoidance.types import Decision, Intruder, Ownship
+from uavxai.dynamics.protocol import Dynamics
 from uavxai.dynamics.state import TrafficState
 from uavxai.processes import interrupts_deferred
 from uavxai.sim.clock import Clock
-from uavxai.sim.command import CommandPath, Dynamics
+from uavxai.sim.command import CommandPath
 from uavxai.sim.judge import Judge
 from uavxai.sim.seat import Seat, TrafficReceiver
 from uavxai.surveillance.tracker import truth_beliefs
