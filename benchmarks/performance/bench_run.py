@@ -23,6 +23,33 @@ Measured (issue 31): 20 intruders, 30 s simulated, no latency, median of 5 at lo
 CPUs (two campaigns running): run / plain JSBSim 1.00, run / bare world 0.94 (plain JSBSim
 itself at 0.6x real time: the machine was oversubscribed; measure again on a quiet one).
 
+Where the time goes (issue 31, cProfile of `uavxai run`, 20 intruders, no latency, 12
+decisions, machine at load 12-15 on 2 CPUs, so the shares, not the seconds, are the
+finding; set-up, the rerun import and the quick-look plot are outside the loop and not
+counted):
+
+| share of the episode loop (after the change below) | |
+|---|---|
+| the intruders' JSBSim flight (lookahead, 20 x 120 ticks a decision) | 34 % |
+| waiting for the companion's search (beyond the lookahead's overlap) | 30 % |
+| ADS-B frames to the companion (picture) | 14 % |
+| the ownship's JSBSim flight and its state reads (world.step) | 6 % |
+| MAVLink telemetry (bridge publish) | 5 % |
+| the rest (recording, judge, observers) | 11 % |
+
+Before it (main 9d54afb, 60 s simulated, quiet machine, --repeats 3): plain lockstep loop
+6.20 s, bare world 8.80 s, run without latency 10.55 s (run / plain JSBSim 0.59), with 0.5 s
+latency 8.62 s (0.72).
+
+(*) The bare world was nothing but ``FGFDMExec.run()`` calls, yet one call cost 3-5x as
+much with the 21 executives taking turns each tick (lockstep) as with one executive flying
+on: 166-336 us against 36-72 us a call at that load, and 60-84 us in turns of 12 ticks,
+36-54 us in turns of 120 (the caches: each executive's working set evicted the others').
+The world now flies each aircraft its whole chunk in turn (JSBSimWorld._integrate, the
+lookahead row by row), the same flight to the bit. Hence the second plain baseline
+(:data:`PLAIN_CHUNKED`): the plain lockstep loop is no longer the fastest loop of
+``FGFDMExec.run()`` calls, and the run is compared with both.
+
     .venv/bin/python benchmarks/performance/bench_run.py [--intruders 20] [--steps 60] \
         [--repeats 5] [--latency 0.5]
 """
