@@ -39,11 +39,11 @@ counted):
 
 Before it (main 9d54afb, 60 s simulated, quiet machine, --repeats 3): plain lockstep loop
 6.20 s, bare world 8.80 s, run without latency 10.55 s (run / plain JSBSim 0.59), with 0.5 s
-latency 8.62 s (0.72). After it, 30 s simulated, one repeat, at load 9-11 (the seconds 2-8x a
-quiet machine's; before at the same load: run / plain JSBSim 0.55, run / bare world 0.64):
-plain lockstep 12.09 s, plain each executive 1 s at a time 2.90 s, bare world 3.11 s, run
-11.72 s with 4.77 s of search: run / plain JSBSim 1.03, run / plain 1 s at a time 0.25, run /
-bare world 0.27 (docs/results/README.md, "Issue 31's co-simulation speed").
+latency 8.62 s (0.72). After it, 30 s simulated, two single repeats alternating with the old
+code's at load 8-11 (the seconds swing 2x between repeats): bare world 3.11 / 3.00 s against
+plain lockstep 12.09 / 14.11 s and plain 1 s at a time 2.90 / 3.35 s; run / plain JSBSim
+1.03 / 1.36 (before: 0.55 / 1.05), run / plain 1 s at a time 0.25 / 0.32, run / bare world
+0.27 / 0.29 (docs/results/README.md, "Issue 31's co-simulation speed").
 
 (*) The bare world was nothing but ``FGFDMExec.run()`` calls, yet one call cost 3-5x as
 much with the 21 executives taking turns each tick (lockstep) as with one executive flying
