@@ -1,7 +1,8 @@
 """The intruders flown ahead of the ownship while its next command is searched for
-(`JSBSimWorld.lookahead`) fly the same flight, to the bit, as the world in lockstep: with
-turbulence, turning traffic, a loiter orbit, ownship commands between periods, and an
-intruder lost in flight and replaced."""
+(`JSBSimWorld.lookahead`), and every aircraft flown its whole chunk at once
+(`JSBSimWorld._integrate`), fly the same flight, to the bit, as the world in lockstep (every
+executive one tick in turn): with turbulence, turning traffic, a loiter orbit, ownship
+commands between periods, and an intruder lost in flight and replaced."""
 
 from __future__ import annotations
 
@@ -23,6 +24,17 @@ def _scenario(count: int = 4):
         intruders={"count": count, "behaviour": "random_turns"},
         environment={"wind": {"speed_mps": 6.0, "from_deg": 200.0}, "turbulence": "moderate"},
     )
+
+
+class LockstepWorld(JSBSimWorld):
+    """The reference: every executive flies one tick in turn, as the world did before it
+    flew each aircraft's chunk at once (issue 31)."""
+
+    def _integrate(self, ticks: int) -> bool:
+        for _ in range(ticks):
+            for run in self._runs:
+                run()
+        return True
 
 
 def _lose_control(w: JSBSimWorld, row: int) -> None:
@@ -63,7 +75,7 @@ def _same(a: list, b: list) -> None:
 
 def test_intruders_flown_ahead_give_the_lockstep_flight_to_the_bit() -> None:
     sc = _scenario()
-    with JSBSimWorld(sc) as lock, JSBSimWorld(sc) as ahead:
+    with LockstepWorld(sc) as lock, JSBSimWorld(sc) as ahead:
         a = _fly(lock, 8, ahead=False)
         b = _fly(ahead, 8, ahead=True)
         assert b[-1] == 8 * PERIOD_TICKS  # the intruders really flew ahead every period
@@ -74,13 +86,25 @@ def test_intruders_flown_ahead_give_the_lockstep_flight_to_the_bit() -> None:
 
 def test_an_intruder_lost_while_ahead_is_replaced_where_the_ownship_meets_it() -> None:
     sc = _scenario(count=2)
-    with JSBSimWorld(sc) as lock, JSBSimWorld(sc) as ahead:
+    with LockstepWorld(sc) as lock, JSBSimWorld(sc) as ahead:
         a = _fly(lock, 14, ahead=False, lose=1)
         b = _fly(ahead, 14, ahead=True, lose=1)
         assert lock.lost_intruders and lock.lost_intruders == ahead.lost_intruders
-        assert b[-1] < 14 * PERIOD_TICKS  # the lookahead stopped at the wreck
+        # the others flew ahead every period, the wreck too until the ownship met it there
+        assert b[-1] == 14 * PERIOD_TICKS
         _same(a, b)
         assert b[-2].ids[1] != "intruder-1"  # a newcomer flies in its row
+
+
+def test_each_aircraft_flown_its_chunk_at_once_gives_the_lockstep_flight_to_the_bit() -> None:
+    sc = _scenario(count=5)
+    with LockstepWorld(sc) as lock, JSBSimWorld(sc) as chunked:
+        a = _fly(lock, 6, ahead=False)
+        b = _fly(chunked, 6, ahead=False)
+        _same(a, b)
+        lock.step(PERIOD_TICKS * 2 + 7)  # chunks cut at the pilots' instants, not samples
+        chunked.step(PERIOD_TICKS * 2 + 7)
+        _same([lock.state(), 0], [chunked.state(), 0])
 
 
 def test_the_lookahead_stops_at_the_pilots_instant_and_states_only_at_kept_ticks() -> None:

@@ -23,6 +23,37 @@ Measured (issue 31): 20 intruders, 30 s simulated, no latency, median of 5 at lo
 CPUs (two campaigns running): run / plain JSBSim 1.00, run / bare world 0.94 (plain JSBSim
 itself at 0.6x real time: the machine was oversubscribed; measure again on a quiet one).
 
+Where the time goes (issue 31, cProfile of `uavxai run`, 20 intruders, no latency, 12
+decisions, machine at load 12-15 on 2 CPUs, so the shares, not the seconds, are the
+finding; set-up, the rerun import and the quick-look plot are outside the loop and not
+counted):
+
+| share of the episode loop (after the change below) | |
+|---|---|
+| the intruders' JSBSim flight (lookahead, 20 x 120 ticks a decision) | 34 % |
+| waiting for the companion's search (beyond the lookahead's overlap) | 30 % |
+| ADS-B frames to the companion (picture) | 14 % |
+| the ownship's JSBSim flight and its state reads (world.step) | 6 % |
+| MAVLink telemetry (bridge publish) | 5 % |
+| the rest (recording, judge, observers) | 11 % |
+
+Before it (main 9d54afb, 60 s simulated, quiet machine, --repeats 3): plain lockstep loop
+6.20 s, bare world 8.80 s, run without latency 10.55 s (run / plain JSBSim 0.59), with 0.5 s
+latency 8.62 s (0.72). After it, 30 s simulated, two single repeats alternating with the old
+code's at load 8-11 (the seconds swing 2x between repeats): bare world 3.11 / 3.00 s against
+plain lockstep 12.09 / 14.11 s and plain 1 s at a time 2.90 / 3.35 s; run / plain JSBSim
+1.03 / 1.36 (before: 0.55 / 1.05), run / plain 1 s at a time 0.25 / 0.32, run / bare world
+0.27 / 0.29 (docs/results/README.md, "Issue 31's co-simulation speed").
+
+(*) The bare world was nothing but ``FGFDMExec.run()`` calls, yet one call cost 3-5x as
+much with the 21 executives taking turns each tick (lockstep) as with one executive flying
+on: 166-336 us against 36-72 us a call at that load, and 60-84 us in turns of 12 ticks,
+36-54 us in turns of 120 (the caches: each executive's working set evicted the others').
+The world now flies each aircraft its whole chunk in turn (JSBSimWorld._integrate, the
+lookahead row by row), the same flight to the bit. Hence the second plain baseline
+(:data:`PLAIN_CHUNKED`): the plain lockstep loop is no longer the fastest loop of
+``FGFDMExec.run()`` calls, and the run is compared with both.
+
     .venv/bin/python benchmarks/performance/bench_run.py [--intruders 20] [--steps 60] \
         [--repeats 5] [--latency 0.5]
 """
@@ -53,18 +84,31 @@ def timed_run(sc, service, port: int) -> tuple[float, dict]:
         return time.perf_counter() - t0, summary
 
 
-def timed_bare(sc, sim_s: float, plain: bool) -> float:
-    """Seconds to fly ``sim_s`` of the scenario's aircraft: ``plain``, a loop of their
-    executives' ``FGFDMExec.run()`` and nothing else; otherwise our world's ``step``."""
+PLAIN = "plain JSBSim (FGFDMExec.run loop)"
+PLAIN_CHUNKED = "plain JSBSim, each 1 s at a time"
+WORLD = "our bare world"
+
+
+def timed_bare(sc, sim_s: float, how: str) -> float:
+    """Seconds to fly ``sim_s`` of the scenario's aircraft: :data:`PLAIN`, a loop of their
+    executives' ``FGFDMExec.run()`` in lockstep (each one tick in turn) and nothing else;
+    :data:`PLAIN_CHUNKED`, the same calls with each executive flying a second at a time (its
+    working set stays in the caches); :data:`WORLD`, our world's ``step``."""
     world = JSBSimWorld(sc, seed=sc.seed)
     try:
         n = round(sim_s / world.dt)
         runs = [a.fdm.run for a in world.aircraft]
+        chunk = round(1.0 / world.dt)
         t0 = time.perf_counter()
-        if plain:
+        if how == PLAIN:
             for _ in range(n):
                 for run in runs:
                     run()
+        elif how == PLAIN_CHUNKED:
+            for begin in range(0, n, chunk):
+                for run in runs:
+                    for _ in range(min(chunk, n - begin)):
+                        run()
         else:
             world.step(n)
         return time.perf_counter() - t0
@@ -102,7 +146,7 @@ def main() -> None:
     port = sink.getsockname()[1]
     # per run: (episode loop, planner, set-up) seconds of every repeat
     loops: dict[str, list[tuple[float, float, float]]] = {k: [] for k in runs}
-    bare: dict[str, list[float]] = {"plain JSBSim (FGFDMExec.run loop)": [], "our bare world": []}
+    bare: dict[str, list[float]] = {PLAIN: [], PLAIN_CHUNKED: [], WORLD: []}
     sim_s = 0.0
     for _ in range(args.repeats):
         for label, sc in runs.items():
@@ -111,15 +155,15 @@ def main() -> None:
             loop = sim_s / summary["sim_realtime_factor"]  # the episode loop, set-up excluded
             planner = summary["decision_ms"]["mean"] * summary["steps"] / 1000.0
             loops[label].append((loop, planner, wall - loop))
-        for plain, label in zip((True, False), bare, strict=True):
-            bare[label].append(timed_bare(runs["no latency (default)"], sim_s, plain))
+        for how in bare:
+            bare[how].append(timed_bare(runs["no latency (default)"], sim_s, how))
     if args.profile:
         sc = runs["no latency (default)"]
         cProfile.runctx(
             "timed_run(sc, service, port)", globals(), locals(), filename=str(args.profile)
         )
     rtf = {label: sim_s / statistics.median(t) for label, t in bare.items()}
-    plain_rtf, world_rtf = rtf.values()
+    plain_rtf, chunked_rtf, world_rtf = rtf.values()
     print(f"{args.intruders} intruders, {sim_s:.0f} s simulated, median of {args.repeats} "
           f"interleaved; load {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs")  # fmt: skip
     for label, t in bare.items():
@@ -129,8 +173,8 @@ def main() -> None:
         run_rtf = sim_s / loop
         print(
             f"  uavxai run, {label:<26} {loop:6.2f} s  {run_rtf:6.1f}x real time  ratio run / "
-            f"plain JSBSim {run_rtf / plain_rtf:.2f} (goal >= 0.8), run / bare world "
-            f"{run_rtf / world_rtf:.2f}\n"
+            f"plain JSBSim {run_rtf / plain_rtf:.2f} (goal >= 0.8), run / plain JSBSim "
+            f"chunked {run_rtf / chunked_rtf:.2f}, run / bare world {run_rtf / world_rtf:.2f}\n"
             f"      planner {planner:.2f} s of search (on the companion's core); "
             f"set-up (aircraft loading, trim, files) {setup:.2f} s, not counted"
         )
