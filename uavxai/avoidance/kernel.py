@@ -23,6 +23,7 @@ import numpy as np
 from numba import njit
 
 from uavxai.avoidance.model import EncounterModel, Track
+from uavxai.avoidance.risk import edge_loss
 from uavxai.avoidance.types import SearchTree
 
 # Columns of the per-key table ``bend`` (per action) and ``bscal`` (per key).
@@ -30,7 +31,7 @@ ZRE, ZIM, DPSI, VEND, PHIEND, PHICMD, RISEEND = range(7)
 BALLRE, BALLIM, BALLR, OWNSTEP = range(4)
 # Entries of ``par``.
 (DMIN, GOALR, XB0, XB1, YB0, YB1, HB0, HB1, CLIMB, DUR, TLEFT, LATE, DMAX, VERT, TDOWN, TLEVEL,
- TUP, GX, GY, GH, CULL, ASPECT) = range(22)  # fmt: skip
+ TUP, GX, GY, GH, CULL, ASPECT, RISK) = range(23)  # fmt: skip
 _TAU = 2.0 * math.pi
 _NONE, _GOAL, _COLLISION, _OUT, _TIMEOUT = 0, 1, 2, 3, 4
 
@@ -272,8 +273,8 @@ def _expand(node, tree, bz, brise, bend, bscal, child, tracks, climbs, drift, pa
     """TreeBuilder.expand over EncounterModel.expand: the K children of ``node``, appended
     to the tree; returns the first child's index."""
     (visits, value_sum, first_child, is_leaf, value, key, state, depth, parent, action, code,
-     min_sep, closest, t_closest, count, depth_limit) = tree  # fmt: skip
-    txy, th, tm, tmargined, tstep, tc, tr = tracks
+     min_sep, closest, t_closest, surv, count, depth_limit) = tree  # fmt: skip
+    txy, th, tm, tmargined, tstep, tc, tr, ts = tracks
     kn, n = climbs.size, bz.shape[2] - 1
     first = count[0]
     count[0] += kn
@@ -290,6 +291,9 @@ def _expand(node, tree, bz, brise, bend, bscal, child, tracks, climbs, drift, pa
     k_event = np.full(kn, n)
     kind = np.zeros(kn, dtype=np.int8)
     res = np.empty(3)
+    risky = par[RISK] > 0
+    edge_surv = np.ones(kn)  # per child, the chance its edge keeps clear of every track
+    loss = np.empty(max(k, 1))
     if k or walls or goal:
         xy, hs = _samples(h, origin, rot, kk, heights, box[5], bz, brise, drift, par)
         k_hit = np.full(kn, n)
@@ -310,6 +314,12 @@ def _expand(node, tree, bz, brise, bend, bscal, child, tracks, climbs, drift, pa
                          res)  # fmt: skip
                 min_sep[first + a], closest[first + a] = res[0], int(res[1])
                 t_closest[first + a] = res[2]
+                if risky:
+                    last = k_event[a] if exact else k_event[a] + 1
+                    edge_loss(sep2[a], frac[a], exact, tm[lvl], ts[lvl], near, k, last,
+                              lvl == 0, par[DMIN], loss)  # fmt: skip
+                    for q in range(k):
+                        edge_surv[a] *= 1.0 - loss[q]
     for a in range(kn):
         c = first + a
         if not k:
@@ -332,6 +342,10 @@ def _expand(node, tree, bz, brise, bend, bscal, child, tracks, climbs, drift, pa
             value[c] = par[LATE] * t / (depth_limit * par[DUR])
         else:
             value[c] = 0.0
+        if risky:  # the line so far keeps clear with this chance: its value's weight
+            surv[c] = surv[node] * edge_surv[a]
+            if cd != _NONE:
+                value[c] *= surv[c]
         key[c] = child[kk, a]
     return first
 
@@ -379,7 +393,7 @@ def run(tree, bz, brise, bend, bscal, child, tracks, climbs, drift, par, explore
     """``simulations`` MCTS simulations from the root (node 0) of ``tree`` (the algorithm:
     the docstring of uavxai.avoidance.mcts). Returns the number of nodes."""
     (visits, value_sum, first_child, is_leaf, value, key, state, depth, parent, action, code,
-     min_sep, closest, t_closest, count, depth_limit) = tree  # fmt: skip
+     min_sep, closest, t_closest, surv, count, depth_limit) = tree  # fmt: skip
     kn = climbs.size
     near = np.empty(tracks[5].shape[1], dtype=np.int64)
     path = np.zeros(depth_limit + 1, dtype=np.int64)
@@ -400,7 +414,10 @@ def run(tree, bz, brise, bend, bscal, child, tracks, climbs, drift, par, explore
         if v != v:  # nan: an open leaf at the depth limit, scored when first reached
             d = math.sqrt((state[node, 0] - par[GX]) ** 2 + (state[node, 1] - par[GY]) ** 2
                           + (state[node, 2] - par[GH]) ** 2)  # fmt: skip
-            v = value[node] = 1.0 - d / par[DMAX]
+            v = 1.0 - d / par[DMAX]
+            if par[RISK] > 0:
+                v *= surv[node]
+            value[node] = v
         for k in range(length):
             p = path[k]
             visits[p] += 1
@@ -446,7 +463,8 @@ def search(
     size = run(tree, bz, brise, bend, bscal, child, _pack(tracks, n), model.climbs,
                model.drift(hold_s, n), _params(model, goal, hold_s, time_left_s), explore,
                inv_sqrt, draws, simulations)  # fmt: skip
-    return _as_search_tree(tree, int(size), model.actions.size, hold_s, time_left_s)
+    risky = model.config.risk == "probability"
+    return _as_search_tree(tree, int(size), model.actions.size, hold_s, time_left_s, risky)
 
 
 @functools.lru_cache(maxsize=8)
@@ -474,6 +492,8 @@ def _pack(tracks: Sequence[Track], n: int) -> tuple:
         np.array([t.step_max for t in tracks]),
         np.stack([t.centre for t in tracks]).reshape(len(tracks), count, 3),
         np.stack([t.radius for t in tracks]).reshape(len(tracks), count),
+        np.stack([np.zeros((n + 1, count)) if t.sigma is None else t.sigma
+                  for t in tracks]),  # fmt: skip
     )
 
 
@@ -485,7 +505,7 @@ def _params(model: EncounterModel, goal: np.ndarray, hold_s: float, time_left_s:
          cfg.climb_rate_mps, hold_s, time_left_s, cfg.late_collision_value, cfg.d_max,
          float(model.vertical), cfg.height_target(-1, gh), cfg.height_target(0, gh),
          cfg.height_target(1, gh), float(goal[0]), float(goal[1]), gh, cfg.cull_m,
-         cfg.cylinder_aspect or 0.0],  # fmt: skip
+         cfg.cylinder_aspect or 0.0, float(cfg.risk == "probability")],  # fmt: skip
         dtype=float,
     )
 
@@ -511,15 +531,18 @@ def _empty_tree(model: EncounterModel, root: np.ndarray, simulations: int, depth
         np.full(cap, np.inf),  # min_sep
         np.full(cap, -1, dtype=np.int64),  # closest
         np.full(cap, np.nan),  # t_closest
+        np.ones(cap),  # surv: the chance the line to the node keeps clear (risk "probability")
         np.ones(1, dtype=np.int64),  # count
         depth_limit,
     )
     return tree
 
 
-def _as_search_tree(tree, size: int, k: int, hold_s: float, time_left_s: float) -> SearchTree:
+def _as_search_tree(
+    tree, size: int, k: int, hold_s: float, time_left_s: float, risky: bool
+) -> SearchTree:
     (visits, value_sum, first_child, _, _, _, state, depth, parent, action, code, min_sep,
-     closest, t_closest, _, _) = tree  # fmt: skip
+     closest, t_closest, surv, _, _) = tree  # fmt: skip
     d = depth[:size].copy()
     states = state[:size].copy()
     return SearchTree(
@@ -537,4 +560,5 @@ def _as_search_tree(tree, size: int, k: int, hold_s: float, time_left_s: float) 
         first_child=first_child[:size].copy(),
         branching=k,
         time_left_s=time_left_s,
+        risk=1.0 - surv[:size] if risky else None,
     )

@@ -16,7 +16,7 @@ import numpy as np
 
 from uavxai.errors import UserError
 from uavxai.scenario import Avoidance, World
-from uavxai.vocabulary import ACTION_SETS, CONFLICT_VOLUMES, N_ACTIONS, action_name
+from uavxai.vocabulary import ACTION_SETS, CONFLICT_VOLUMES, N_ACTIONS, RISK_MODELS, action_name
 
 if TYPE_CHECKING:
     from uavxai.scenario import Scenario
@@ -97,7 +97,7 @@ def schema_settings(avoidance: Avoidance, world: World) -> dict[str, object]:
         "speed_mps": tuple(a.speed_mps),
         **{k: getattr(m, k) for k in ("simulations", "depth", "c", "action_hold_s",
                                        "reach_horizon_s", "own_error_10s_m",
-                                       "uncertainty_horizon_s")},  # fmt: skip
+                                       "uncertainty_horizon_s", "risk")},  # fmt: skip
         "alert_well_clear_m": (a.well_clear.horizontal_m, a.well_clear.vertical_m),
         "nmac_m": (a.nmac.horizontal_m, a.nmac.vertical_m),
     }
@@ -157,6 +157,10 @@ class PlannerConfig:
     # the whole search). Re-planning every decision period, on fresh reports, answers what
     # lies beyond; a vague track otherwise fences off hundreds of metres 16 s ahead.
     uncertainty_horizon_s: float | None = _SCHEMA["uncertainty_horizon_s"]
+    # How the MCTS tree counts that error (uavxai.avoidance.risk): "margin", the uncertainty_k
+    # sigmas above as a wall; "probability", no wall for it (the reachable-set margin stays
+    # one), the line's value weighted by the chance that it keeps clear of every track.
+    risk: str = _SCHEMA["risk"]
     # The ownship's own path is not exact either: the JSBSim aircraft strays from the model's
     # prediction of the same commands like a random acceleration, sigma (per axis) growing as
     # t^1.5; this is that sigma 10 s ahead, added to the intruders' track error (the same
@@ -207,6 +211,12 @@ class PlannerConfig:
                 f"PlannerConfig.conflict_volume must be one of {', '.join(CONFLICT_VOLUMES)}, "
                 f"got {self.conflict_volume!r}."
             )
+        if self.risk not in RISK_MODELS:
+            raise UserError(
+                f"PlannerConfig.risk must be one of {', '.join(RISK_MODELS)}, got {self.risk!r}."
+            )
+        if self.risk == "probability" and self.conflict_volume != "sphere":
+            raise UserError("PlannerConfig.risk 'probability' needs the sphere conflict volume.")
         hh = self.conflict_half_height_m
         if hh is not None and not hh > 0:
             raise UserError(f"PlannerConfig.conflict_half_height_m must be > 0 or None, got {hh}.")
@@ -397,6 +407,10 @@ class ChildStats:
     # other intruders whose track error could bring them closer than ``closest_intruder`` on
     # that line: (id, closest approach on its predicted track less its margin there, m)
     unsure: tuple[tuple[int | str, float], ...] = ()
+    # with risk as a probability (PlannerConfig.risk): the chance that line loses separation
+    # with each intruder, (id, chance) the likeliest first, and with any (None: not weighed)
+    losses: tuple[tuple[int | str, float], ...] = ()
+    risk: float | None = None
 
     @property
     def flies(self) -> int:
@@ -427,6 +441,9 @@ class SearchTree:
     # the time the episode had left when the search valued its lines: a line still open
     # then ends ``timeout`` (inf: no time-out in sight)
     time_left_s: float = math.inf
+    # (M,) with risk as a probability (PlannerConfig.risk): the chance that the line from the
+    # root to the node loses separation with some track, which weighted its value; None: off
+    risk: np.ndarray | None = None
 
     @property
     def q(self) -> np.ndarray:
@@ -579,6 +596,9 @@ class Decision:
                     "meets": None if c.meets is None else asdict(c.meets),
                     "flies": action_name(c.flies),
                     "unsure": [[who, m] for who, m in c.unsure],
+                    # with risk as a probability only: the line's chance of losing separation
+                    **({} if c.risk is None else {
+                        "risk": c.risk, "losses": [[who, p] for who, p in c.losses]}),
                 }
                 for c in self.children
             ],

@@ -32,6 +32,7 @@ from uavxai.vocabulary import (
     CHANNEL_MODEL_NAMES,
     CHANNEL_MODELS,
     CONFLICT_VOLUMES,
+    RISK_MODELS,
     SERVICE_PLANNERS,
     action_set_problem,
     avoidance_planners,
@@ -392,6 +393,11 @@ class MCTSConfig(_Model):
     # (uavxai.avoidance.model.intruder_margin); null: over the whole search. With a poor
     # picture a shorter one keeps the mission going (docs/scenario.md has what it measured).
     uncertainty_horizon_s: Annotated[float, Field(gt=0, le=60)] | None = None
+    # How `mcts` / `mcts_vertical` count a track's error (issue 31): "margin", uncertainty_k
+    # sigmas of it grow the separation the tree needs (a wall); "probability", the chance
+    # that the error brings the intruder within d_min weights the line's value
+    # (uavxai.avoidance.risk). The sphere only: refused with the conflict cylinder.
+    risk: Literal[RISK_MODELS] = "margin"  # type: ignore[valid-type]
 
 
 class NMAC(_Model):
@@ -458,6 +464,11 @@ class Avoidance(_Model):
         problem = action_set_problem(self.planner, self.actions)
         if problem:
             raise ValueError(problem)
+        if self.mcts.risk == "probability" and self.conflict_volume != "sphere":
+            raise ValueError(
+                "avoidance.mcts.risk: probability needs avoidance.conflict_volume: sphere "
+                "(the chance of losing separation is worked out for a sphere of d_min_m)"
+            )
         return self
 
 
