@@ -344,7 +344,9 @@ def _expand(node, tree, bz, brise, bend, bscal, child, tracks, climbs, drift, pa
             value[c] = 0.0
         if risky:  # the line so far keeps clear with this chance: its value's weight
             surv[c] = surv[node] * edge_surv[a]
-            if cd != _NONE:
+            if cd == _COLLISION:  # a hard collision keeps its (late) value, weighed by
+                value[c] *= surv[node]  # the chance of getting that far
+            elif cd != _NONE:
                 value[c] *= surv[c]
         key[c] = child[kk, a]
     return first
@@ -461,10 +463,10 @@ def search(
     brise = np.stack([b.rise for b in bodies])
     tree = _empty_tree(model, root, simulations, depth_limit)
     size = run(tree, bz, brise, bend, bscal, child, _pack(tracks, n), model.climbs,
-               model.drift(hold_s, n), _params(model, goal, hold_s, time_left_s), explore,
+               model.drift(hold_s, n), _params(model, goal, hold_s, time_left_s, tracks), explore,
                inv_sqrt, draws, simulations)  # fmt: skip
-    risky = model.config.risk == "probability"
-    return _as_search_tree(tree, int(size), model.actions.size, hold_s, time_left_s, risky)
+    return _as_search_tree(tree, int(size), model.actions.size, hold_s, time_left_s,
+                           _risky(model, tracks))  # fmt: skip
 
 
 @functools.lru_cache(maxsize=8)
@@ -497,7 +499,19 @@ def _pack(tracks: Sequence[Track], n: int) -> tuple:
     )
 
 
-def _params(model: EncounterModel, goal: np.ndarray, hold_s: float, time_left_s: float):
+def _risky(model: EncounterModel, tracks: Sequence[Track]) -> bool:
+    """Does the search weigh its lines by their chance of keeping clear: risk as a
+    probability, and some track error to weigh (none: the values are the margin's)."""
+    return model.config.risk == "probability" and any(t.sigma is not None for t in tracks)
+
+
+def _params(
+    model: EncounterModel,
+    goal: np.ndarray,
+    hold_s: float,
+    time_left_s: float,
+    tracks: Sequence[Track],
+):
     cfg = model.config
     gh = float(goal[2])
     return np.array(
@@ -505,7 +519,7 @@ def _params(model: EncounterModel, goal: np.ndarray, hold_s: float, time_left_s:
          cfg.climb_rate_mps, hold_s, time_left_s, cfg.late_collision_value, cfg.d_max,
          float(model.vertical), cfg.height_target(-1, gh), cfg.height_target(0, gh),
          cfg.height_target(1, gh), float(goal[0]), float(goal[1]), gh, cfg.cull_m,
-         cfg.cylinder_aspect or 0.0, float(cfg.risk == "probability")],  # fmt: skip
+         cfg.cylinder_aspect or 0.0, float(_risky(model, tracks))],  # fmt: skip
         dtype=float,
     )
 
