@@ -159,6 +159,18 @@ def _closest(sep2, frac, exact, tm, lvl, ids, k, k_event, dt, margined, a, out):
 
 
 @njit(cache=True)
+def _keeps_clear(sep2, frac, exact, tm, ts, lvl, ids, k, k_event, a, par, loss):
+    """The chance that row ``a``'s edge keeps clear of the ``k`` intruders ``ids``, up to its
+    event (risk as a probability: uavxai.avoidance.risk), each intruder independent."""
+    last = k_event if exact else k_event + 1  # as _closest counts
+    edge_loss(sep2[a], frac[a], exact, tm[lvl], ts[lvl], ids, k, last, lvl == 0, par[DMIN], loss)
+    keeps = 1.0
+    for q in range(k):
+        keeps *= 1.0 - loss[q]
+    return keeps
+
+
+@njit(cache=True)
 def _first_out(xy, hs, par):
     """Per row, the first sub-step whose end is out of the flight area (n: none)."""
     rows, n = xy.shape[0], xy.shape[1] - 1
@@ -315,11 +327,8 @@ def _expand(node, tree, bz, brise, bend, bscal, child, tracks, climbs, drift, pa
                 min_sep[first + a], closest[first + a] = res[0], int(res[1])
                 t_closest[first + a] = res[2]
                 if risky:
-                    last = k_event[a] if exact else k_event[a] + 1
-                    edge_loss(sep2[a], frac[a], exact, tm[lvl], ts[lvl], near, k, last,
-                              lvl == 0, par[DMIN], loss)  # fmt: skip
-                    for q in range(k):
-                        edge_surv[a] *= 1.0 - loss[q]
+                    edge_surv[a] = _keeps_clear(sep2, frac, exact, tm, ts, lvl, near, k,
+                                                k_event[a], a, par, loss)  # fmt: skip
     for a in range(kn):
         c = first + a
         if not k:
