@@ -92,6 +92,9 @@ ACTIONS: tuple[Action, ...] = _table()
 ACTION_SETS = {"paper": 9, "vertical": len(ACTIONS)}
 # A tree planner's conflict volume around each intruder (`avoidance.conflict_volume`).
 CONFLICT_VOLUMES = ("sphere", "cylinder")
+# How a tree planner counts a track's uncertainty (`avoidance.mcts.risk`): "margin", k sigmas
+# of it as a wall; "probability", the chance of losing separation, in the line's value.
+RISK_MODELS = ("margin", "probability")
 N_ACTIONS = ACTION_SETS["paper"]  # the paper's nine: the learned planners' output size
 HOLD = 4  # hold the bank command, hold speed: the reference every other option is compared to
 CLIMB, DESCEND = (next(a.index for a in ACTIONS if a.climb == c) for c in (+1, -1))

@@ -13,6 +13,7 @@ MCTS tree. Cost grows as ``9^depth``; that is the point of the comparison.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 
@@ -73,6 +74,9 @@ class ExhaustivePlanner(TreePlanner):
     sampled = False
 
     def __init__(self, config: PlannerConfig | None = None, *, name: str = "exhaustive") -> None:
+        # Risk as a probability weighs the values MCTS backs up (avoidance.mcts.risk); the
+        # exhaustive reference keeps the k-sigma wall, whatever the scenario asks of MCTS.
+        config = dataclasses.replace(config or PlannerConfig(), risk="margin")
         super().__init__(config, name=name)
 
     def search(

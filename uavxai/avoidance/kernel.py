@@ -23,6 +23,7 @@ import numpy as np
 from numba import njit
 
 from uavxai.avoidance.model import EncounterModel, Track
+from uavxai.avoidance.risk import edge_loss
 from uavxai.avoidance.types import SearchTree
 
 # Columns of the per-key table ``bend`` (per action) and ``bscal`` (per key).
@@ -30,7 +31,7 @@ ZRE, ZIM, DPSI, VEND, PHIEND, PHICMD, RISEEND = range(7)
 BALLRE, BALLIM, BALLR, OWNSTEP = range(4)
 # Entries of ``par``.
 (DMIN, GOALR, XB0, XB1, YB0, YB1, HB0, HB1, CLIMB, DUR, TLEFT, LATE, DMAX, VERT, TDOWN, TLEVEL,
- TUP, GX, GY, GH, CULL, ASPECT) = range(22)  # fmt: skip
+ TUP, GX, GY, GH, CULL, ASPECT, RISK) = range(23)  # fmt: skip
 _TAU = 2.0 * math.pi
 _NONE, _GOAL, _COLLISION, _OUT, _TIMEOUT = 0, 1, 2, 3, 4
 
@@ -158,6 +159,18 @@ def _closest(sep2, frac, exact, tm, lvl, ids, k, k_event, dt, margined, a, out):
 
 
 @njit(cache=True)
+def _keeps_clear(sep2, frac, exact, tm, ts, lvl, ids, k, k_event, a, par, loss):
+    """The chance that row ``a``'s edge keeps clear of the ``k`` intruders ``ids``, up to its
+    event (risk as a probability: uavxai.avoidance.risk), each intruder independent."""
+    last = k_event if exact else k_event + 1  # as _closest counts
+    edge_loss(sep2[a], frac[a], exact, tm[lvl], ts[lvl], ids, k, last, lvl == 0, par[DMIN], loss)
+    keeps = 1.0
+    for q in range(k):
+        keeps *= 1.0 - loss[q]
+    return keeps
+
+
+@njit(cache=True)
 def _first_out(xy, hs, par):
     """Per row, the first sub-step whose end is out of the flight area (n: none)."""
     rows, n = xy.shape[0], xy.shape[1] - 1
@@ -272,8 +285,8 @@ def _expand(node, tree, bz, brise, bend, bscal, child, tracks, climbs, drift, pa
     """TreeBuilder.expand over EncounterModel.expand: the K children of ``node``, appended
     to the tree; returns the first child's index."""
     (visits, value_sum, first_child, is_leaf, value, key, state, depth, parent, action, code,
-     min_sep, closest, t_closest, count, depth_limit) = tree  # fmt: skip
-    txy, th, tm, tmargined, tstep, tc, tr = tracks
+     min_sep, closest, t_closest, surv, count, depth_limit) = tree  # fmt: skip
+    txy, th, tm, tmargined, tstep, tc, tr, ts = tracks
     kn, n = climbs.size, bz.shape[2] - 1
     first = count[0]
     count[0] += kn
@@ -290,6 +303,9 @@ def _expand(node, tree, bz, brise, bend, bscal, child, tracks, climbs, drift, pa
     k_event = np.full(kn, n)
     kind = np.zeros(kn, dtype=np.int8)
     res = np.empty(3)
+    risky = par[RISK] > 0
+    edge_surv = np.ones(kn)  # per child, the chance its edge keeps clear of every track
+    loss = np.empty(max(k, 1))
     if k or walls or goal:
         xy, hs = _samples(h, origin, rot, kk, heights, box[5], bz, brise, drift, par)
         k_hit = np.full(kn, n)
@@ -310,6 +326,9 @@ def _expand(node, tree, bz, brise, bend, bscal, child, tracks, climbs, drift, pa
                          res)  # fmt: skip
                 min_sep[first + a], closest[first + a] = res[0], int(res[1])
                 t_closest[first + a] = res[2]
+                if risky:
+                    edge_surv[a] = _keeps_clear(sep2, frac, exact, tm, ts, lvl, near, k,
+                                                k_event[a], a, par, loss)  # fmt: skip
     for a in range(kn):
         c = first + a
         if not k:
@@ -332,6 +351,12 @@ def _expand(node, tree, bz, brise, bend, bscal, child, tracks, climbs, drift, pa
             value[c] = par[LATE] * t / (depth_limit * par[DUR])
         else:
             value[c] = 0.0
+        if risky:  # the line so far keeps clear with this chance: its value's weight
+            surv[c] = surv[node] * edge_surv[a]
+            if cd == _COLLISION:  # a hard collision keeps its (late) value, weighed by
+                value[c] *= surv[node]  # the chance of getting that far
+            elif cd != _NONE:
+                value[c] *= surv[c]
         key[c] = child[kk, a]
     return first
 
@@ -379,7 +404,7 @@ def run(tree, bz, brise, bend, bscal, child, tracks, climbs, drift, par, explore
     """``simulations`` MCTS simulations from the root (node 0) of ``tree`` (the algorithm:
     the docstring of uavxai.avoidance.mcts). Returns the number of nodes."""
     (visits, value_sum, first_child, is_leaf, value, key, state, depth, parent, action, code,
-     min_sep, closest, t_closest, count, depth_limit) = tree  # fmt: skip
+     min_sep, closest, t_closest, surv, count, depth_limit) = tree  # fmt: skip
     kn = climbs.size
     near = np.empty(tracks[5].shape[1], dtype=np.int64)
     path = np.zeros(depth_limit + 1, dtype=np.int64)
@@ -400,7 +425,10 @@ def run(tree, bz, brise, bend, bscal, child, tracks, climbs, drift, par, explore
         if v != v:  # nan: an open leaf at the depth limit, scored when first reached
             d = math.sqrt((state[node, 0] - par[GX]) ** 2 + (state[node, 1] - par[GY]) ** 2
                           + (state[node, 2] - par[GH]) ** 2)  # fmt: skip
-            v = value[node] = 1.0 - d / par[DMAX]
+            v = 1.0 - d / par[DMAX]
+            if par[RISK] > 0:
+                v *= surv[node]
+            value[node] = v
         for k in range(length):
             p = path[k]
             visits[p] += 1
@@ -444,9 +472,10 @@ def search(
     brise = np.stack([b.rise for b in bodies])
     tree = _empty_tree(model, root, simulations, depth_limit)
     size = run(tree, bz, brise, bend, bscal, child, _pack(tracks, n), model.climbs,
-               model.drift(hold_s, n), _params(model, goal, hold_s, time_left_s), explore,
+               model.drift(hold_s, n), _params(model, goal, hold_s, time_left_s, tracks), explore,
                inv_sqrt, draws, simulations)  # fmt: skip
-    return _as_search_tree(tree, int(size), model.actions.size, hold_s, time_left_s)
+    return _as_search_tree(tree, int(size), model.actions.size, hold_s, time_left_s,
+                           _risky(model, tracks))  # fmt: skip
 
 
 @functools.lru_cache(maxsize=8)
@@ -474,10 +503,24 @@ def _pack(tracks: Sequence[Track], n: int) -> tuple:
         np.array([t.step_max for t in tracks]),
         np.stack([t.centre for t in tracks]).reshape(len(tracks), count, 3),
         np.stack([t.radius for t in tracks]).reshape(len(tracks), count),
+        np.stack([np.zeros((n + 1, count)) if t.sigma is None else t.sigma
+                  for t in tracks]),  # fmt: skip
     )
 
 
-def _params(model: EncounterModel, goal: np.ndarray, hold_s: float, time_left_s: float):
+def _risky(model: EncounterModel, tracks: Sequence[Track]) -> bool:
+    """Does the search weigh its lines by their chance of keeping clear: risk as a
+    probability, and some track error to weigh (none: the values are the margin's)."""
+    return model.config.risk == "probability" and any(t.sigma is not None for t in tracks)
+
+
+def _params(
+    model: EncounterModel,
+    goal: np.ndarray,
+    hold_s: float,
+    time_left_s: float,
+    tracks: Sequence[Track],
+):
     cfg = model.config
     gh = float(goal[2])
     return np.array(
@@ -485,7 +528,7 @@ def _params(model: EncounterModel, goal: np.ndarray, hold_s: float, time_left_s:
          cfg.climb_rate_mps, hold_s, time_left_s, cfg.late_collision_value, cfg.d_max,
          float(model.vertical), cfg.height_target(-1, gh), cfg.height_target(0, gh),
          cfg.height_target(1, gh), float(goal[0]), float(goal[1]), gh, cfg.cull_m,
-         cfg.cylinder_aspect or 0.0],  # fmt: skip
+         cfg.cylinder_aspect or 0.0, float(_risky(model, tracks))],  # fmt: skip
         dtype=float,
     )
 
@@ -511,15 +554,18 @@ def _empty_tree(model: EncounterModel, root: np.ndarray, simulations: int, depth
         np.full(cap, np.inf),  # min_sep
         np.full(cap, -1, dtype=np.int64),  # closest
         np.full(cap, np.nan),  # t_closest
+        np.ones(cap),  # surv: the chance the line to the node keeps clear (risk "probability")
         np.ones(1, dtype=np.int64),  # count
         depth_limit,
     )
     return tree
 
 
-def _as_search_tree(tree, size: int, k: int, hold_s: float, time_left_s: float) -> SearchTree:
+def _as_search_tree(
+    tree, size: int, k: int, hold_s: float, time_left_s: float, risky: bool
+) -> SearchTree:
     (visits, value_sum, first_child, _, _, _, state, depth, parent, action, code, min_sep,
-     closest, t_closest, _, _) = tree  # fmt: skip
+     closest, t_closest, surv, _, _) = tree  # fmt: skip
     d = depth[:size].copy()
     states = state[:size].copy()
     return SearchTree(
@@ -537,4 +583,5 @@ def _as_search_tree(tree, size: int, k: int, hold_s: float, time_left_s: float) 
         first_child=first_child[:size].copy(),
         branching=k,
         time_left_s=time_left_s,
+        risk=1.0 - surv[:size] if risky else None,
     )

@@ -28,6 +28,7 @@ from uavxai.avoidance.model import (
     bank_command,
     vertical_command,
 )
+from uavxai.avoidance.risk import edge_loss
 from uavxai.avoidance.types import ChildStats, Meeting, Ownship, PlannerConfig, SearchTree
 from uavxai.geometry import closest_on_pieces, closest_on_pieces_cylinder
 from uavxai.vocabulary import ACTIONS, Outcome
@@ -50,6 +51,11 @@ class LineMeasure:
     # them closer than ``closest`` on its predicted track: (index, closest approach less that
     # margin, m), the least first. The prediction is not sure which intruder passes closest.
     unsure: tuple[tuple[int, float], ...] = ()
+    # With risk as a probability (tracks with ``sigma``): the chance that the line loses
+    # separation with each intruder (index, chance), the likeliest first, those above 0 only,
+    # and with any of them (None: risk not weighed).
+    losses: tuple[tuple[int, float], ...] = ()
+    risk: float | None = None
 
 
 def measure_line(
@@ -115,7 +121,37 @@ def measure_line(
     could = np.maximum(best - best_margin, 0.0)
     unsure = tuple((int(i), float(could[i])) for i in np.argsort(could, kind="stable")
                    if i != j and could[i] < best[j])  # fmt: skip
-    return LineMeasure(float(best[j]), j, float(best_t[j]), met, horizon, unsure)
+    losses, risk = _line_losses(dist, frac, keep, levels[:used], tracks, d_min_m)
+    return LineMeasure(float(best[j]), j, float(best_t[j]), met, horizon, unsure, losses, risk)
+
+
+def _line_losses(
+    dist: np.ndarray,
+    frac: np.ndarray,
+    keep: np.ndarray,
+    levels: Sequence[int],
+    tracks: Sequence[Track],
+    d_min_m: float,
+) -> tuple[tuple[tuple[int, float], ...], float | None]:
+    """:attr:`LineMeasure.losses` and ``risk`` of a line whose edges' chords are ``dist``,
+    ``frac`` (E, n, N), edge ``e`` counted over its first ``keep[e]`` sub-steps: per edge the
+    search's own :func:`edge_loss`, combined over edges and intruders as independent."""
+    if any(tracks[lv].sigma is None for lv in levels):
+        return (), None
+    n_int = dist.shape[2]
+    ids = np.arange(n_int)
+    keeps = np.ones(n_int)  # per intruder, the chance the line keeps clear of it
+    loss = np.empty(n_int)
+    for e, lv in enumerate(levels):
+        t = tracks[lv]
+        margin = np.zeros(t.sigma.shape) if t.margin is None else t.margin
+        edge_loss(dist[e] ** 2, frac[e], True, margin, t.sigma, ids, n_int, int(keep[e]) - 1,
+                  lv == 0, d_min_m, loss)  # fmt: skip
+        keeps *= 1.0 - loss
+    chance = 1.0 - keeps
+    order = np.argsort(-chance, kind="stable")
+    losses = tuple((int(i), float(chance[i])) for i in order if chance[i] > 0)
+    return losses, float(1.0 - np.prod(keeps))
 
 
 def chord_distances(
@@ -213,6 +249,8 @@ def with_measure(child: ChildStats, m: LineMeasure, ids: Sequence) -> ChildStats
         time_to_closest_s=m.t_closest_s,
         meets=meets,
         unsure=tuple((ids[i], could) for i, could in m.unsure),
+        losses=tuple((ids[i], chance) for i, chance in m.losses),
+        risk=m.risk,
     )
 
 

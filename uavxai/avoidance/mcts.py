@@ -51,6 +51,7 @@ from uavxai.avoidance.model import (
     ownship_air,
     ownship_state,
     place_children,
+    track_sigma,
     vertical_command,
 )
 from uavxai.avoidance.types import (
@@ -192,14 +193,20 @@ def predict_levels(
     pos, vel = intruder_arrays(intruders)
     turn = intruder_turn_rates(intruders, cfg)
     margin = intruder_margin(
-        cfg,
-        vel,
-        np.zeros(len(intruders)) if turn is None else turn,
-        np.array([i.sigma_m for i in intruders]),
-        np.array([i.sigma_v for i in intruders]),
+        cfg, vel, np.zeros(len(intruders)) if turn is None else turn, *_track_errors(intruders)
     )
+    sigma = None
+    if cfg.risk == "probability":  # the track error as a chance, not a wall (avoidance.risk)
+        sigma = track_sigma(cfg, len(intruders), *_track_errors(intruders))
     starts = [d * hold_s for d in range(depth)]
-    return model.predict_levels(pos, vel, hold_s, starts, turn_rate=turn, margin=margin)
+    return model.predict_levels(
+        pos, vel, hold_s, starts, turn_rate=turn, margin=margin, sigma=sigma
+    )
+
+
+def _track_errors(intruders: Sequence[Intruder]) -> tuple[np.ndarray, np.ndarray]:
+    """(N,) position and (N,) velocity 1-sigma errors of the intruders' tracks."""
+    return np.array([i.sigma_m for i in intruders]), np.array([i.sigma_v for i in intruders])
 
 
 def decision_from_tree(

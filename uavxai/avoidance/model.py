@@ -61,6 +61,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from uavxai.avoidance.risk import RISK_SIGMAS
 from uavxai.avoidance.types import Ownship, PlannerConfig
 from uavxai.geometry import clip, cylinder_closest, turn_positions, turn_rate_of_bank
 from uavxai.vocabulary import ACTIONS, Outcome
@@ -176,6 +177,10 @@ class Track:
     # how uncertain its track is), non-decreasing in time; None: none. The ball above
     # includes it, so that culling by ``near`` stays exact.
     margin: np.ndarray | None = field(default=None, repr=False)
+    # (n+1, N) the track's 1-sigma position error at each instant when the search weighs it
+    # as a probability (PlannerConfig.risk "probability", uavxai.avoidance.risk); None: not.
+    # The ball reaches RISK_SIGMAS of it beyond the margin, where the chance is counted.
+    sigma: np.ndarray | None = field(default=None, repr=False)
 
     @classmethod
     def of(
@@ -184,9 +189,11 @@ class Track:
         index_distance: float = 0.0,
         margin: np.ndarray | None = None,
         grow: float = 1.0,
+        sigma: np.ndarray | None = None,
     ) -> Track:
         """``grow``: the ball holds the margin times this (the conflict cylinder's corner
-        reaches ``PlannerConfig.cull_factor`` times its radius, margin included)."""
+        reaches ``PlannerConfig.cull_factor`` times its radius, margin included);
+        ``sigma``: see the field."""
         pos = np.asarray(pos, dtype=float)
         if pos.ndim != 3 or pos.shape[2] != 3 or pos.shape[0] < 2:
             raise ValueError(f"intruder positions must be (n+1, N, 3) with n >= 1, got {pos.shape}")
@@ -200,6 +207,11 @@ class Track:
                 margin = None
             else:
                 radius = radius + grow * margin.max(axis=0, initial=0.0)
+        if sigma is not None:
+            sigma = np.asarray(sigma, dtype=float)
+            if sigma.shape != pos.shape[:2]:
+                raise ValueError(f"sigma must be {pos.shape[:2]}, got {sigma.shape}")
+            radius = radius + RISK_SIGMAS * sigma.max(axis=0, initial=0.0)
         steps = np.sqrt(np.sum(np.diff(pos, axis=0) ** 2, axis=2))
         track = cls(
             pos=pos,
@@ -210,6 +222,7 @@ class Track:
             step_max=float(steps.max()) if steps.size else 0.0,
             index_distance=index_distance if pos.shape[1] >= _INDEX_MIN else 0.0,
             margin=margin,
+            sigma=sigma,
         )
         return track  # filed in its grid when first asked (the compiled search never asks)
 
@@ -309,30 +322,52 @@ def intruder_margin(
     15 m/s intruder can be anywhere within 240 m of its prediction after 16 s).
     """
     n = vel.shape[0]
-    sm = np.zeros(n) if sigma_m is None else np.asarray(sigma_m, dtype=float)
-    sv = np.zeros(n) if sigma_v is None else np.asarray(sigma_v, dtype=float)
-    k = config.uncertainty_k
-    own = config.own_error_10s_m / 10.0**1.5
+    # With risk as a probability the track error is no wall: only what the intruder could do
+    # grows the separation needed (track_sigma gives the error to the search instead).
+    k = 0.0 if config.risk == "probability" else config.uncertainty_k
+    sigma = track_sigma(config, n, sigma_m, sigma_v)
     reach = config.intruder_model == "reachable" and config.reach_horizon_s > 0
-    uncertain = k > 0 and (np.any(sm) or np.any(sv) or own > 0)
+    uncertain = k > 0 and sigma is not None
     if not n or not (reach or uncertain):
         return None
     limit = math.radians(config.intruder_bank_limit_deg)
     horizon = config.reach_horizon_s
-    vel_horizon = config.uncertainty_horizon_s
     air = np.asarray(vel, dtype=float) - np.array([*config.wind_mps, 0.0])
 
     def margin(t: np.ndarray) -> np.ndarray:  # t (..., T): (..., T, N)
         out = np.zeros((*t.shape, n))
         if uncertain:
-            tt = t[..., None]
-            tv = tt if vel_horizon is None else np.minimum(tt, vel_horizon)
-            out += k * np.sqrt(sm[None] ** 2 + (sv[None] * tv) ** 2 + own**2 * tt**3)
+            out += k * sigma(t)
         if reach:  # turns differ through the air: the wind carries all of them alike
             out += manoeuvre_spread(air, turn_rate, np.minimum(t, horizon), limit)
         return out
 
     return margin
+
+
+def track_sigma(
+    config: PlannerConfig,
+    n: int,
+    sigma_m: np.ndarray | None = None,
+    sigma_v: np.ndarray | None = None,
+) -> Callable[[np.ndarray], np.ndarray] | None:
+    """The 1-sigma position error (per axis) of ``n`` tracks predicted ``t`` (..., T)
+    seconds ahead, (..., T, N): ``sqrt(sigma_m^2 + (sigma_v t_v)^2 + own(t)^2)``, the track's
+    and the ownship model's own (``own_error_10s_m`` at 10 s, as ``t^1.5``), with ``t_v =
+    min(t, uncertainty_horizon_s)`` (``t`` when None). None when there is none."""
+    sm = np.zeros(n) if sigma_m is None else np.asarray(sigma_m, dtype=float)
+    sv = np.zeros(n) if sigma_v is None else np.asarray(sigma_v, dtype=float)
+    own = config.own_error_10s_m / 10.0**1.5
+    if not n or not (np.any(sm) or np.any(sv) or own > 0):
+        return None
+    vel_horizon = config.uncertainty_horizon_s
+
+    def sigma(t: np.ndarray) -> np.ndarray:
+        tt = np.asarray(t, dtype=float)[..., None]
+        tv = tt if vel_horizon is None else np.minimum(tt, vel_horizon)
+        return np.sqrt(sm ** 2 + (sv * tv) ** 2 + own**2 * tt**3)
+
+    return sigma
 
 
 # ----------------------------------------------------------------------------------- segments
@@ -571,10 +606,12 @@ class EncounterModel:
         index: bool = True,
         turn_rate: np.ndarray | None = None,
         margin: Callable[[np.ndarray], np.ndarray] | None = None,
+        sigma: Callable[[np.ndarray], np.ndarray] | None = None,
     ) -> list[Track]:
         """:meth:`predict` over ``[t0, t0 + duration]`` for every ``t0`` of ``starts`` (a
         tree's levels), computed in one batch; ``margin(t)`` is given ``t`` (n+1,) for one
-        level, as :meth:`predict` says, and (levels, n+1) for several."""
+        level, as :meth:`predict` says, and (levels, n+1) for several; ``sigma(t)`` alike
+        (:func:`track_sigma`: the tracks' errors, when risk is a probability)."""
         n = self.substeps(duration)
         t = np.array(starts, dtype=float)[:, None] + (duration / n) * np.arange(n + 1)
         distance = self.reach(0.0, duration) + self.config.cull_m if index else 0.0
@@ -585,7 +622,11 @@ class EncounterModel:
         wind = self.config.wind_mps
         pos = turn_positions(pos, vel, t.ravel(), turn_rate, wind).reshape(*t.shape, -1, 3)
         grow = self.config.cull_factor
-        return [Track.of(p, distance, m, grow) for p, m in zip(pos, extra, strict=True)]
+        errors = [None] * len(starts) if sigma is None else list(sigma(t))
+        return [
+            Track.of(p, distance, m, grow, e)
+            for p, m, e in zip(pos, extra, errors, strict=True)
+        ]
 
     def reach(self, speed: float, duration: float) -> float:
         """The farthest (3-D) an ownship at ``speed`` can get from its start in ``duration``."""

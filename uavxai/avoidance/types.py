@@ -316,6 +316,10 @@ class ChildStats:
     # other intruders whose track error could bring them closer than ``closest_intruder`` on
     # that line: (id, closest approach on its predicted track less its margin there, m)
     unsure: tuple[tuple[int | str, float], ...] = ()
+    # with risk as a probability (PlannerConfig.risk): the chance that line loses separation
+    # with each intruder, (id, chance) the likeliest first, and with any (None: not weighed)
+    losses: tuple[tuple[int | str, float], ...] = ()
+    risk: float | None = None
 
     @property
     def flies(self) -> int:
@@ -346,6 +350,9 @@ class SearchTree:
     # the time the episode had left when the search valued its lines: a line still open
     # then ends ``timeout`` (inf: no time-out in sight)
     time_left_s: float = math.inf
+    # (M,) with risk as a probability (PlannerConfig.risk): the chance that the line from the
+    # root to the node loses separation with some track, which weighted its value; None: off
+    risk: np.ndarray | None = None
 
     @property
     def q(self) -> np.ndarray:
@@ -498,6 +505,9 @@ class Decision:
                     "meets": None if c.meets is None else asdict(c.meets),
                     "flies": action_name(c.flies),
                     "unsure": [[who, m] for who, m in c.unsure],
+                    # with risk as a probability only: the line's chance of losing separation
+                    **({} if c.risk is None else {
+                        "risk": c.risk, "losses": [[who, p] for who, p in c.losses]}),
                 }
                 for c in self.children
             ],

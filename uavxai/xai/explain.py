@@ -273,6 +273,8 @@ def _keeps(c: ChildStats, decision: Decision) -> str:
         text += f" and {_ends(c, chosen)}"
     if c.closest_intruder is not None and c.unsure:
         text += f"; {_unsure(c)}"
+    if c.losses:
+        text += f"; {_losses(c)}"
     return text
 
 
@@ -287,6 +289,22 @@ def _unsure(c: ChildStats) -> str:
                       for who, m in c.unsure[:UNSURE_SHOWN])  # fmt: skip
     more = len(c.unsure) - UNSURE_SHOWN
     return f"less sure of {named}" + (f" and {more} more" if more > 0 else "")
+
+
+def _losses(c: ChildStats) -> str:
+    """With risk as a probability, what the search weighed the line by (issue 31): "the
+    chance of losing separation with intruder 7 along this line is 3 %", and with the
+    others too when they add to it."""
+    who, p = c.losses[0]
+    text = f"the chance of losing separation with {_name(who)} along this line is {_percent(p)}"
+    if c.risk is not None and len(c.losses) > 1:
+        text += f" ({_percent(c.risk)} with any of {len(c.losses)} intruders)"
+    return text
+
+
+def _percent(p: float) -> str:
+    """A chance in words: whole percent, and below 1 % as "under 1 %" (not "0 %")."""
+    return "under 1 %" if p < 0.005 else f"{100 * p:.0f} %"
 
 
 def _support(decision: Decision) -> str:

@@ -23,6 +23,7 @@ from uavxai.scenario.schema.base import (
 from uavxai.vocabulary import (
     ACTION_SETS,
     CONFLICT_VOLUMES,
+    RISK_MODELS,
     action_set_problem,
     avoidance_planners,
 )
@@ -114,6 +115,11 @@ class MCTSConfig(Section):
     # the tree planners and mcts_daa's alerting add to the separation they ask of it
     # (uavxai.avoidance.model.intruder_margin); 0: the tracks are taken as exact.
     uncertainty_k: Annotated[float, Field(ge=0, le=10)] = 2.0
+    # How `mcts` / `mcts_vertical` count a track's error (issue 31): "margin", uncertainty_k
+    # sigmas of it grow the separation the tree needs (a wall); "probability", the chance
+    # that the error brings the intruder within d_min weights the line's value
+    # (uavxai.avoidance.risk). The sphere only: refused with the conflict cylinder.
+    risk: Literal[RISK_MODELS] = "margin"  # type: ignore[valid-type]
 
 
 class NMAC(Section):
@@ -180,4 +186,9 @@ class Avoidance(Section):
         problem = action_set_problem(self.planner, self.actions)
         if problem:
             raise ValueError(problem)
+        if self.mcts.risk == "probability" and self.conflict_volume != "sphere":
+            raise ValueError(
+                "avoidance.mcts.risk: probability needs avoidance.conflict_volume: sphere "
+                "(the chance of losing separation is worked out for a sphere of d_min_m)"
+            )
         return self
