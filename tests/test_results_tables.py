@@ -35,3 +35,23 @@ def test_daa_table_quotes_each_method_and_dynamics(tmp_path: Path) -> None:
     side = text.split("\n\n")[1].splitlines()
     assert side[0].startswith("| method | NMAC risk ratio, kinematic | NMAC risk ratio, jsbsim")
     assert [line.split(" |")[0] for line in side[2:]] == ["| none"]
+
+
+def test_multi_threat_table_quotes_the_mission_safety_and_daa_columns(tmp_path: Path) -> None:
+    src = ROOT / "docs" / "results" / "manoeuvring" / "kinematic-mt20-daa50-results.csv"
+    folder = tmp_path / "kinematic"
+    folder.mkdir()
+    shutil.copy(src, folder / "results.csv")
+    text = _tables().multi_threat_table([folder / "results.csv"])
+    with src.open() as f:
+        rows = {r["method"]: r for r in csv.DictReader(f)}
+    lines = text.splitlines()
+    assert lines[0].startswith("| method | file | intruders | episodes | goal |")
+    # none first, then in the DAA order, every method of the file once
+    assert [ln.split(" |")[0].removeprefix("| ") for ln in lines[2:]] == [
+        m for m in ("none", "mvp", "mcts", "mcts_vertical", "mcts_daa") if m in rows]
+    daa = rows["mcts_daa"]
+    row = next(ln for ln in lines if ln.startswith("| mcts_daa |"))
+    assert f"| {float(daa['goal_rate']):.3f} | {float(daa['out_of_bounds_rate']):.3f} |" in row
+    rr = f"{float(daa['nmac_risk_ratio']):.3g} [{float(daa['nmac_risk_ratio_lo']):.3g}, "
+    assert rr in row
