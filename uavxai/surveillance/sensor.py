@@ -9,14 +9,13 @@ intruder it sees (perfect association): the tracker needs no data association.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
 from uavxai.dynamics.state import TrafficState
-from uavxai.errors import UserError
 from uavxai.geometry import wrap_angle
-from uavxai.scenario import Sensor
+from uavxai.scenario import Sensor, checked
 
 _DEFAULT = Sensor()  # the schema's defaults (surveillance.sensor), declared there once
 
@@ -32,12 +31,10 @@ class SensorConfig:
     sigma_m: float = _DEFAULT.sigma_m
 
     def __post_init__(self) -> None:
-        if not self.range_m >= 0:
-            raise UserError(f"surveillance.sensor.range_m must be >= 0, got {self.range_m}")
-        if not 0 <= self.fov_deg <= 360:
-            raise UserError(f"surveillance.sensor.fov_deg must be in [0, 360], got {self.fov_deg}")
-        if not self.sigma_m >= 0:
-            raise UserError(f"surveillance.sensor.sigma_m must be >= 0, got {self.sigma_m}")
+        # The schema's section checks every field: one rule for a scenario's sensor and for
+        # one built in code.
+        checked(Sensor, {f.name: getattr(self, f.name) for f in fields(self)},
+                "surveillance.sensor")
 
 
 def sensor_sees(state: TrafficState, rows: np.ndarray, sensor: SensorConfig) -> np.ndarray:
