@@ -93,17 +93,25 @@ print(json.dumps(where))
 """
 
 
-def test_installed_wheel_imports_every_module(wheel: zipfile.ZipFile, tmp_path: Path) -> None:
-    """pip installs the wheel (into a folder of its own: no second venv) and a fresh
-    interpreter, outside the repository and without PYTHONPATH, imports every module the wheel
-    holds from there. Only ``__main__`` is left out: importing it runs the command line."""
-    site = tmp_path / "site"
+@pytest.fixture(scope="module")
+def site(wheel: zipfile.ZipFile, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The wheel pip-installed into a folder of its own (no second venv)."""
+    site = tmp_path_factory.mktemp("site")
     subprocess.run(
         [sys.executable, "-m", "pip", "install", "--no-deps", "--no-compile", "-q",
          "--target", str(site), wheel.filename],
         check=True,
         capture_output=True,
     )  # fmt: skip
+    return site
+
+
+def test_installed_wheel_imports_every_module(
+    wheel: zipfile.ZipFile, site: Path, tmp_path: Path
+) -> None:
+    """pip installs the wheel (into a folder of its own: no second venv) and a fresh
+    interpreter, outside the repository and without PYTHONPATH, imports every module the wheel
+    holds from there. Only ``__main__`` is left out: importing it runs the command line."""
     modules = sorted(
         n.removesuffix(".py").removesuffix("/__init__").replace("/", ".")
         for n in wheel.namelist()
@@ -125,17 +133,9 @@ def test_installed_wheel_imports_every_module(wheel: zipfile.ZipFile, tmp_path: 
     assert sorted(where) == modules and not elsewhere, elsewhere
 
 
-def test_the_installed_wheel_trains_the_avoidance_stage(wheel: zipfile.ZipFile,
-                                                        tmp_path: Path) -> None:
+def test_the_installed_wheel_trains_the_avoidance_stage(site: Path, tmp_path: Path) -> None:
     """Issue 29: after installing, `uavxai train --stage avoidance` runs from the installed
     copy (outside the repository, without PYTHONPATH) and writes its checkpoint."""
-    site = tmp_path / "site"
-    subprocess.run(
-        [sys.executable, "-m", "pip", "install", "--no-deps", "--no-compile", "-q",
-         "--target", str(site), wheel.filename],
-        check=True,
-        capture_output=True,
-    )  # fmt: skip
     scenario = tmp_path / "tiny.yaml"
     scenario.write_text("name: tiny\nintruders: {count: 2}\n")
     train = ("import sys; sys.path.insert(0, sys.argv[1]); import uavxai.cli as c; "
