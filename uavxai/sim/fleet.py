@@ -24,7 +24,7 @@ from uavxai.scenario import Scenario
 from uavxai.sim.command import DirectPath
 from uavxai.sim.episode import EngineStep, Episode
 from uavxai.sim.mission import Mission, MissionConfig
-from uavxai.sim.steps import Energy, OrbitBreak
+from uavxai.sim.steps import Energy, OrbitBreak, service_files
 from uavxai.surveillance.tracker import truth_beliefs
 from uavxai.vocabulary import Outcome
 
@@ -214,15 +214,14 @@ class Fleet(EngineStep):
             ended = m.sample()
             if ended is not None and ended is not Outcome.COMPLETED:
                 main.outcome = ended  # the fleet's episode ends with it
-        if main.outcome is not Outcome.COMPLETED:
-            return
-        if any(m.flying for m in self.members):  # member 0 done first: it waits
+        others = any(m.flying for m in self.members)
+        if self._waiting and not others and main.outcome is None:  # the last one is done
+            main.outcome = Outcome.COMPLETED
+        elif main.outcome is Outcome.COMPLETED and others:  # member 0 done first: it waits
             main.outcome = None
             if not self._waiting:
                 self._waiting = True
                 main.suspend()
-        elif self._waiting:
-            main.outcome = Outcome.COMPLETED
 
     def on_end(self, ep: Episode, summary: dict) -> None:
         own = {
@@ -247,7 +246,7 @@ class FleetService(EngineStep):
     ``users_served`` to ``summary.fleet`` and the fleet's totals to ``summary.mission``."""
 
     def __init__(self, scenario: Scenario, channel, plan, fleet: Fleet, out: Path | None) -> None:
-        from uavxai.comms.delivery import USERS_COLUMNS, Delivery
+        from uavxai.comms.delivery import Delivery
         from uavxai.comms.fleet import FleetChannel
         from uavxai.comms.mobility import UserMobility
 
@@ -265,15 +264,9 @@ class FleetService(EngineStep):
             for n, users in enumerate(self.mine)
         ]
         self._breaks = [OrbitBreak() for _ in self.mine]
-        self._files = []
-        if out is not None:
-            from uavxai.comms.delivery import SERVICE_COLUMNS
-
-            self._users = (out / "users.csv").open("w")
-            self._users.write(",".join(USERS_COLUMNS) + "\n")
-            self._service = (out / "service.csv").open("w")
-            self._service.write(",".join(SERVICE_COLUMNS) + "\n")
-            self._files = [self._users, self._service]
+        self._files = service_files(out)
+        if self._files:
+            self._users, self._service = self._files
 
     def on_sample(self, ep: Episode, state: TrafficState) -> None:
         from uavxai.comms.delivery import service_lines

@@ -80,6 +80,18 @@ class Energy(EngineStep):
             summary["energy"] = self.section()
 
 
+def service_files(out: Path | None) -> list:
+    """users.csv and service.csv in ``out``, their headers written ([] without ``out``)."""
+    from uavxai.comms.delivery import SERVICE_COLUMNS, USERS_COLUMNS
+
+    if out is None:
+        return []
+    files = [(out / "users.csv").open("w"), (out / "service.csv").open("w")]
+    files[0].write(",".join(USERS_COLUMNS) + "\n")
+    files[1].write(",".join(SERVICE_COLUMNS) + "\n")
+    return files
+
+
 class OrbitBreak:
     """Where the planned orbit would have had the aircraft while it avoids: the orbit flown on
     from the bearing at which avoiding began (the service lost to avoidance is measured
@@ -126,7 +138,7 @@ class Service(EngineStep):
         replan=None,
         energy: Energy | None = None,
     ) -> None:
-        from uavxai.comms.delivery import SERVICE_COLUMNS, USERS_COLUMNS, Delivery
+        from uavxai.comms.delivery import Delivery
         from uavxai.comms.mobility import UserMobility
 
         self.scenario = scenario
@@ -140,13 +152,9 @@ class Service(EngineStep):
         self.qos_bps = float(scenario.comms.qos_rate_bps)
         self._last_plan_t = 0.0
         self._break = OrbitBreak()
-        self._files = []
-        if out is not None:
-            self._users = (out / "users.csv").open("w")
-            self._users.write(",".join(USERS_COLUMNS) + "\n")
-            self._service = (out / "service.csv").open("w")
-            self._service.write(",".join(SERVICE_COLUMNS) + "\n")
-            self._files = [self._users, self._service]
+        self._files = service_files(out)
+        if self._files:
+            self._users, self._service = self._files
 
     def on_sample(self, ep: Episode, state: TrafficState) -> None:
         from uavxai.comms.delivery import service_lines
