@@ -37,10 +37,19 @@ import numpy as np
 from uavxai.comms.channel import Channel
 from uavxai.errors import UserError
 
-SERVICE_COLUMNS = ("t", "user", "power_w", "sinr_db", "rate_bps")
+SERVICE_COLUMNS = ("t", "user", "power_w", "sinr_db", "rate_bps", "uav")
 USERS_COLUMNS = ("t", "user", "x", "y")
 
 ServiceRow = tuple[float, int, float, float, float]
+
+
+def service_lines(rows: list[ServiceRow], uav: int = 0, users: np.ndarray | None = None) -> str:
+    """``rows`` as service.csv's lines, served by ``uav``; ``users`` maps a row's user (an
+    index into the serving UAV's own users) to the crowd's (None: the same)."""
+    def k(r: ServiceRow) -> int:
+        return r[1] if users is None else int(users[r[1]])
+
+    return "".join(f"{r[0]:.3f},{k(r)},{r[2]:.6g},{r[3]:.4f},{r[4]:.6g},{uav}\n" for r in rows)
 
 
 def user_positions(channel: Channel, users_pos: np.ndarray) -> np.ndarray:

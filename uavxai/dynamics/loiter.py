@@ -33,12 +33,28 @@ class LoiterAutopilot:
     ``scenario``, ``state()`` and ``_bank_from_guidance``)."""
 
     _orbit = None
+    # a fleet's members' loiter laws, row -> OrbitGuidance (a world without members: none)
+    _member_orbits: dict = {}
 
     def command_orbit(self, x: float, y: float, radius_m: float, clockwise: bool = True) -> None:
         """Orbit (x, y) at ``radius_m`` at the height target, until a bank command takes
         over."""
         self._orbit = orbit_guidance(self.scenario, x, y, radius_m, clockwise)
         self._fly_orbit()
+
+    def command_member_orbit(
+        self, row: int, x: float, y: float, radius_m: float, clockwise: bool = True
+    ) -> None:
+        """Fleet member ``row``'s :meth:`command_orbit`."""
+        self._member_orbits = {**self._member_orbits, row: orbit_guidance(
+            self.scenario, x, y, radius_m, clockwise)}  # fmt: skip
+        self._fly_member_orbits()
+
+    def _fly_member_orbits(self) -> None:
+        s = self.state()
+        for row, orbit in self._member_orbits.items():
+            bank = orbit.bank_command(s.pos[row, :2], s.vel[row, :2], float(s.airspeed[row]))
+            self._bank_from_guidance(bank, row)
 
     @property
     def orbit(self):
@@ -50,7 +66,7 @@ class LoiterAutopilot:
         bank = self._orbit.bank_command(s.pos[0, :2], s.vel[0, :2], float(s.airspeed[0]))
         self._bank_from_guidance(bank)
 
-    def _bank_from_guidance(self, bank_rad: float) -> None:
+    def _bank_from_guidance(self, bank_rad: float, row: int = 0) -> None:
         raise NotImplementedError
 
 
@@ -60,6 +76,13 @@ class ScheduledWorld(LoiterAutopilot):
     ownship's loiter law every ``GUIDANCE_PERIOD_S``. A world provides ``_integrate(ticks)``,
     ``_halted()``, ``_command_intruder(row, bank, speed, alt)`` (``alt`` None: hold the height)
     and ``_replace(entries)``."""
+
+    member_rows: range = range(0)  # a fleet's members' rows (JSBSimWorld; none here)
+
+    @property
+    def fleet_rows(self) -> list[int]:
+        """The rows of the fleet's aircraft: the ownship and the members."""
+        return [0, *self.member_rows]
 
     def _init_schedule(self, scenario: Scenario, seed: int, n_intruders: int) -> None:
         from uavxai.dynamics.behaviours import PILOT_PERIOD_S
@@ -93,7 +116,8 @@ class ScheduledWorld(LoiterAutopilot):
         left = int(n)
         while left > 0 and not self._halted():
             chunk = min(left, self._pilot_period - self._steps % self._pilot_period)
-            if self._orbit is not None:  # the loiter law's period cuts only while it flies
+            guided = self._orbit is not None or self._member_orbits
+            if guided:  # the loiter law's period cuts only while it flies
                 chunk = min(chunk, self._guidance_period - self._steps % self._guidance_period)
             if not self._integrate(chunk):
                 return
@@ -102,8 +126,11 @@ class ScheduledWorld(LoiterAutopilot):
             self._cached = None
             if self._steps % self._pilot_period == 0:
                 self._fly_pilots()
-            if self._orbit is not None and self._steps % self._guidance_period == 0:
-                self._fly_orbit()
+            if guided and self._steps % self._guidance_period == 0:
+                if self._orbit is not None:
+                    self._fly_orbit()
+                if self._member_orbits:
+                    self._fly_member_orbits()
 
     @staticmethod
     def _finite_commands(**given: float | None) -> None:
@@ -122,7 +149,9 @@ class ScheduledWorld(LoiterAutopilot):
         s = self.state()  # the check may have replaced a lost intruder
         if self._flow is not None:
             entries = self._flow.replace(
-                s.pos[1:], keep_clear=s.pos[:1], min_distance_m=self._clearance
+                s.pos[1 : 1 + len(self._pilots)],  # the intruders' rows: a fleet's come after
+                keep_clear=s.pos[self.fleet_rows],
+                min_distance_m=self._clearance,
             )
             if entries:
                 self._replace(entries)

@@ -14,6 +14,11 @@ import numpy as np
 OWNSHIP_ID = "ownship"
 
 
+def member_id(n: int) -> str:
+    """Public name of fleet member ``n`` (0-based; a fleet of one is ``ownship``)."""
+    return f"{OWNSHIP_ID}-{n}"
+
+
 def intruder_id(n: int) -> str:
     """Public name of intruder ``n`` (1-based), as in trajectory.csv and rerun paths."""
     return f"intruder-{n}"

@@ -23,7 +23,7 @@ from uavxai.dynamics.environment import EnvironmentConfig
 from uavxai.dynamics.flow import Entry
 from uavxai.dynamics.geodesy import LocalFrame
 from uavxai.dynamics.loiter import ScheduledWorld
-from uavxai.dynamics.state import OWNSHIP_ID, TrafficState, intruder_id
+from uavxai.dynamics.state import OWNSHIP_ID, TrafficState, intruder_id, member_id
 from uavxai.dynamics.track_pilot import TrackLike
 from uavxai.dynamics.traffic import draw_intruders
 from uavxai.errors import UserError
@@ -46,6 +46,7 @@ SPEED_TOLERANCE_MPS = 1e-9  # float rounding of a speed computed from its compon
 _NED_FT_TO_ENU_M = np.array([FT, FT, -FT])
 
 _JSBSIM_STREAM = 0x4A5342  # spawn key of the JSBSim seeds, apart from the pilots' streams
+MEMBER_SEED_INDEX = 1 << 30  # fleet member j's seed index: never an intruder's number
 
 
 def jsbsim_seed(seed: int, index: int) -> int:
@@ -78,7 +79,17 @@ class JSBSimWorld(ScheduledWorld):
         if intruders is None:
             intruders = draw_intruders(scenario, np.random.default_rng(self.seed))
         self.intruders = list(intruders)
-        self.ids = (OWNSHIP_ID, *(intruder_id(i + 1) for i in range(len(self.intruders))))
+        # a fleet's members (docs/fleet.md) fly in rows after the intruders', so that every
+        # intruder row, pilot, track and newcomer keeps its number
+        self.members = scenario.member_starts()[1:]
+        first = 1 + len(self.intruders)
+        self._intruder_rows = range(1, first)
+        self.member_rows = range(first, first + len(self.members))
+        self.ids = (
+            OWNSHIP_ID if not self.members else member_id(0),
+            *(intruder_id(i + 1) for i in range(len(self.intruders))),
+            *(member_id(j + 1) for j in range(len(self.members))),
+        )
         self._pilots = make_pilots(scenario, self.intruders, self.seed, tracks)
         self._init_schedule(scenario, self.seed, len(self.intruders))
         self._cached: TrafficState | None = None
@@ -128,6 +139,14 @@ class JSBSimWorld(ScheduledWorld):
         own.start(start.x, start.y, start.h, heading_from_deg(start.heading_deg), start.speed_mps)
         for i, spec in enumerate(self.intruders, start=1):
             self.aircraft.append(self._intruder(i, spec, env))
+        for j, s in enumerate(self.members, start=1):
+            seed = jsbsim_seed(self.seed, MEMBER_SEED_INDEX + j)
+            a = Aircraft(sc.ownship.aircraft, self.frame, self.dt, seed)
+            self.aircraft.append(a)  # closed with the others if it fails to start
+            if not env.calm:
+                a.set_environment(env.wind_ne, env.turbulence, seed)
+            a.set_limits(bank_limit_rad=math.radians(avoid.bank_limit_deg), speed_range=limits)
+            a.start(s.x, s.y, s.h, heading_from_deg(s.heading_deg), s.speed_mps)
 
     def _intruder(self, i: int, spec: IntruderSpec, env: EnvironmentConfig) -> Aircraft:
         """The JSBSim aircraft of intruder row ``i`` (1-based), started and trimmed."""
@@ -216,7 +235,8 @@ class JSBSimWorld(ScheduledWorld):
         with the ownship, and what the wreck flew beyond is dropped with it. States may then
         be read only at the kept ticks: multiples of ``every`` and of the loiter law's
         period."""
-        if any(self._lead) or self._halted() or self.n < 2 or ticks < 1:
+        rows = self._intruder_rows  # a member's flight depends on its commands: never ahead
+        if any(self._lead) or self._halted() or not rows or ticks < 1:
             return 0
         start = self._steps
         ticks = min(int(ticks), self._pilot_period - start % self._pilot_period)
@@ -224,9 +244,9 @@ class JSBSimWorld(ScheduledWorld):
         marks = [k for k in range(1, ticks + 1) if (start + k) % keep == 0 or k == ticks]
         self._kept = {start: _read(self.aircraft[1:])}
         self._kept.update((start + k, np.full_like(self._kept[start], np.nan)) for k in marks)
-        for row in range(1, self.n):
+        for row in rows:
             self._lead[row] = self._fly_ahead(row, start, marks)
-        return min(self._lead[1:])
+        return self.ahead_ticks
 
     def _fly_ahead(self, row: int, start: int, marks: list[int]) -> int:
         """Fly ``row`` to the last of ``marks`` (ticks after ``start``), keeping its state
@@ -247,7 +267,7 @@ class JSBSimWorld(ScheduledWorld):
     def ahead_ticks(self) -> int:
         """How many ticks the intruders fly ahead of the ownship now (:meth:`lookahead`),
         all of them (the least any row is ahead)."""
-        return min(self._lead[1:], default=0)
+        return min((self._lead[r] for r in self._intruder_rows), default=0)
 
     def _halted(self) -> bool:
         return self._failure is not None
@@ -325,6 +345,19 @@ class JSBSimWorld(ScheduledWorld):
         by the autopilot itself; ``alt_target_m`` is a height above ground (local h);
         ``speed_max_mps`` lowers (or restores) the top of the speed range, within it: an
         operator's airspeed, which avoidance may fly below but never above."""
+        self.command_row(0, bank_cmd_rad, accel_cmd_mps2, speed_target_mps, alt_target_m,
+                         speed_max_mps)  # fmt: skip
+
+    def command_row(
+        self,
+        row: int,
+        bank_cmd_rad: float | None = None,
+        accel_cmd_mps2: float | None = None,
+        speed_target_mps: float | None = None,
+        alt_target_m: float | None = None,
+        speed_max_mps: float | None = None,
+    ) -> None:
+        """:meth:`command_ownship` of fleet row ``row`` (0: the ownship; else a member's)."""
         given = {
             "bank_cmd_rad": bank_cmd_rad,
             "accel_cmd_mps2": accel_cmd_mps2,
@@ -336,12 +369,14 @@ class JSBSimWorld(ScheduledWorld):
         if speed_max_mps is not None:
             lo, hi = self._own_speed_range
             given["speed_max_mps"] = min(max(float(speed_max_mps), lo), hi)
-        if bank_cmd_rad is not None:
+        if bank_cmd_rad is not None and row == 0:
             self._orbit = None  # a bank command takes the aircraft off its loiter orbit
-        self.aircraft[0].command(**given)
+        elif bank_cmd_rad is not None:
+            self._member_orbits = {r: o for r, o in self._member_orbits.items() if r != row}
+        self.aircraft[row].command(**given)
 
-    def _bank_from_guidance(self, bank_rad: float) -> None:
-        self.aircraft[0].command(bank_cmd_rad=bank_rad)
+    def _bank_from_guidance(self, bank_rad: float, row: int = 0) -> None:
+        self.aircraft[row].command(bank_cmd_rad=bank_rad)
 
     def ownship_command(self) -> dict[str, float]:
         """The ownship's current bank command, acceleration command, speed and height targets
@@ -375,7 +410,7 @@ class JSBSimWorld(ScheduledWorld):
         lost = []
         for i, who in enumerate(s.ids):
             reason = _diagnose(who, s.pos[i], s.att[i], s.airspeed[i], envelope[:, i])
-            if reason and i > 0 and self._flow is not None:
+            if reason and i in self._intruder_rows and self._flow is not None:
                 lost.append(i - 1)
                 self.lost_intruders.append(f"{reason} at t = {s.t:.2f} s")
                 log.info("intruder lost: %s; a newcomer enters instead", reason)
@@ -384,7 +419,7 @@ class JSBSimWorld(ScheduledWorld):
                 log.info("run ends: %s", self._failure)
                 return True
         if lost:
-            keep_clear = s.pos[:1]
+            keep_clear = s.pos[self.fleet_rows]
             self._replace(self._flow.enter(lost, keep_clear, min_distance_m=self._clearance))
         return False
 

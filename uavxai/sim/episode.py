@@ -324,23 +324,9 @@ class Episode:
         for k in range(self.clock.samples_per_decision):
             if self._pending is not None and k == self.clock.latency_samples:
                 event = self._arrive(send=True)
-            prev = self.state
             self.world.step(self.clock.sample_ticks)
-            self.state = self.world.state()
-            self.path.on_sample(self.state)
-            sep = self.judge.separation(prev, self.state)
-            self.sample_separation_m = sep  # observers read it rather than judge again
-            self.nmac = self.nmac or self.judge.nmac(prev, self.state, sep)
+            sep, outcome = self.sample()
             flown_min = min(flown_min, sep)
-            self.min_separation_m = min(self.min_separation_m, sep)
-            for o in self._subscribers:
-                o.on_sample(self, self.state)
-            outcome = self.judge.judge(self.state, sep, self.world.failure())
-            if outcome is None:
-                plan = self.plan()
-                outcome = plan.outcome if plan is not None else None
-            if outcome is None and self.mission is not None:
-                outcome = self.mission.outcome  # the battery ends a suspended mission too
             if outcome is not None:
                 break
         if self._pending is not None:
@@ -348,6 +334,33 @@ class Episode:
         for o in self._subscribers:
             o.on_period(self, event, flown_min)
         return outcome
+
+    def begin(self) -> None:
+        """Tell the subscribers the episode starts (:meth:`run` does; a fleet member's
+        episode is begun by the fleet)."""
+        for o in self._subscribers:
+            o.on_start(self)
+
+    def sample(self) -> tuple[float, Outcome | None]:
+        """The world has flown a sample: read it, judge it, tell every subscriber; the
+        closest approach over the sample and the outcome (None: flying on). A fleet member's
+        episode is handed its samples this way by the fleet (``uavxai.sim.fleet``)."""
+        prev = self.state
+        self.state = self.world.state()
+        self.path.on_sample(self.state)
+        sep = self.judge.separation(prev, self.state)
+        self.sample_separation_m = sep  # observers read it rather than judge again
+        self.nmac = self.nmac or self.judge.nmac(prev, self.state, sep)
+        self.min_separation_m = min(self.min_separation_m, sep)
+        for o in self._subscribers:
+            o.on_sample(self, self.state)
+        outcome = self.judge.judge(self.state, sep, self.world.failure())
+        if outcome is None:
+            plan = self.plan()
+            outcome = plan.outcome if plan is not None else None
+        if outcome is None and self.mission is not None:
+            outcome = self.mission.outcome  # the battery ends a suspended mission too
+        return sep, outcome
 
     def run(self) -> EpisodeResult:
         """Fly to the end; observers are closed whatever happens. A signal (SIGINT, SIGTERM)
@@ -357,8 +370,7 @@ class Episode:
         interrupted."""
         outcome: Outcome = Outcome.TIMEOUT
         try:
-            for o in self._subscribers:
-                o.on_start(self)
+            self.begin()
             self.wall0 = time.perf_counter()  # the flight starts now: set-up is not counted
             try:
                 while self.steps < self.max_steps:

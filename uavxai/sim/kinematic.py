@@ -212,7 +212,7 @@ class KinematicWorld(ScheduledWorld):
             self._alt_target = float(alt_target_m)
         self._cached = None
 
-    def _bank_from_guidance(self, bank_rad: float) -> None:
+    def _bank_from_guidance(self, bank_rad: float, row: int = 0) -> None:
         lim = self.config.bank_limit_rad
         self._own[PHI_CMD] = min(max(float(bank_rad), -lim), lim)
         self._cached = None

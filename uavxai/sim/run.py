@@ -91,12 +91,12 @@ def mavlink_path(scenario: Scenario, link: str | None, tlog: Path | None = None)
     return build
 
 
-def run_spec(scenario: Scenario, service) -> EpisodeSpec:
+def run_spec(scenario: Scenario, service, point=None) -> EpisodeSpec:
     """The episode `uavxai run` flies for ``scenario`` (at its seed): in JSBSim, to the
-    scenario's goal (``service``'s point unless it names one), the mission if it has one."""
-    return episode_spec(
-        scenario, dynamics="jsbsim", service_point=service.service_point, mission=True
-    )
+    scenario's goal (``point``, else ``service``'s point, unless it names one), the mission if
+    it has one."""
+    point = service.service_point if point is None else point
+    return episode_spec(scenario, dynamics="jsbsim", service_point=point, mission=True)
 
 
 def run_episode(
@@ -118,14 +118,22 @@ def run_episode(
     from uavxai.sim.companion import Companion
 
     sc = scenario
-    spec = run_spec(sc, service)
+    placement = fleet_placement(sc, service.users) if sc.fleet.size > 1 else None
+    spec = run_spec(sc, service, None if placement is None else placement.positions[0])
     config, checkpoint = PlannerConfig.from_scenario(sc), sc.avoidance.checkpoint
     # On its own core, as on a UAV's companion computer: it searches while the world flies
     # (the intruders, with an instant decision; everyone, with a latency).
     planner = Companion(sc.avoidance.planner, config, checkpoint, scenario=sc)
     channel = Channel.from_scenario(sc, users=service.users)
-    steps, observers = run_parts(spec, channel, service.power_w, out)
+    steps, observers = run_parts(spec, channel, service.power_w, out, placement)
     record = sc.log.rerun if record is None else record
+    if placement is not None and (spawn or rerun_file is not None):
+        from uavxai.errors import UserError
+
+        raise UserError(
+            f"fleet.size = {sc.fleet.size}: a fleet's recording is not built yet; allowed: "
+            "no --spawn or --rerun with a fleet (docs/fleet.md)"
+        )
     if record or spawn or rerun_file is not None:
         # --spawn records to the file too: a viewer problem never loses the run's recording
         link = (channel, service.power_w)  # the recorder's metrics/sum_rate_bps
@@ -159,7 +167,7 @@ def run_episode(
 
 
 def run_parts(
-    spec: EpisodeSpec, channel, power_w: np.ndarray, out: Path
+    spec: EpisodeSpec, channel, power_w: np.ndarray, out: Path, placement=None
 ) -> tuple[list[EngineStep], list[Observer]]:
     """What a run adds to its episode: its engine steps, in their order after the picture,
     the operators and the mission (the battery: home at its reserve, the end when empty; then,
@@ -170,7 +178,12 @@ def run_parts(
     sc = spec.scenario
     energy = Energy()
     steps: list[EngineStep] = [energy]
-    if spec.mission is not None:
+    if placement is not None:  # a fleet (docs/fleet.md): its members, then its service
+        from uavxai.sim.fleet import Fleet, FleetService
+
+        fleet = Fleet(sc, placement.positions, _member_planner(sc), spec.max_steps)
+        steps += [fleet, FleetService(sc, channel, placement, fleet, out)]
+    elif spec.mission is not None:
         steps.append(Service(sc, channel, power_w, out, replan=_replanner(sc), energy=energy))
     observers: list[Observer] = [
         Throughput(channel, power_w),
@@ -180,6 +193,27 @@ def run_parts(
         QuickLook(out / PLOT, channel, power_w, energy, sc.avoidance.d_min_m),
     ]
     return steps, observers
+
+
+def fleet_placement(sc: Scenario, users: np.ndarray):
+    """The fleet's joint placement for the run's users (docs/fleet.md)."""
+    from uavxai.sim.fleet import fleet_stations
+
+    return fleet_stations(sc, users)
+
+
+def _member_planner(sc: Scenario):
+    """Fleet member j's own planner, in this process, seeded apart from the others'."""
+    from uavxai.avoidance.planners import make_planner
+    from uavxai.avoidance.types import PlannerConfig
+
+    def planner(j: int):
+        av = sc.avoidance
+        p = make_planner(av.planner, PlannerConfig.from_scenario(sc), checkpoint=av.checkpoint)
+        p.reset(int(np.random.SeedSequence([sc.seed, j]).generate_state(1)[0]))
+        return p
+
+    return planner
 
 
 def _replanner(sc: Scenario):
@@ -309,7 +343,9 @@ def report(summary: dict, out: Path, rerun_file: Path | None, spawn: bool) -> No
             f"{e['sim_realtime_factor'] or 0:.1f}x real time"
         )
         console.print(_safety_line(e))
-        if e.get("mission", {}).get("delivered_bits") is not None:
+        if e.get("fleet"):
+            console.print(_fleet_line(e["fleet"]))
+        elif e.get("mission", {}).get("delivered_bits") is not None:
             console.print(_mission_line(e["mission"]))
     console.print(f"outputs in {out}/ (summary.json, trajectory.csv, decisions.jsonl, {PLOT})")
     rrd = rerun_file or out / "run.rrd"  # written with or without --spawn
@@ -341,6 +377,20 @@ def _safety_line(e: dict) -> str:
     if e.get("intruders_lost"):
         line += f"; {len(e['intruders_lost'])} intruder(s) lost in flight and replaced"
     return line
+
+
+def _fleet_line(fleet: list[dict]) -> str:
+    """Each UAV of a fleet: outcome, closest approach, delivery, energy."""
+
+    def one(u: dict) -> str:
+        sep, wh = u["min_separation_m"], u["energy_wh"]
+        return (
+            f"{u['id']} {u['outcome']}, min sep {'-' if sep is None else f'{sep:.0f} m'}, "
+            f"{u.get('delivered_bits', 0.0) / 1e6:.0f} Mbit to {len(u.get('users_served', []))} "
+            f"users, {'-' if wh is None else f'{wh:.1f} Wh'}"
+        )
+
+    return "  fleet: " + "; ".join(one(u) for u in fleet)
 
 
 def _mission_line(m: dict) -> str:

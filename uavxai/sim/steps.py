@@ -80,6 +80,41 @@ class Energy(EngineStep):
             summary["energy"] = self.section()
 
 
+def service_files(out: Path | None) -> list:
+    """users.csv and service.csv in ``out``, their headers written ([] without ``out``)."""
+    from uavxai.comms.delivery import SERVICE_COLUMNS, USERS_COLUMNS
+
+    if out is None:
+        return []
+    files = [(out / "users.csv").open("w"), (out / "service.csv").open("w")]
+    files[0].write(",".join(USERS_COLUMNS) + "\n")
+    files[1].write(",".join(SERVICE_COLUMNS) + "\n")
+    return files
+
+
+class OrbitBreak:
+    """Where the planned orbit would have had the aircraft while it avoids: the orbit flown on
+    from the bearing at which avoiding began (the service lost to avoidance is measured
+    against it)."""
+
+    def __init__(self) -> None:
+        self._break: tuple[float, float] | None = None  # (t, orbit bearing) when it began
+
+    def planned(self, mission, t: float, pos: np.ndarray) -> tuple[np.ndarray | None, bool]:
+        """(the planned orbit's point now, or None when not avoiding; whether avoiding)."""
+        from uavxai.service.orbit_rate import orbit_bearing, orbit_position
+
+        c = mission.config
+        if mission.phase.value != "avoiding":
+            self._break = None
+            return None, False
+        if self._break is None:
+            self._break = (t, orbit_bearing(c.station, pos))
+        t0, bearing0 = self._break
+        at = orbit_position(c.station, c.radius_m, bearing0, t - t0, c.speed_mps, c.clockwise)
+        return at, True
+
+
 class Service(EngineStep):
     """The communication service, every sample: users walk (``comms.users.mobility``); while
     the mission serves (on station or avoiding) the rates delivered from the flown position
@@ -103,7 +138,7 @@ class Service(EngineStep):
         replan=None,
         energy: Energy | None = None,
     ) -> None:
-        from uavxai.comms.delivery import SERVICE_COLUMNS, USERS_COLUMNS, Delivery
+        from uavxai.comms.delivery import Delivery
         from uavxai.comms.mobility import UserMobility
 
         self.scenario = scenario
@@ -116,17 +151,13 @@ class Service(EngineStep):
         self.replan_s = scenario.service.replan_s
         self.qos_bps = float(scenario.comms.qos_rate_bps)
         self._last_plan_t = 0.0
-        self._break: tuple[float, float] | None = None  # (t, orbit bearing) when avoiding began
-        self._files = []
-        if out is not None:
-            self._users = (out / "users.csv").open("w")
-            self._users.write(",".join(USERS_COLUMNS) + "\n")
-            self._service = (out / "service.csv").open("w")
-            self._service.write(",".join(SERVICE_COLUMNS) + "\n")
-            self._files = [self._users, self._service]
+        self._break = OrbitBreak()
+        self._files = service_files(out)
+        if self._files:
+            self._users, self._service = self._files
 
     def on_sample(self, ep: Episode, state: TrafficState) -> None:
-        from uavxai.service.orbit_rate import orbit_bearing, orbit_position
+        from uavxai.comms.delivery import service_lines
 
         m, t, dt = ep.mission, state.t, ep.clock.sample_s
         users = self.walk.positions
@@ -138,23 +169,10 @@ class Service(EngineStep):
                 "".join(f"{t:.3f},{k},{u[0]:.3f},{u[1]:.3f}\n" for k, u in enumerate(users))
             )
         if m is not None and m.serving and m.outcome is None:  # each sample: the dt after it
-            c = m.config
-            avoiding = m.phase.value == "avoiding"
-            planned = None
-            if avoiding:
-                if self._break is None:
-                    self._break = (t, orbit_bearing(c.station, state.pos[0]))
-                t0, bearing0 = self._break
-                planned = orbit_position(
-                    c.station, c.radius_m, bearing0, t - t0, c.speed_mps, c.clockwise
-                )
-            else:
-                self._break = None
+            planned, avoiding = self._break.planned(m, t, state.pos[0])
             rows = self.delivery.sample(t, state.pos[0], users, dt, planned, avoiding)
             if self._files:
-                self._service.write("".join(
-                    f"{r[0]:.3f},{r[1]},{r[2]:.6g},{r[3]:.4f},{r[4]:.6g}\n" for r in rows
-                ))  # fmt: skip
+                self._service.write(service_lines(rows))
             rates = np.array([r[4] for r in rows])
             ep.sample_metrics["user_rates_bps"] = rates
             ep.sample_metrics["delivered_rate_bps"] = float(rates.sum())

@@ -6,7 +6,7 @@ import-linter: "schema rooms" in pyproject.toml):
 - ``flight``: ownship, intruders, avoidance (uavxai.avoidance.settings derives PlannerConfig
   from it);
 - ``links``: bridge, log, environment, surveillance;
-- ``operations``: operator, mission, encounters;
+- ``operations``: operator, mission, fleet, encounters;
 - ``base``: what every section shares (the base model, bounded numbers, names).
 
 The reference of every key (default, unit, allowed values) is docs/scenario.md; a test checks
@@ -49,8 +49,10 @@ from uavxai.scenario.schema.links import (
 )
 from uavxai.scenario.schema.operations import (
     ENCOUNTER_AIRCRAFT,
+    MAX_FLEET,
     OPERATOR_MODES,
     Encounters,
+    Fleet,
     Mission,
     Operator,
     OperatorCommandSpec,
@@ -92,6 +94,8 @@ __all__ = [
     "Intruders",
     "Log",
     "MCTSConfig",
+    "Fleet",
+    "MAX_FLEET",
     "Mission",
     "Mobility",
     "Operator",

@@ -1,5 +1,6 @@
 """What the flight is for and what it meets: `operator` (scripted ground-station commands),
-`mission` (time on station, return home) and `encounters` (statistical pairwise encounters)."""
+`mission` (time on station, return home), `fleet` (how many ownships fly it) and `encounters`
+(statistical pairwise encounters)."""
 
 from __future__ import annotations
 
@@ -66,6 +67,18 @@ class Mission(Section):
     service_s: Annotated[float, Field(ge=0, le=86_400)] = 300.0
     return_home: bool = True
     orbit_radius_m: Annotated[float, Field(gt=0, le=10_000)] | None = None  # null: from bank
+
+
+# ---------------------------------------------------------------------------------------- fleet
+MAX_FLEET = 8  # members are JSBSim executives flown and planned for on the simulation's core
+
+
+class Fleet(Section):
+    """How many ownships fly the mission together (docs/fleet.md): member 0 is the ownship at
+    ``ownship.start``; member i starts ``i * spacing_m`` to the right of it, abreast."""
+
+    size: Annotated[int, Field(ge=1, le=MAX_FLEET)] = 1
+    spacing_m: Annotated[float, Field(ge=50, le=5_000)] = 300.0
 
 
 # ------------------------------------------------------------------------------------- scenario

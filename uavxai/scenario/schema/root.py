@@ -15,9 +15,9 @@ from uavxai.scenario.schema.base import (
     Section,
     check_slug,
 )
-from uavxai.scenario.schema.flight import Avoidance, Intruders, Ownship
+from uavxai.scenario.schema.flight import Avoidance, Intruders, Ownship, Start
 from uavxai.scenario.schema.links import Bridge, Environment, Log, Surveillance
-from uavxai.scenario.schema.operations import Encounters, Mission, Operator
+from uavxai.scenario.schema.operations import Encounters, Fleet, Mission, Operator
 from uavxai.scenario.schema.world import Comms, DynamicsConfig, Service, World
 from uavxai.vocabulary import (
     CHANNEL_MODELS,
@@ -39,6 +39,7 @@ class Scenario(Section):
     environment: Environment = Environment()
     surveillance: Surveillance = Surveillance()
     mission: Mission = Mission()
+    fleet: Fleet = Fleet()
     operator: Operator = Operator()
     encounters: Encounters | None = None
 
@@ -103,7 +104,51 @@ class Scenario(Section):
         self._flyable()
         self._encounters()
         self._channel_range()
+        self._fleet()
         return self
+
+    def member_starts(self) -> list[Start]:
+        """Where each fleet member starts (member 0: ``ownship.start``): abreast, member i
+        ``i * fleet.spacing_m`` to the right of the start's heading, on the same heading,
+        height and speed."""
+        s, f = self.ownship.start, self.fleet
+        right = math.radians(s.heading_deg + 90.0)  # headings clockwise from north
+        return [
+            s.model_copy(update={
+                "x": s.x + i * f.spacing_m * math.sin(right),
+                "y": s.y + i * f.spacing_m * math.cos(right),
+            })
+            for i in range(f.size)
+        ]  # fmt: skip
+
+    def _fleet(self) -> None:
+        """What a fleet of more than one cannot fly yet (docs/fleet.md), refused by name."""
+        n = self.fleet.size
+        if n == 1:
+            return
+        what = f"fleet.size = {n}"
+        refused = [
+            (self.ownship.goal is not None, "ownship.goal (a fleet flies the mission)"),
+            (self.mission.service_s <= 0, "mission.service_s = 0 (a fleet serves on station)"),
+            (self.encounters is not None, "encounters"),
+            (bool(self.operator.commands), "operator.commands"),
+            (self.avoidance.decision_latency_s > 0, "avoidance.decision_latency_s > 0"),
+            (self.log.rerun, "log.rerun: true (a fleet's recording is not built yet)"),
+        ]
+        for bad, setting in refused:
+            if bad:
+                raise ValueError(f"{what} cannot be flown with {setting}; allowed: fleet.size 1")
+        k = self.comms.users.k
+        if k < n:
+            raise ValueError(f"{what} needs at least {n} users (one per UAV), got {k}")
+        w = self.world
+        for i, s in enumerate(self.member_starts()):
+            if not w.contains(s.x, s.y, s.h):
+                raise ValueError(
+                    f"{what}: member {i} would start at ({s.x:.0f}, {s.y:.0f}, {s.h:.0f}), "
+                    f"outside the world x {list(w.x)}, y {list(w.y)}, h {list(w.h)}; allowed: "
+                    "a smaller fleet.spacing_m or a start farther from the edge"
+                )
 
     def _channel_range(self) -> None:
         """A 3GPP channel holds for some UAV heights and horizontal distances only; the UAV

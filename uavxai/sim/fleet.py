@@ -1,0 +1,322 @@
+"""A fleet in flight (issue 32, docs/fleet.md): members 1..N-1 of ``fleet.size`` ownships, each
+flown by its own planner in an :class:`Episode` of its own inside the run's episode (whose
+ownship is member 0), and the service the fleet delivers together.
+
+A member's episode sees the one world through :class:`MemberWorld` (its own row first, its
+commands to its own row), so the engine's pieces (``ownship_view``, the judge, the mission,
+the battery) fly and judge it unchanged. :class:`Fleet`, an engine step of the run's episode,
+decides every member at each decision and hands each member every sample;
+:class:`FleetService` accounts each UAV's delivery to the users the fleet's placement gave it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from uavxai.avoidance.types import Intruder
+from uavxai.dynamics.state import TrafficState
+from uavxai.geometry import turn_rate_of_bank
+from uavxai.scenario import Scenario
+from uavxai.sim.command import DirectPath
+from uavxai.sim.episode import EngineStep, Episode
+from uavxai.sim.mission import Mission, MissionConfig
+from uavxai.sim.steps import Energy, OrbitBreak, service_files
+from uavxai.surveillance.tracker import truth_beliefs
+from uavxai.vocabulary import Outcome
+
+FLOOR_MARGIN_M = 20.0  # stations at least this far above the world's floor
+
+
+class MemberWorld:
+    """Fleet row ``row`` of ``world`` (a :class:`uavxai.dynamics.world.JSBSimWorld`) as the
+    member's own episode sees it: its row first, the others after in the world's order; its
+    commands go to its row. The fleet steps the world; this view never does."""
+
+    lost_intruders: list[str] = []  # the world's own episode reports those
+
+    def __init__(self, world, row: int) -> None:
+        self._world = world
+        self.row = row
+        self.scenario = world.scenario
+        self.dt = world.dt
+        self._seen: tuple[TrafficState, TrafficState] | None = None  # (world's, reordered)
+
+    def state(self) -> TrafficState:
+        s = self._world.state()
+        if self._seen is None or self._seen[0] is not s:
+            order = [self.row, *(r for r in range(s.n) if r != self.row)]
+            mine = TrafficState(
+                t=s.t,
+                ids=tuple(s.ids[r] for r in order),
+                pos=s.pos[order],
+                vel=s.vel[order],
+                att=s.att[order],
+                airspeed=s.airspeed[order],
+            )
+            self._seen = (s, mine)
+        return self._seen[1]
+
+    def step(self, n: int = 1) -> None:
+        raise RuntimeError("a fleet member's world is stepped by the run's episode")
+
+    def lookahead(self, ticks: int, every: int) -> int:
+        return 0  # a member never flies ahead: its flight depends on its commands
+
+    def command_ownship(
+        self,
+        bank_cmd_rad: float | None = None,
+        accel_cmd_mps2: float | None = None,
+        speed_target_mps: float | None = None,
+        alt_target_m: float | None = None,
+        speed_max_mps: float | None = None,
+    ) -> None:
+        self._world.command_row(self.row, bank_cmd_rad, accel_cmd_mps2, speed_target_mps,
+                                alt_target_m, speed_max_mps)  # fmt: skip
+
+    def command_orbit(self, x: float, y: float, radius_m: float, clockwise: bool = True) -> None:
+        self._world.command_member_orbit(self.row, x, y, radius_m, clockwise)
+
+    def ownship_command(self) -> dict[str, float]:
+        return self._world.aircraft[self.row].read_command()
+
+    def powered_ownship(self):
+        return self._world.aircraft[self.row]
+
+    def failure(self) -> str | None:
+        return self._world.failure()
+
+    def close(self) -> None:
+        pass  # the world is the run's
+
+
+class IntentPicture:
+    """A member's picture: every other aircraft's exact state, and for the fleet's aircraft
+    their intent, the turn their autopilot is commanded to fly (the chosen branch's first
+    action, or the loiter law's bank) as the track's turn rate; the intruders' turn is the one
+    they fly now (non-cooperative)."""
+
+    receiver = None
+    truth = True
+
+    def __init__(self, world) -> None:
+        self._world = world
+
+    def __call__(self, state: TrafficState) -> list[Intruder]:
+        w = self._world
+        fleet = {w.ids[r]: r for r in w.fleet_rows}
+        out = []
+        for b in truth_beliefs(state):
+            row = fleet.get(str(b.id))
+            if row is not None:
+                bank = w.aircraft[row].read_command()["bank_cmd_rad"]
+                speed = max(float(np.hypot(b.vx, b.vy)), 1.0)
+                b = dataclasses.replace(b, turn_rate=turn_rate_of_bank(bank, speed))
+            out.append(b)
+        return out
+
+
+class Member:
+    """Fleet member ``j`` (1-based) of the world: its episode, mission and battery."""
+
+    def __init__(self, scenario: Scenario, world, j: int, station, planner, max_steps: int):
+        from uavxai.sim.build import start_episode
+
+        self.j = j
+        start = scenario.member_starts()[j]
+        own = scenario.ownship.model_copy(update={"start": start})
+        config = MissionConfig.from_scenario(scenario.model_copy(update={"ownship": own}), station)
+        view = MemberWorld(world, world.member_rows[j - 1])
+        path = DirectPath(view)
+        self.mission = Mission(config, path.announce)
+        self.energy = Energy()
+        self.outcome: Outcome | None = None
+        self.ep = start_episode(
+            scenario, view, planner, path, config.station, max_steps=max_steps,
+            picture=IntentPicture(world), mission=self.mission,
+            engine_steps=[self.mission, self.energy],
+        )  # fmt: skip
+
+    @property
+    def flying(self) -> bool:
+        return self.outcome is None
+
+    def sample(self) -> Outcome | None:
+        """Judge the sample just flown; the member's outcome when it ends now. A member done
+        orbits its home, judged on as long as the fleet flies."""
+        _, outcome = self.ep.sample()
+        if self.outcome is not None or outcome is None:
+            return None
+        self.outcome = outcome
+        if outcome is Outcome.COMPLETED:
+            c = self.mission.config
+            self.ep.path.orbit(*c.home, c.radius_m, c.clockwise, c.speed_mps, self.ep.state.t)
+        return outcome
+
+    def entry(self, fleet_outcome: str) -> dict:
+        """The member's ``summary.fleet`` object (delivery added by the service)."""
+        ep = self.ep
+        return {
+            "id": ep.state.ids[0],
+            "outcome": self.outcome.value if self.outcome is not None else fleet_outcome,
+            "min_separation_m": ep.min_separation_m,
+            "nmac": ep.nmac,
+            "decisions": ep.steps,
+            "energy_wh": self.energy.section().get("energy_wh"),
+            "phases": self.mission.phases,
+            "station": list(self.mission.config.station),
+        }
+
+
+class Fleet(EngineStep):
+    """The fleet's members beside the run's ownship (member 0): at each of its decisions every
+    member still flying decides, from its own picture, with its own planner; every sample each
+    member is judged. A member's collision, failure or exit ends everyone's episode with that
+    outcome; the fleet completes when every UAV has (the ownship waits for the others under
+    its avoidance planner, its mission suspended: nothing more is served)."""
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        stations: np.ndarray,
+        planner: Callable[[int], object],
+        max_steps: int,
+    ) -> None:
+        self.scenario = scenario
+        self.stations = np.asarray(stations, dtype=float)
+        self._planner = planner  # member j -> its planner, seeded
+        self._max_steps = max_steps
+        self.members: list[Member] = []
+        self._waiting = False
+
+    def on_start(self, ep: Episode) -> None:
+        for j in range(1, len(self.stations)):
+            m = Member(self.scenario, ep.world, j, self.stations[j], self._planner(j),
+                       self._max_steps)  # fmt: skip
+            m.ep.begin()
+            self.members.append(m)
+
+    def uavs(self, ep: Episode) -> list[tuple[Mission, int]]:
+        """Each UAV's mission and world row, member 0 first."""
+        return [(ep.mission, 0)] + [(m.mission, m.ep.world.row) for m in self.members]
+
+    def on_decision(self, ep: Episode, event) -> None:
+        for m in self.members:
+            if m.flying:
+                m.ep.decide()
+
+    def on_sample(self, ep: Episode, state: TrafficState) -> None:
+        main = ep.mission
+        for m in self.members:
+            ended = m.sample()
+            if ended is not None and ended is not Outcome.COMPLETED:
+                main.outcome = ended  # the fleet's episode ends with it
+        others = any(m.flying for m in self.members)
+        if self._waiting and not others and main.outcome is None:  # the last one is done
+            main.outcome = Outcome.COMPLETED
+        elif main.outcome is Outcome.COMPLETED and others:  # member 0 done first: it waits
+            main.outcome = None
+            if not self._waiting:
+                self._waiting = True
+                main.suspend()
+
+    def on_end(self, ep: Episode, summary: dict) -> None:
+        own = {
+            "id": ep.state.ids[0],
+            "outcome": summary["outcome"],
+            "min_separation_m": summary["min_separation_m"],
+            "nmac": summary["nmac"],
+            "decisions": ep.steps,
+            "energy_wh": (summary.get("energy") or {}).get("energy_wh"),
+            "phases": ep.mission.phases,
+            "station": list(ep.mission.config.station),
+        }
+        summary["fleet"] = [own, *(m.entry(summary["outcome"]) for m in self.members)]
+
+
+class FleetService(EngineStep):
+    """The fleet's service every sample: the whole crowd walks once; each UAV serving (on
+    station or avoiding) delivers to its own users (the placement's association) through its
+    one-UAV channel (``FleetChannel.uav_channel``: exact in OFDMA; in the shared band with the
+    other UAVs' interference as planned), fading drawn per UAV from its own stream. Writes
+    users.csv and service.csv (with ``uav``); adds each UAV's ``delivered_bits`` and
+    ``users_served`` to ``summary.fleet`` and the fleet's totals to ``summary.mission``."""
+
+    def __init__(self, scenario: Scenario, channel, plan, fleet: Fleet, out: Path | None) -> None:
+        from uavxai.comms.delivery import Delivery
+        from uavxai.comms.fleet import FleetChannel
+        from uavxai.comms.mobility import UserMobility
+
+        self.fleet = fleet
+        self.walk = UserMobility.from_scenario(scenario, users=channel.users)
+        fc = FleetChannel.of(channel, len(plan.positions))
+        gains = fc.gains(plan.positions)
+        self.mine = [np.flatnonzero(plan.association == n) for n in range(fc.n)]
+        self.delivery = [
+            Delivery(
+                fc.uav_channel(n, gains, plan.association, plan.power_w),
+                plan.power_w[users],
+                rng=np.random.default_rng([scenario.seed, 0x736572, n]),
+            )
+            for n, users in enumerate(self.mine)
+        ]
+        self._breaks = [OrbitBreak() for _ in self.mine]
+        self._files = service_files(out)
+        if self._files:
+            self._users, self._service = self._files
+
+    def on_sample(self, ep: Episode, state: TrafficState) -> None:
+        from uavxai.comms.delivery import service_lines
+
+        t, dt = state.t, ep.clock.sample_s
+        users = self.walk.positions
+        if self._files:
+            self._users.write(
+                "".join(f"{t:.3f},{k},{u[0]:.3f},{u[1]:.3f}\n" for k, u in enumerate(users))
+            )
+        for n, (mission, row) in enumerate(self.fleet.uavs(ep)):
+            if not (mission.serving and mission.outcome is None):
+                continue
+            mine, pos = self.mine[n], state.pos[row]
+            planned, avoiding = self._breaks[n].planned(mission, t, pos)
+            rows = self.delivery[n].sample(t, pos, users[mine], dt, planned, avoiding)
+            if self._files:
+                self._service.write(service_lines(rows, n, mine))
+        self.walk.advance(dt)
+
+    def on_end(self, ep: Episode, summary: dict) -> None:
+        total = 0.0
+        for entry, d, mine in zip(summary["fleet"], self.delivery, self.mine, strict=True):
+            bits = float(d.summary().get("delivered_bits", 0.0))
+            entry["delivered_bits"] = bits
+            entry["users_served"] = [int(k) for k in mine]
+            total += bits
+        summary.setdefault("mission", {})["delivered_bits"] = total
+
+    def close(self) -> None:
+        for f in self._files:
+            f.close()
+
+
+def fleet_stations(scenario: Scenario, users: Sequence) -> object:
+    """The fleet's joint placement for ``users`` on the scenario's channel and lattice
+    (:func:`uavxai.service.fleet.plan_fleet`, fading-free): each UAV's station, the user
+    association and the power (a :class:`uavxai.service.fleet.FleetPlan`)."""
+    from uavxai.comms.channel import Channel
+    from uavxai.comms.fleet import FleetChannel
+    from uavxai.service.fleet import FleetProblem, plan_fleet
+    from uavxai.service.service_env import SearchSpace
+
+    channel = Channel.from_scenario(scenario, users=np.asarray(users, dtype=float))
+    space = SearchSpace.from_scenario(scenario)
+    # a station at the world's floor is left at the first gust's dip (fleet.yaml, seed 3:
+    # two members placed at 50 m flew out of the world at 32 s)
+    floor = min(space.lo[2] + FLOOR_MARGIN_M, space.hi[2])
+    space = dataclasses.replace(space, lo=np.array([*space.lo[:2], floor]))
+    problem = FleetProblem(
+        FleetChannel.of(channel, scenario.fleet.size), space, scenario.comms.power_levels
+    )
+    return plan_fleet(problem)
