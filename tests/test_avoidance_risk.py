@@ -176,3 +176,33 @@ def test_bad_risk_settings_are_user_errors(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "Traceback" not in err and "conflict_volume: sphere" in err
     assert dataclasses.replace(PlannerConfig(), risk="probability").risk == "probability"
+
+
+def test_the_risk_wall_fences_the_first_seconds_and_holds_its_width():
+    """risk_wall_s: uncertainty_k sigmas of the track error over a line's first seconds, held
+    at that width beyond; without it the probability has no wall of track error at all."""
+    from uavxai.avoidance.model import intruder_margin, track_sigma
+
+    vel, turn = np.array([[15.0, 0.0, 0.0]]), np.zeros(1)
+    sm, sv = np.array([22.0]), np.array([8.0])
+    t = np.array([0.0, 2.0, 4.0, 8.0, 16.0])
+    base = dict(intruder_model="cv", **BOX)
+    sigma = track_sigma(PlannerConfig(**base), 1, sm, sv)
+    margin = intruder_margin(PlannerConfig(**base), vel, turn, sm, sv)(t)[:, 0]
+    np.testing.assert_allclose(margin, 2.0 * sigma(t)[:, 0])  # the margin: a growing wall
+    assert intruder_margin(PlannerConfig(risk="probability", **base), vel, turn, sm, sv) is None
+    walled = PlannerConfig(risk="probability", risk_wall_s=4.0, **base)
+    wall = intruder_margin(walled, vel, turn, sm, sv)(t)[:, 0]
+    np.testing.assert_allclose(wall[:3], margin[:3])
+    np.testing.assert_allclose(wall[3:], margin[2])
+    assert margin[4] > 2 * wall[4]  # poor ADS-B 16 s ahead: the margin's wall, twice the width
+
+
+def test_the_risk_wall_needs_the_probability(tmp_path, capsys):
+    with pytest.raises(UserError, match="risk_wall_s needs avoidance.mcts.risk: probability"):
+        PlannerConfig(risk_wall_s=4.0)
+    path = tmp_path / "s.yaml"
+    path.write_text("avoidance:\n  mcts:\n    risk_wall_s: -1\n    risk: probability\n")
+    assert main(["validate", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "risk_wall_s" in err and "greater than 0" in err

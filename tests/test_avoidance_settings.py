@@ -44,9 +44,9 @@ NON_DEFAULT: dict[str, Any] = {
     "avoidance.well_clear.horizontal_m": 500.0,
     "avoidance.well_clear.vertical_m": 60.0,
 }
-# Keys whose non-default value another non-default refuses (probability needs the sphere):
-# each checked in a scenario of its own.
-ALONE = {"avoidance.mcts.risk": "probability"}
+# Keys whose non-default value another non-default refuses (probability needs the sphere),
+# checked together in a scenario of their own (the risk wall needs the probability).
+ALONE = {"avoidance.mcts.risk": "probability", "avoidance.mcts.risk_wall_s": 4.0}
 # Where the planner reads the keys it names otherwise: (PlannerConfig field, index in its pair).
 RENAMED = {
     "world.x": ("x_bounds", None),
@@ -101,8 +101,8 @@ def test_every_avoidance_key_reaches_the_planner_config():
         expected = tuple(value) if isinstance(value, list) else value
         assert _read(cfg, dotted) == expected, dotted
         assert _read(default, dotted) != expected, dotted
+    cfg = PlannerConfig.from_scenario(default_scenario(**_nested(ALONE)))
     for dotted, value in ALONE.items():
-        cfg = PlannerConfig.from_scenario(default_scenario(**_nested({dotted: value})))
         assert _read(cfg, dotted) == value != _read(default, dotted), dotted
 
 

@@ -312,7 +312,8 @@ def intruder_margin(
     """The separation needed beyond ``d_min`` from each intruder, as a function of the time
     ``t`` (T,) from now, (T, N); None when there is none.
 
-    Two parts add up: the uncertainty, ``uncertainty_k`` sigmas of
+    Two parts add up: the uncertainty (with ``risk="probability"`` only over the first
+    ``risk_wall_s`` seconds, held beyond; none when that is None), ``uncertainty_k`` sigmas of
     ``sqrt(sigma_m^2 + (sigma_v t_v)^2 + own(t)^2)``, the track's and the ownship model's own
     (``own_error_10s_m`` at 10 s, as ``t^1.5``), with ``t_v = min(t,
     uncertainty_horizon_s)`` (``t`` when None); and with ``intruder_model="reachable"`` what the
@@ -322,9 +323,11 @@ def intruder_margin(
     15 m/s intruder can be anywhere within 240 m of its prediction after 16 s).
     """
     n = vel.shape[0]
-    # With risk as a probability the track error is no wall: only what the intruder could do
-    # grows the separation needed (track_sigma gives the error to the search instead).
-    k = 0.0 if config.risk == "probability" else config.uncertainty_k
+    # With risk as a probability the track error is no wall (track_sigma gives it to the
+    # search as a chance), except over a line's first risk_wall_s seconds when set: what the
+    # track may do before the ownship can answer it is fenced off, the rest weighed.
+    wall_s = config.risk_wall_s if config.risk == "probability" else None
+    k = 0.0 if config.risk == "probability" and wall_s is None else config.uncertainty_k
     sigma = track_sigma(config, n, sigma_m, sigma_v)
     reach = config.intruder_model == "reachable" and config.reach_horizon_s > 0
     uncertain = k > 0 and sigma is not None
@@ -336,8 +339,8 @@ def intruder_margin(
 
     def margin(t: np.ndarray) -> np.ndarray:  # t (..., T): (..., T, N)
         out = np.zeros((*t.shape, n))
-        if uncertain:
-            out += k * sigma(t)
+        if uncertain:  # held at its width at wall_s beyond it: a wall never narrows
+            out += k * sigma(t if wall_s is None else np.minimum(t, wall_s))
         if reach:  # turns differ through the air: the wind carries all of them alike
             out += manoeuvre_spread(air, turn_rate, np.minimum(t, horizon), limit)
         return out

@@ -120,6 +120,11 @@ class MCTSConfig(Section):
     # that the error brings the intruder within d_min weights the line's value
     # (uavxai.avoidance.risk). The sphere only: refused with the conflict cylinder.
     risk: Literal[RISK_MODELS] = "margin"  # type: ignore[valid-type]
+    # With risk "probability": the track error is still a wall of uncertainty_k sigmas over a
+    # line's first risk_wall_s seconds (held at that width beyond), a chance after them; null:
+    # a chance only. The time the ownship is committed to its first action (action_hold_s)
+    # is the natural choice: what a track may do before the tree can answer it is fenced off.
+    risk_wall_s: Annotated[float, Field(gt=0, le=60)] | None = None
 
 
 class NMAC(Section):
@@ -186,6 +191,11 @@ class Avoidance(Section):
         problem = action_set_problem(self.planner, self.actions)
         if problem:
             raise ValueError(problem)
+        if self.mcts.risk_wall_s is not None and self.mcts.risk != "probability":
+            raise ValueError(
+                "avoidance.mcts.risk_wall_s needs avoidance.mcts.risk: probability (with the "
+                "margin the whole track error is a wall already)"
+            )
         if self.mcts.risk == "probability" and self.conflict_volume != "sphere":
             raise ValueError(
                 "avoidance.mcts.risk: probability needs avoidance.conflict_volume: sphere "
