@@ -313,7 +313,7 @@ def intruder_margin(
     ``t`` (T,) from now, (T, N); None when there is none.
 
     Two parts add up: the uncertainty (with ``risk="probability"`` only over the first
-    ``risk_wall_s`` seconds, held beyond; none when that is None), ``uncertainty_k`` sigmas of
+    ``risk_wall_s`` seconds, none beyond them nor when that is None), ``uncertainty_k`` sigmas of
     ``sqrt(sigma_m^2 + (sigma_v t_v)^2 + own(t)^2)``, the track's and the ownship model's own
     (``own_error_10s_m`` at 10 s, as ``t^1.5``), with ``t_v = min(t,
     uncertainty_horizon_s)`` (``t`` when None); and with ``intruder_model="reachable"`` what the
@@ -339,8 +339,9 @@ def intruder_margin(
 
     def margin(t: np.ndarray) -> np.ndarray:  # t (..., T): (..., T, N)
         out = np.zeros((*t.shape, n))
-        if uncertain:  # held at its width at wall_s beyond it: a wall never narrows
-            out += k * sigma(t if wall_s is None else np.minimum(t, wall_s))
+        if uncertain:  # with risk_wall_s none beyond it: the chance counts the error there
+            wall = k * sigma(t)
+            out += wall if wall_s is None else np.where((t <= wall_s)[..., None], wall, 0.0)
         if reach:  # turns differ through the air: the wind carries all of them alike
             out += manoeuvre_spread(air, turn_rate, np.minimum(t, horizon), limit)
         return out

@@ -121,7 +121,7 @@ class MCTSConfig(Section):
     # (uavxai.avoidance.risk). The sphere only: refused with the conflict cylinder.
     risk: Literal[RISK_MODELS] = "margin"  # type: ignore[valid-type]
     # With risk "probability": the track error is still a wall of uncertainty_k sigmas over a
-    # line's first risk_wall_s seconds (held at that width beyond), a chance after them; null:
+    # line's first risk_wall_s seconds (none beyond), the chance alone after them; null:
     # a chance only. The time the ownship is committed to its first action (action_hold_s)
     # is the natural choice: what a track may do before the tree can answer it is fenced off.
     risk_wall_s: Annotated[float, Field(gt=0, le=60)] | None = None
