@@ -117,7 +117,6 @@ class TreePlanner:
         tracks = predict_levels(model, intruders, cfg.depth, cfg.action_hold_s)
         time_left_s = (cfg.max_steps - step) * cfg.decision_period_s
         root = ownship_state(own)
-        model.motions(root.tolist(), cfg.action_hold_s, cfg.depth)  # memoised in batches
         tree = self.search(root, goal_xyz, tracks, time_left_s)
         decision = decision_from_tree(
             tree,
