@@ -140,6 +140,7 @@ class MCTSPlanner(TreePlanner):
     def __init__(self, config: PlannerConfig | None = None, *, name: str = "mcts") -> None:
         super().__init__(config, name=name)
         self._rng = np.random.default_rng(self.config.seed)
+        self._scratch: dict = {}  # the kernel's tree arrays, reused (kernel.search)
 
     def reset(self, seed: int) -> None:
         super().reset(seed)
@@ -159,6 +160,7 @@ class MCTSPlanner(TreePlanner):
             hold_s=cfg.action_hold_s,
             rng=self._rng,
             time_left_s=time_left_s,
+            scratch=self._scratch,
         )
 
 
