@@ -238,8 +238,7 @@ def decision_from_tree(
     samples, t_events = _remeasure(
         model, tree, [n for line in lines.values() for n in line], goal, tracks
     )
-    shares = collision_shares(tree) if sampled else None
-    q = tree.q
+    shares, q = (collision_shares(tree) if sampled else None), tree.q
     children = [
         _child_stats(tree, q, a, line, own, model, goal, None if shares is None else shares[a])
         for a, line in lines.items()
