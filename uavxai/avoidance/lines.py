@@ -117,54 +117,56 @@ def measure_lines(
     n_lines, width, n, n_int = dist.shape
     dt = hold_s / n
     keep = np.zeros((n_lines, width), dtype=int)  # sub-steps counted per edge (0: padding)
-    t0 = np.zeros((n_lines, width))
     lev = np.zeros((n_lines, width), dtype=int)
-    used_of, horizons = [], []
-    for ln in range(n_lines):
-        used = _used(ends[ln])
+    used_of = [_used(line_ends) for line_ends in ends]
+    for ln, used in enumerate(used_of):
         keep[ln, :used] = n
         code, t_event = ends[ln][used - 1]
         if code in (GOAL, OUT_OF_BOUNDS) and math.isfinite(t_event):
             keep[ln, used - 1] = min(n, int(round(t_event / dt)) + 1)
-        t0[ln, :used] = np.asarray(levels[ln][:used], dtype=float) * hold_s
         lev[ln, :used] = levels[ln][:used]
-        used_of.append(used)
-        horizons.append(float(t0[ln, used - 1] + keep[ln, used - 1] * dt))
+    t0 = lev.astype(float) * hold_s
+    rows, last = np.arange(n_lines), np.array(used_of) - 1
+    horizons = (t0[rows, last] + keep[rows, last] * dt).tolist()
     if not n_int:
         return [LineMeasure(math.inf, -1, None, None, h) for h in horizons]
     # the closest approach to each intruder over the kept sub-steps, the first if tied
     kept = np.where(np.arange(n)[None, None, :, None] < keep[:, :, None, None], dist, np.inf)
     first = kept.reshape(n_lines, width * n, n_int).argmin(axis=1)  # (L, N)
     e, k = np.divmod(first, n)
-    rows, cols = np.arange(n_lines)[:, None], np.arange(n_int)[None, :]
+    rows, cols = rows[:, None], np.arange(n_int)[None, :]
     best = kept[rows, e, k, cols]
     best_t = t0[rows, e] + (k + frac[rows, e, k, cols]) * dt
     margins = np.stack([np.zeros((n + 1, n_int)) if t.margin is None else t.margin
                         for t in tracks])  # fmt: skip
     best_margin = margins[lev[rows, e], k + 1, cols]  # the sub-step's end margin, as held
     could = np.maximum(best - best_margin, 0.0)
+    # per line: the closest intruder j, and the others whose margin could bring them closer
+    # (the least first)
+    j = np.argmin(best, axis=1)
     order = np.argsort(could, axis=1, kind="stable")
+    sorted_could = np.take_along_axis(could, order, axis=1)
+    unsure = (order != j[:, None]) & (sorted_could < best[rows[:, 0], j][:, None])
+    found = np.isfinite(best).any(axis=1).tolist()
+    best_j, t_j = best[rows[:, 0], j].tolist(), best_t[rows[:, 0], j].tolist()
     out = []
-    for ln in range(n_lines):
-        used, line_best = used_of[ln], best[ln]
-        if not np.isfinite(line_best).any():
+    for ln, used in enumerate(used_of):
+        if not found[ln]:
             out.append(LineMeasure(math.inf, -1, None, None, horizons[ln]))
             continue
         met = None
         if ends[ln][used - 1][0] == COLLISION:
-            last = levels[ln][used - 1]
             who, when, needed = _first_conflict(
-                dist[ln, used - 1], tracks[last], d_min_m, float(t0[ln, used - 1]), dt
-            )
-            met = (who, when, float(line_best[who]), needed)
-        j = int(np.argmin(line_best))
-        o = order[ln]
-        o = o[(o != j) & (could[ln, o] < line_best[j])]
-        unsure = tuple(zip(o.tolist(), could[ln, o].tolist(), strict=True))
+                dist[ln, used - 1], tracks[levels[ln][used - 1]], d_min_m,
+                float(t0[ln, used - 1]), dt,
+            )  # fmt: skip
+            met = (who, when, float(best[ln, who]), needed)
+        pick = unsure[ln]
+        doubt = tuple(zip(order[ln][pick].tolist(), sorted_could[ln][pick].tolist(), strict=True))
         losses, risk = _line_losses(dist[ln, :used], frac[ln, :used], keep[ln, :used],
                                     levels[ln][:used], tracks, d_min_m)  # fmt: skip
-        out.append(LineMeasure(float(line_best[j]), j, float(best_t[ln, j]), met, horizons[ln],
-                               unsure, losses, risk))  # fmt: skip
+        out.append(LineMeasure(best_j[ln], int(j[ln]), t_j[ln], met, horizons[ln], doubt,
+                               losses, risk))  # fmt: skip
     return out
 
 
