@@ -173,10 +173,13 @@ def child_times(args, n_intruders: int) -> None:
     print(json.dumps(out))
 
 
-def against_baseline(args, n_intruders: int, planners, cases) -> None:
-    """This tree's MCTS planners and ``args.baseline``'s, timed alternately (module doc)."""
-    own = {m.name: np.full(len(cases), np.inf) for m, _ in planners}
-    base = {m.name: np.full(len(cases), np.inf) for m, _ in planners}
+def against_baseline(args, n_intruders: int, cfg: PlannerConfig, cases) -> None:
+    """This tree's MCTS planners and ``args.baseline``'s, timed alternately (module doc).
+    Each pass, on either side, flies fresh planners warmed on the first encounter only, as
+    the child does: the motions of every other encounter are computed, not memoised."""
+    names = [m.name for m, _ in pairs(cfg, not args.no_vertical)]
+    own = {name: np.full(len(cases), np.inf) for name in names}
+    base = {name: np.full(len(cases), np.inf) for name in names}
     argv = [sys.executable, os.path.abspath(__file__), "--child-times", "--intruders",
             str(n_intruders), "--encounters", str(len(cases)), "--simulations",
             str(args.simulations), "--depth", str(args.depth), "--risk", args.risk,
@@ -185,7 +188,8 @@ def against_baseline(args, n_intruders: int, planners, cases) -> None:
         argv.append("--no-vertical")
     env = {**os.environ, "PYTHONPATH": os.path.abspath(args.baseline)}
     for _ in range(args.repeats):
-        for mcts, _ in planners:
+        for mcts, _ in pairs(cfg, not args.no_vertical):
+            mcts.plan(*cases[0])
             own[mcts.name] = np.minimum(own[mcts.name], time_decisions(mcts, cases, 1)[0])
         done = subprocess.run(argv, env=env, capture_output=True, text=True, check=True)
         theirs = json.loads(done.stdout.strip().splitlines()[-1])
@@ -220,7 +224,7 @@ def density(args, n_intruders: int) -> None:
             share = np.percentile(m_cpu, 50) / goal
             print(f"  {mcts.name} cpu p50 / its goal of {goal:.0f} ms: {share:.2f}")
     if args.baseline:
-        against_baseline(args, n_intruders, planners, cases)
+        against_baseline(args, n_intruders, PlannerConfig.from_scenario(scenario), cases)
     if not args.episodes:
         return
     print(f"  {args.episodes} kinematic episodes each (seeds 0..{args.episodes - 1}):")
