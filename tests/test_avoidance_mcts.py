@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -10,6 +11,8 @@ import pytest
 
 from uavxai.avoidance import Intruder, MCTSPlanner, Ownship, PlannerConfig
 from uavxai.avoidance.direct import DirectPlanner
+from uavxai.avoidance.lines import measure_line, with_measure
+from uavxai.avoidance.mcts import predict_levels
 from uavxai.avoidance.model import COLLISION, NONE, TIMEOUT
 from uavxai.learning.env import EncounterEnv
 from uavxai.scenario import IntruderSpec, default_scenario
@@ -222,3 +225,34 @@ def test_a_memo_past_its_bound_between_decisions_changes_no_decision(monkeypatch
         bounded = planner.plan(o, intruders, (1000, 1000, 100))
         np.testing.assert_array_equal(bounded.tree.visits, p.plan(o, intruders,
                                                                    (1000, 1000, 100)).tree.visits)
+
+
+def test_root_lines_measured_in_one_batch_read_as_each_line_measured_alone():
+    """A tree decision measures its root lines in one batch (lines.measure_lines); each line
+    measured alone (measure_line, its own chords) gives the very same numbers: separations,
+    a conflict's miss, the unsure intruders, the chances of loss."""
+    own, intruders = random_encounter(5, n=40)
+    ahead = 400.0 * math.sqrt(0.5)  # one nose to nose, 400 m ahead: some lines meet it
+    intruders.append(Intruder(99, own.x + ahead, own.y + ahead, own.h, -15.0, -15.0))
+    intruders = [dataclasses.replace(i, sigma_m=20.0, sigma_v=5.0) for i in intruders]
+    planner = MCTSPlanner(PlannerConfig(seed=0, risk="probability"))
+    d = planner.plan(own, intruders, GOAL)
+    tree, model, cfg = d.tree, planner.model, planner.config
+    tracks = predict_levels(model, intruders, cfg.depth, cfg.action_hold_s)
+    ids = [i.id for i in intruders]
+    seen = {"meets": 0, "unsure": 0, "losses": 0}
+    for c in d.children:
+        line = tree.best_line(int(tree.children_of(0)[c.action]))
+        levels = (tree.depth[line] - 1).tolist()
+        start = tree.state[tree.parent[line]]
+        seg = model.fly_levels(
+            start, tree.action[line], np.array(levels), np.asarray(GOAL), cfg.action_hold_s, tracks
+        )
+        ends = list(zip(tree.terminal[line].tolist(), seg.t_event.tolist(), strict=True))
+        alone = with_measure(
+            c, measure_line(list(seg.samples), levels, ends, tracks, cfg.action_hold_s,
+                            cfg.d_min_m), ids)  # fmt: skip
+        assert alone == c
+        for field in seen:
+            seen[field] += bool(getattr(c, field))
+    assert all(seen.values()), seen  # the picture exercises every part of the measure

@@ -14,9 +14,11 @@ from uavxai.avoidance.model import (
     OUT_OF_BOUNDS,
     EncounterModel,
     Track,
+    intruder_margin,
     ownship_air,
     ownship_state,
     place_children,
+    track_sigma,
 )
 from uavxai.avoidance.types import Ownship, PlannerConfig
 from uavxai.units import G
@@ -345,6 +347,30 @@ def test_fly_levels_equals_flying_each_level():
         )
         for name in ("end", "min_sep", "closest", "t_closest", "event"):
             np.testing.assert_allclose(getattr(both, name)[b], getattr(one, name)[0], atol=1e-9)
+
+
+def test_tracks_of_all_levels_in_one_batch_are_each_level_predicted_alone():
+    """predict_levels builds the tree levels' tracks in one batch (Track.levels): each is the
+    track predict gives that level alone, to the bit (margin and sigma included)."""
+    cfg = PlannerConfig(intruder_model="reachable", risk="probability")
+    model = EncounterModel(cfg)
+    rng = np.random.default_rng(3)
+    n = 10
+    pos = np.c_[rng.uniform(0, 2000, (n, 2)), rng.uniform(100, 140, n)]
+    vel = np.c_[rng.uniform(-25, 25, (n, 2)), np.zeros(n)]
+    turn = rng.uniform(-0.1, 0.1, n)
+    margin = intruder_margin(cfg, vel, turn, np.full(n, 5.0), np.full(n, 2.0))
+    sigma = track_sigma(cfg, n, np.full(n, 5.0), np.full(n, 2.0))
+    starts = [0.0, 4.0, 8.0, 12.0]
+    batch = model.predict_levels(pos, vel, 4.0, starts, turn_rate=turn, margin=margin,
+                                 sigma=sigma)  # fmt: skip
+    assert batch[-1].margin is not None and batch[-1].sigma is not None
+    for t0, track in zip(starts, batch, strict=True):
+        alone = model.predict_levels(pos, vel, 4.0, [t0], turn_rate=turn, margin=margin,
+                                     sigma=sigma)[0]  # fmt: skip
+        for name in ("pos", "xy", "h", "centre", "radius", "margin", "sigma"):
+            np.testing.assert_array_equal(getattr(track, name), getattr(alone, name))
+        assert (track.step_max, track.index_distance) == (alone.step_max, alone.index_distance)
 
 
 def test_the_search_terminal_codes_are_read_back_as_the_outcome_enum():

@@ -14,9 +14,15 @@ Times are the process's CPU time per decision (less disturbed by other processes
 time, which is printed too); the load average is printed beside them.
 
     .venv/bin/python benchmarks/performance/bench_mcts.py [--quick] [--encounters 40]
-        [--episodes 20]
+        [--episodes 20] [--baseline DIR]
         [--intruders 20,40] [--simulations 200] [--depth 4] [--repeats 5] [--no-vertical]
         [--risk margin|probability] [--track-error 2.9,2.4]
+
+``--baseline DIR`` times the MCTS planners of another source tree too (a checkout of the
+code before a change, first on the path of a child process that builds the same encounters),
+its pass and this process's pass alternating repeat by repeat, so both see the same load; it
+prints each planner's p50 against the baseline's and their ratio (issue 31: "before/after,
+alternately").
 
 ``--risk`` sets ``avoidance.mcts.risk`` (issue 31: the track error as a probability in the
 value, not a wall); ``--track-error M,V`` gives every encounter's intruders that 1-sigma
@@ -29,8 +35,11 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import math
 import os
+import subprocess
+import sys
 import time
 
 import numpy as np
@@ -44,6 +53,8 @@ from uavxai.sim.build import run_kinematic as run_episode
 from uavxai.sim.spec import episode_spec
 from uavxai.surveillance.tracker import truth_beliefs
 from uavxai.vocabulary import RISK_MODELS
+
+DECISION_GOAL_MS = {20: 10.0, 40: 25.0}  # issue 31: MCTS decision p50, CPU, by intruders
 
 
 def encounters(
@@ -134,8 +145,8 @@ def episodes(planner: Planner, scenario, n_intruders: int, count: int) -> dict:
     return out
 
 
-def density(args, n_intruders: int) -> None:
-    """Everything measured at one traffic density."""
+def setup(args, n_intruders: int):
+    """(scenario, encounters, planner pairs, warmed) at one traffic density."""
     scenario = default_scenario(
         "bench-mcts",
         intruders={"count": n_intruders},
@@ -148,6 +159,53 @@ def density(args, n_intruders: int) -> None:
     for pair in planners:
         for planner in pair:  # warm caches and imports
             planner.plan(*cases[0])
+    return scenario, cases, planners
+
+
+def child_times(args, n_intruders: int) -> None:
+    """The child of ``--baseline``: one timing pass of the MCTS planners, as JSON."""
+    _, cases, planners = setup(args, n_intruders)
+    import uavxai
+
+    out = {"uavxai": uavxai.__file__}
+    for mcts, _ in planners:
+        out[mcts.name] = time_decisions(mcts, cases, 1)[0].tolist()
+    print(json.dumps(out))
+
+
+def against_baseline(args, n_intruders: int, cfg: PlannerConfig, cases) -> None:
+    """This tree's MCTS planners and ``args.baseline``'s, timed alternately (module doc).
+    Each pass, on either side, flies fresh planners warmed on the first encounter only, as
+    the child does: the motions of every other encounter are computed, not memoised."""
+    names = [m.name for m, _ in pairs(cfg, not args.no_vertical)]
+    own = {name: np.full(len(cases), np.inf) for name in names}
+    base = {name: np.full(len(cases), np.inf) for name in names}
+    argv = [sys.executable, os.path.abspath(__file__), "--child-times", "--intruders",
+            str(n_intruders), "--encounters", str(len(cases)), "--simulations",
+            str(args.simulations), "--depth", str(args.depth), "--risk", args.risk,
+            "--track-error", ",".join(str(e) for e in args.track_error)]  # fmt: skip
+    if args.no_vertical:
+        argv.append("--no-vertical")
+    env = {**os.environ, "PYTHONPATH": os.path.abspath(args.baseline)}
+    for _ in range(args.repeats):
+        for mcts, _ in pairs(cfg, not args.no_vertical):
+            mcts.plan(*cases[0])
+            own[mcts.name] = np.minimum(own[mcts.name], time_decisions(mcts, cases, 1)[0])
+        done = subprocess.run(argv, env=env, capture_output=True, text=True, check=True)
+        theirs = json.loads(done.stdout.strip().splitlines()[-1])
+        for name in base:
+            base[name] = np.minimum(base[name], theirs[name])
+    print(f"  against the baseline {theirs['uavxai']} ({args.repeats} alternating repeats, "
+          f"load average now {os.getloadavg()[0]:.2f}):")  # fmt: skip
+    for name in own:
+        mine, before = np.percentile(own[name], 50), np.percentile(base[name], 50)
+        print(f"  {name:<20} cpu p50 {mine:7.2f} ms, baseline {before:7.2f} ms, "
+              f"ratio {mine / before:.3f}")  # fmt: skip
+
+
+def density(args, n_intruders: int) -> None:
+    """Everything measured at one traffic density."""
+    scenario, cases, planners = setup(args, n_intruders)
     print(
         f"{n_intruders} intruders, {len(cases)} encounters, MCTS {args.simulations} simulations, "
         f"depth {args.depth}, risk {args.risk}, track error {args.track_error} "
@@ -161,6 +219,12 @@ def density(args, n_intruders: int) -> None:
         ratio = m_cpu.sum() / e_cpu.sum()
         print(f"  cost ratio {mcts.name} / {exhaustive.name} (cpu): {ratio:.3f}")
         against_optimum(mcts, exhaustive, cases)
+        goal = DECISION_GOAL_MS.get(n_intruders)
+        if goal is not None:
+            share = np.percentile(m_cpu, 50) / goal
+            print(f"  {mcts.name} cpu p50 / its goal of {goal:.0f} ms: {share:.2f}")
+    if args.baseline:
+        against_baseline(args, n_intruders, PlannerConfig.from_scenario(scenario), cases)
     if not args.episodes:
         return
     print(f"  {args.episodes} kinematic episodes each (seeds 0..{args.episodes - 1}):")
@@ -187,6 +251,9 @@ def main() -> None:
                     help="avoidance.mcts.risk (default: margin)")  # fmt: skip
     ap.add_argument("--track-error", default="0,0",
                     help="intruders' 1-sigma position m, velocity m/s errors")  # fmt: skip
+    ap.add_argument("--baseline", metavar="DIR",
+                    help="a source tree whose MCTS planners are timed alternately")  # fmt: skip
+    ap.add_argument("--child-times", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
     try:
         args.track_error = tuple(float(x) for x in args.track_error.split(","))
@@ -200,8 +267,10 @@ def main() -> None:
         counts = [int(n) for n in args.intruders.split(",")]
     except ValueError:
         ap.error(f"--intruders: comma-separated whole numbers (20,40), got {args.intruders!r}")
+    if args.baseline and not os.path.isdir(os.path.join(args.baseline, "uavxai")):
+        ap.error(f"--baseline: a source tree holding the uavxai package, got {args.baseline!r}")
     for n in counts:
-        density(args, n)
+        child_times(args, n) if args.child_times else density(args, n)
 
 
 if __name__ == "__main__":

@@ -36,6 +36,9 @@ def exhaustive_search(
     time_left_s: float = math.inf,
 ) -> SearchTree:
     """The full tree to depth ``len(tracks)`` with best-value backups (see module docstring)."""
+    # the body motions the tree can expand, memoised in one batch per level (one at a time,
+    # as the builder meets them, they cost more than the search)
+    model.motions(np.asarray(root, dtype=float).tolist(), hold_s, len(tracks))
     builder = TreeBuilder(model, root, goal, tracks, hold_s, time_left_s)
     frontier = [0]
     for _ in range(len(tracks)):

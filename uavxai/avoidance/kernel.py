@@ -447,9 +447,14 @@ def search(
     hold_s: float,
     rng: np.random.Generator,
     time_left_s: float = math.inf,
+    scratch: dict | None = None,
 ) -> SearchTree:
     """Run MCTS from ``root`` (a model state row) and return the tree (the algorithm: the
     docstring of :mod:`uavxai.avoidance.mcts`).
+
+    ``scratch``: a dict the caller keeps from one search to the next, where the kernel's tree
+    arrays are kept and reused (allocating and filling them cost more than a third of the
+    compiled search); the returned tree is a copy, never a view of them.
 
     ``tracks[d]`` holds the intruders during tree level ``d``, i.e. over
     ``[d * hold_s, (d + 1) * hold_s]`` from now; the search depth is ``len(tracks)``.
@@ -470,7 +475,7 @@ def search(
     )
     bz = np.stack([b.z for b in bodies])
     brise = np.stack([b.rise for b in bodies])
-    tree = _empty_tree(model, root, simulations, depth_limit)
+    tree = _empty_tree(model, root, simulations, depth_limit, {} if scratch is None else scratch)
     size = run(tree, bz, brise, bend, bscal, child, _pack(tracks, n), model.climbs,
                model.drift(hold_s, n), _params(model, goal, hold_s, time_left_s, tracks), explore,
                inv_sqrt, draws, simulations)  # fmt: skip
@@ -533,31 +538,41 @@ def _params(
     )
 
 
-def _empty_tree(model: EncounterModel, root: np.ndarray, simulations: int, depth_limit: int):
-    """The kernel's tree arrays, sized for the most nodes the search can make, root filled."""
+def _empty_tree(
+    model: EncounterModel, root: np.ndarray, simulations: int, depth_limit: int, scratch: dict
+):
+    """The kernel's tree arrays, sized for the most nodes the search can make, root filled:
+    ``scratch``'s from an earlier search of the same size if it has them (every node but the
+    root is written whole when the kernel expands it, so only the root is filled again)."""
     k = model.actions.size
     cap = 1 + k * (1 + simulations * max(depth_limit - 1, 0))
-    state = np.zeros((cap, 8))
+    tree = scratch.get((cap, depth_limit))
+    if tree is None:
+        tree = scratch[(cap, depth_limit)] = (
+            np.zeros(cap, dtype=np.int64),  # visits
+            np.zeros(cap),  # value_sum
+            np.full(cap, -1, dtype=np.int64),  # first_child
+            np.zeros(cap, dtype=np.bool_),  # is_leaf
+            np.full(cap, np.nan),  # value
+            np.zeros(cap, dtype=np.int64),  # key
+            np.zeros((cap, 8)),  # state
+            np.zeros(cap, dtype=np.int64),  # depth
+            np.full(cap, -1, dtype=np.int64),  # parent
+            np.full(cap, -1, dtype=np.int64),  # action
+            np.zeros(cap, dtype=np.int8),  # code
+            np.full(cap, np.inf),  # min_sep
+            np.full(cap, -1, dtype=np.int64),  # closest
+            np.full(cap, np.nan),  # t_closest
+            np.ones(cap),  # surv: the chance the line to the node keeps clear (risk "probability")
+            np.ones(1, dtype=np.int64),  # count
+            depth_limit,
+        )
+    (visits, value_sum, first_child, is_leaf, value, key, state, depth, parent, action, code,
+     min_sep, closest, t_closest, surv, count, _) = tree  # fmt: skip
+    visits[0], value_sum[0], first_child[0], is_leaf[0], value[0], key[0] = 0, 0.0, -1, 0, np.nan, 0
     state[0] = np.asarray(root, dtype=float)[:8]
-    tree = (
-        np.zeros(cap, dtype=np.int64),  # visits
-        np.zeros(cap),  # value_sum
-        np.full(cap, -1, dtype=np.int64),  # first_child
-        np.zeros(cap, dtype=np.bool_),  # is_leaf
-        np.full(cap, np.nan),  # value
-        np.zeros(cap, dtype=np.int64),  # key
-        state,
-        np.zeros(cap, dtype=np.int64),  # depth
-        np.full(cap, -1, dtype=np.int64),  # parent
-        np.full(cap, -1, dtype=np.int64),  # action
-        np.zeros(cap, dtype=np.int8),  # code
-        np.full(cap, np.inf),  # min_sep
-        np.full(cap, -1, dtype=np.int64),  # closest
-        np.full(cap, np.nan),  # t_closest
-        np.ones(cap),  # surv: the chance the line to the node keeps clear (risk "probability")
-        np.ones(1, dtype=np.int64),  # count
-        depth_limit,
-    )
+    depth[0], parent[0], action[0], code[0] = 0, -1, -1, 0
+    min_sep[0], closest[0], t_closest[0], surv[0], count[0] = np.inf, -1, np.nan, 1.0, 1
     return tree
 
 

@@ -76,53 +76,98 @@ def measure_line(
     is solved exactly. A line that reaches the goal or leaves the area counts up to the end of
     that event's sub-step (it stops there); one that collides is measured to the end of the
     edge, so that its miss is the closest approach, not where it first came too close.
-    ``chords[e]``: edge ``e``'s :func:`chord_distances`, if computed already (in a batch).
+    ``chords[e]``: edge ``e``'s :func:`chord_distances`, if computed already.
     ``aspect``: separations in the conflict cylinder's norm (``PlannerConfig.cylinder_aspect``;
-    None: 3-D distances, the sphere's).
+    None: 3-D distances, the sphere's). Many lines at once: :func:`measure_lines`.
     """
+    used = _used(ends)
     n_int = tracks[0].count if tracks else 0
-    used = next((e + 1 for e, (code, _) in enumerate(ends) if code != NONE), len(ends))
     n = samples[0].shape[0] - 1
+    if not n_int:
+        empty = np.zeros((1, used, n, 0))
+        return measure_lines(empty, empty, [levels], [ends], tracks, hold_s, d_min_m)[0]
+    if chords is None:
+        chords = [chord_distances(samples[e], tracks[levels[e]].pos, aspect)
+                  for e in range(used)]  # fmt: skip
+    dist = np.stack([chords[e][0] for e in range(used)])[None]  # (1, E, n, N)
+    frac = np.stack([chords[e][1] for e in range(used)])[None]
+    return measure_lines(dist, frac, [levels], [ends], tracks, hold_s, d_min_m)[0]
+
+
+def _used(ends: Sequence[tuple[int, float]]) -> int:
+    """How many edges of a line count: up to its first terminal one."""
+    return next((e + 1 for e, (code, _) in enumerate(ends) if code != NONE), len(ends))
+
+
+def measure_lines(
+    dist: np.ndarray,
+    frac: np.ndarray,
+    levels: Sequence[Sequence[int]],
+    ends: Sequence[Sequence[tuple[int, float]]],
+    tracks: Sequence[Track],
+    hold_s: float,
+    d_min_m: float,
+) -> list[LineMeasure]:
+    """:func:`measure_line` of L lines in one vectorised pass (a tree planner quotes one line
+    per root action; measured one by one, their small arrays cost more than the search):
+    ``dist``, ``frac`` (L, U, n, N) the :func:`chord_distances` of line ``l``'s edge ``e``
+    (edges beyond a line's own, up to U, are padding and never read); ``levels[l]``,
+    ``ends[l]`` as :func:`measure_line` has them. Every number is computed per line as that
+    function says, so a line measures the same alone or in a batch."""
+    n_lines, width, n, n_int = dist.shape
     dt = hold_s / n
-    keep = np.full(used, n)
-    code, t_event = ends[used - 1]
-    if code in (GOAL, OUT_OF_BOUNDS) and math.isfinite(t_event):
-        keep[-1] = min(n, int(round(t_event / dt)) + 1)
-    t0 = np.asarray(levels[:used], dtype=float) * hold_s
-    horizon = float(t0[-1] + keep[-1] * dt)
-    best = np.full(n_int, math.inf)
-    meets = None
-    if n_int:
-        if chords is None:
-            chords = [chord_distances(samples[e], tracks[levels[e]].pos, aspect)
-                      for e in range(used)]  # fmt: skip
-        dist = np.stack([chords[e][0] for e in range(used)])  # (E, n, N)
-        frac = np.stack([chords[e][1] for e in range(used)])
-        # the closest approach to each intruder over the kept sub-steps, the first if tied
-        kept = np.where(np.arange(n)[None, :, None] < keep[:, None, None], dist, np.inf)
-        first = kept.reshape(used * n, n_int).argmin(axis=0)
-        e, k = np.divmod(first, n)
-        cols = np.arange(n_int)
-        best = kept[e, k, cols]
-        best_t = t0[e] + (k + frac[e, k, cols]) * dt
-        margins = np.stack([np.zeros((n + 1, n_int)) if tracks[lv].margin is None
-                            else tracks[lv].margin for lv in levels[:used]])  # fmt: skip
-        best_margin = margins[e, k + 1, cols]  # the sub-step's end margin, as the search holds it
-        if code == COLLISION:
-            last = used - 1
-            meets = _first_conflict(dist[last], tracks[levels[last]], d_min_m, float(t0[last]), dt)
-    if not n_int or not np.isfinite(best).any():
-        return LineMeasure(math.inf, -1, None, None, horizon)
-    j = int(np.argmin(best))
-    met = None
-    if meets is not None:
-        who, when, needed = meets
-        met = (who, when, float(best[who]), needed)
+    keep = np.zeros((n_lines, width), dtype=int)  # sub-steps counted per edge (0: padding)
+    lev = np.zeros((n_lines, width), dtype=int)
+    used_of = [_used(line_ends) for line_ends in ends]
+    for ln, used in enumerate(used_of):
+        keep[ln, :used] = n
+        code, t_event = ends[ln][used - 1]
+        if code in (GOAL, OUT_OF_BOUNDS) and math.isfinite(t_event):
+            keep[ln, used - 1] = min(n, int(round(t_event / dt)) + 1)
+        lev[ln, :used] = levels[ln][:used]
+    t0 = lev.astype(float) * hold_s
+    rows, last = np.arange(n_lines), np.array(used_of) - 1
+    horizons = (t0[rows, last] + keep[rows, last] * dt).tolist()
+    if not n_int:
+        return [LineMeasure(math.inf, -1, None, None, h) for h in horizons]
+    # the closest approach to each intruder over the kept sub-steps, the first if tied
+    kept = np.where(np.arange(n)[None, None, :, None] < keep[:, :, None, None], dist, np.inf)
+    first = kept.reshape(n_lines, width * n, n_int).argmin(axis=1)  # (L, N)
+    e, k = np.divmod(first, n)
+    rows, cols = rows[:, None], np.arange(n_int)[None, :]
+    best = kept[rows, e, k, cols]
+    best_t = t0[rows, e] + (k + frac[rows, e, k, cols]) * dt
+    margins = np.stack([np.zeros((n + 1, n_int)) if t.margin is None else t.margin
+                        for t in tracks])  # fmt: skip
+    best_margin = margins[lev[rows, e], k + 1, cols]  # the sub-step's end margin, as held
     could = np.maximum(best - best_margin, 0.0)
-    unsure = tuple((int(i), float(could[i])) for i in np.argsort(could, kind="stable")
-                   if i != j and could[i] < best[j])  # fmt: skip
-    losses, risk = _line_losses(dist, frac, keep, levels[:used], tracks, d_min_m)
-    return LineMeasure(float(best[j]), j, float(best_t[j]), met, horizon, unsure, losses, risk)
+    # per line: the closest intruder j, and the others whose margin could bring them closer
+    # (the least first)
+    j = np.argmin(best, axis=1)
+    order = np.argsort(could, axis=1, kind="stable")
+    sorted_could = np.take_along_axis(could, order, axis=1)
+    unsure = (order != j[:, None]) & (sorted_could < best[rows[:, 0], j][:, None])
+    found = np.isfinite(best).any(axis=1).tolist()
+    best_j, t_j = best[rows[:, 0], j].tolist(), best_t[rows[:, 0], j].tolist()
+    out = []
+    for ln, used in enumerate(used_of):
+        if not found[ln]:
+            out.append(LineMeasure(math.inf, -1, None, None, horizons[ln]))
+            continue
+        met = None
+        if ends[ln][used - 1][0] == COLLISION:
+            who, when, needed = _first_conflict(
+                dist[ln, used - 1], tracks[levels[ln][used - 1]], d_min_m,
+                float(t0[ln, used - 1]), dt,
+            )  # fmt: skip
+            met = (who, when, float(best[ln, who]), needed)
+        pick = unsure[ln]
+        doubt = tuple(zip(order[ln][pick].tolist(), sorted_could[ln][pick].tolist(), strict=True))
+        losses, risk = _line_losses(dist[ln, :used], frac[ln, :used], keep[ln, :used],
+                                    levels[ln][:used], tracks, d_min_m)  # fmt: skip
+        out.append(LineMeasure(best_j[ln], int(j[ln]), t_j[ln], met, horizons[ln], doubt,
+                               losses, risk))  # fmt: skip
+    return out
 
 
 def _line_losses(
@@ -195,49 +240,59 @@ def measured_children(
     own: Ownship,
     config: PlannerConfig,
 ) -> tuple[list[ChildStats], dict[int, float]]:
-    """A tree planner's root options quoting what their lines predict (:func:`measure_line`)
-    and which manoeuvre each flies (:func:`flies`); and how far ahead each line reaches."""
+    """A tree planner's root options quoting what their lines predict (:func:`measure_line`,
+    all lines in one batch) and which manoeuvre each flies (:func:`flies`); and how far ahead
+    each line reaches."""
+    order = [lines[c.action] for c in children]
+    dist, frac = _line_chords(order, tree, samples, tracks, config.cylinder_aspect)
+    measures = measure_lines(
+        dist,
+        frac,
+        [[int(tree.depth[node]) - 1 for node in line] for line in order],
+        [[(int(tree.terminal[node]), t_events[node]) for node in line] for line in order],
+        tracks,
+        config.action_hold_s,
+        config.d_min_m,
+    )
     out, horizons = [], {}
-    chords = _edge_chords(lines, tree, samples, tracks, config.cylinder_aspect)
-    for c in children:
-        line = lines[c.action]
-        m = measure_line(
-            [samples[node] for node in line],
-            [int(tree.depth[node]) - 1 for node in line],
-            [(int(tree.terminal[node]), t_events[node]) for node in line],
-            tracks,
-            config.action_hold_s,
-            config.d_min_m,
-            None if chords is None else [chords[node] for node in line],
-            config.cylinder_aspect,
-        )
-        out.append(replace(with_measure(c, m, ids), effect=flies(c.action, own, config)))
+    for c, m in zip(children, measures, strict=True):
+        out.append(with_measure(c, m, ids, effect=flies(c.action, own, config)))
         horizons[c.action] = m.horizon_s
     return out, horizons
 
 
-def _edge_chords(
-    lines: dict[int, list[int]],
+def _line_chords(
+    lines: Sequence[list[int]],
     tree: SearchTree,
     samples: dict[int, np.ndarray],
     tracks: Sequence[Track],
     aspect: float | None = None,
-) -> dict[int, tuple[np.ndarray, np.ndarray]] | None:
-    """:func:`chord_distances` of every edge of ``lines``, by node, in one batch (one call
-    per edge costs more than the rest of the explanation); None without intruders."""
-    nodes = [node for line in lines.values() for node in line]
-    if not nodes or not tracks or not tracks[0].count:
-        return None
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`chord_distances` of every edge of ``lines``, in one batch (one call per edge
+    costs more than the rest of the explanation), laid out (L, U, n, N) for
+    :func:`measure_lines`: a shorter line's missing edges repeat its first."""
+    nodes = [node for line in lines for node in line]
+    n = samples[nodes[0]].shape[0] - 1
+    width = max(len(line) for line in lines)
+    if not tracks or not tracks[0].count:
+        return (np.zeros((len(lines), width, n, 0)),) * 2
     levels = tree.depth[nodes] - 1
     dist, frac = chord_distances(
         np.stack([samples[node] for node in nodes]), np.stack([t.pos for t in tracks])[levels],
         aspect,
     )
-    return {node: (dist[e], frac[e]) for e, node in enumerate(nodes)}
+    index = np.zeros((len(lines), width), dtype=int)
+    at = 0
+    for row, line in enumerate(lines):
+        index[row, :] = at
+        index[row, : len(line)] = np.arange(at, at + len(line))
+        at += len(line)
+    return dist[index], frac[index]
 
 
-def with_measure(child: ChildStats, m: LineMeasure, ids: Sequence) -> ChildStats:
-    """``child`` quoting ``m``'s predictions (intruders named by their ids)."""
+def with_measure(child: ChildStats, m: LineMeasure, ids: Sequence, **more) -> ChildStats:
+    """``child`` quoting ``m``'s predictions (intruders named by their ids), and ``more``
+    fields changed in the same copy."""
     meets = None
     if m.meets is not None:
         who, when, miss, needed = m.meets
@@ -251,6 +306,7 @@ def with_measure(child: ChildStats, m: LineMeasure, ids: Sequence) -> ChildStats
         unsure=tuple((ids[i], could) for i, could in m.unsure),
         losses=tuple((ids[i], chance) for i, chance in m.losses),
         risk=m.risk,
+        **more,
     )
 
 

@@ -117,7 +117,6 @@ class TreePlanner:
         tracks = predict_levels(model, intruders, cfg.depth, cfg.action_hold_s)
         time_left_s = (cfg.max_steps - step) * cfg.decision_period_s
         root = ownship_state(own)
-        model.motions(root.tolist(), cfg.action_hold_s, cfg.depth)  # memoised in batches
         tree = self.search(root, goal_xyz, tracks, time_left_s)
         decision = decision_from_tree(
             tree,
@@ -141,6 +140,7 @@ class MCTSPlanner(TreePlanner):
     def __init__(self, config: PlannerConfig | None = None, *, name: str = "mcts") -> None:
         super().__init__(config, name=name)
         self._rng = np.random.default_rng(self.config.seed)
+        self._scratch: dict = {}  # the kernel's tree arrays, reused (kernel.search)
 
     def reset(self, seed: int) -> None:
         super().reset(seed)
@@ -160,6 +160,7 @@ class MCTSPlanner(TreePlanner):
             hold_s=cfg.action_hold_s,
             rng=self._rng,
             time_left_s=time_left_s,
+            scratch=self._scratch,
         )
 
 
@@ -237,9 +238,9 @@ def decision_from_tree(
     samples, t_events = _remeasure(
         model, tree, [n for line in lines.values() for n in line], goal, tracks
     )
-    shares = collision_shares(tree) if sampled else None
+    shares, q = (collision_shares(tree) if sampled else None), tree.q
     children = [
-        _child_stats(tree, a, line, own, model, goal, ids, None if shares is None else shares[a])
+        _child_stats(tree, q, a, line, own, model, goal, None if shares is None else shares[a])
         for a, line in lines.items()
     ]
     children, horizons = measured_children(
@@ -365,30 +366,26 @@ def _remeasure(
 
 def _child_stats(
     tree: SearchTree,
+    q: np.ndarray,
     action: int,
     line: list[int],
     own: Ownship,
     model: EncounterModel,
     goal: np.ndarray,
-    ids: list,
     collision_share: float | None,
 ) -> ChildStats:
+    """What the tree says of one root action (``q``: the tree's); the separations along its
+    line are left unknown here: :func:`measured_children` measures them exactly."""
     cfg = model.config
-    assert tree.t_closest is not None
-    seps = tree.min_sep[line]
-    k = int(np.argmin(seps))
-    closest = int(tree.closest[line[k]])
-    known = bool(np.isfinite(seps[k])) and closest >= 0
     return ChildStats(
         action=action,
         bank_cmd_rad=float(bank_command(own.bank, action, cfg)),
         accel_mps2=float(accel_command(action, cfg)),
         alt_target_m=height_command(model, action, own, goal),
         visits=int(tree.visits[line[0]]),
-        q=float(tree.q[line[0]]),
-        predicted_min_separation_m=float(seps[k]),
-        closest_intruder=ids[closest] if known else None,
-        time_to_closest_s=float(tree.t_closest[line[k]]) if known else None,
+        q=float(q[line[0]]),
+        predicted_min_separation_m=math.inf,
+        closest_intruder=None,
         outcome=OUTCOME_NAMES[int(tree.terminal[line[-1]])],
         collision_share=None if collision_share is None else float(collision_share),
     )

@@ -193,38 +193,54 @@ class Track:
     ) -> Track:
         """``grow``: the ball holds the margin times this (the conflict cylinder's corner
         reaches ``PlannerConfig.cull_factor`` times its radius, margin included);
-        ``sigma``: see the field."""
+        ``sigma``: see the field. Several tree levels at once: :meth:`levels`."""
         pos = np.asarray(pos, dtype=float)
         if pos.ndim != 3 or pos.shape[2] != 3 or pos.shape[0] < 2:
             raise ValueError(f"intruder positions must be (n+1, N, 3) with n >= 1, got {pos.shape}")
-        centre = 0.5 * (pos.min(axis=0) + pos.max(axis=0))
-        radius = np.sqrt(np.max(np.sum((pos - centre) ** 2, axis=2), axis=0))
-        if margin is not None:
-            margin = np.asarray(margin, dtype=float)
-            if margin.shape != pos.shape[:2]:
-                raise ValueError(f"margin must be {pos.shape[:2]}, got {margin.shape}")
-            if not np.any(margin):
-                margin = None
-            else:
-                radius = radius + grow * margin.max(axis=0, initial=0.0)
-        if sigma is not None:
-            sigma = np.asarray(sigma, dtype=float)
-            if sigma.shape != pos.shape[:2]:
-                raise ValueError(f"sigma must be {pos.shape[:2]}, got {sigma.shape}")
-            radius = radius + RISK_SIGMAS * sigma.max(axis=0, initial=0.0)
-        steps = np.sqrt(np.sum(np.diff(pos, axis=0) ** 2, axis=2))
-        track = cls(
-            pos=pos,
-            xy=pos[:, :, 0] + 1j * pos[:, :, 1],
-            h=np.ascontiguousarray(pos[:, :, 2]),
-            centre=centre,
-            radius=radius,
-            step_max=float(steps.max()) if steps.size else 0.0,
-            index_distance=index_distance if pos.shape[1] >= _INDEX_MIN else 0.0,
-            margin=margin,
-            sigma=sigma,
-        )
-        return track  # filed in its grid when first asked (the compiled search never asks)
+        for name, extra in (("margin", margin), ("sigma", sigma)):
+            if extra is not None and np.shape(extra) != pos.shape[:2]:
+                raise ValueError(f"{name} must be {pos.shape[:2]}, got {np.shape(extra)}")
+        margins = None if margin is None else [margin]
+        sigmas = None if sigma is None else [sigma]
+        return cls.levels(pos[None], index_distance, margins, grow, sigmas)[0]
+
+    @classmethod
+    def levels(
+        cls,
+        pos: np.ndarray,
+        index_distance: float = 0.0,
+        margins: Sequence[np.ndarray] | np.ndarray | None = None,
+        grow: float = 1.0,
+        sigmas: Sequence[np.ndarray] | np.ndarray | None = None,
+    ) -> list[Track]:
+        """:meth:`of` for L tree levels at once: ``pos`` (L, n+1, N, 3), ``margins[l]`` and
+        ``sigmas[l]`` (n+1, N) level ``l``'s (None: none at any level). Every number is
+        computed per level as :meth:`of` says (a level's track is the same in a batch or
+        alone); one pass over the levels costs less than a pass each."""
+        pos = np.asarray(pos, dtype=float)
+        centre = 0.5 * (pos.min(axis=1) + pos.max(axis=1))  # (L, N, 3)
+        radius = np.sqrt(np.max(np.sum((pos - centre[:, None]) ** 2, axis=3), axis=1))
+        steps = np.sqrt(np.sum(np.diff(pos, axis=1) ** 2, axis=3))  # (L, n, N)
+        step_max = steps.max(axis=(1, 2)).tolist() if steps.size else [0.0] * len(pos)
+        xy = pos[..., 0] + 1j * pos[..., 1]
+        h = np.ascontiguousarray(pos[..., 2])
+        index_distance = index_distance if pos.shape[2] >= _INDEX_MIN else 0.0
+        out = []
+        for lv in range(len(pos)):
+            r = radius[lv]
+            margin = None if margins is None else np.asarray(margins[lv], dtype=float)
+            if margin is not None:
+                if not np.any(margin):
+                    margin = None
+                else:
+                    r = r + grow * margin.max(axis=0, initial=0.0)
+            sigma = None if sigmas is None else np.asarray(sigmas[lv], dtype=float)
+            if sigma is not None:
+                r = r + RISK_SIGMAS * sigma.max(axis=0, initial=0.0)
+            out.append(cls(pos=pos[lv], xy=xy[lv], h=h[lv], centre=centre[lv], radius=r,
+                           step_max=step_max[lv], index_distance=index_distance, margin=margin,
+                           sigma=sigma))  # fmt: skip
+        return out  # filed in its grid when first asked (the compiled search never asks)
 
     def _file(self, distance: float) -> None:
         """Each intruder goes into every cell that its ball grown by ``distance`` touches, so
@@ -619,18 +635,13 @@ class EncounterModel:
         n = self.substeps(duration)
         t = np.array(starts, dtype=float)[:, None] + (duration / n) * np.arange(n + 1)
         distance = self.reach(0.0, duration) + self.config.cull_m if index else 0.0
-        if margin is None:
-            extra = [None] * len(starts)
-        else:
+        extra = None
+        if margin is not None:
             extra = margin(t[0])[None] if len(starts) == 1 else margin(t)
         wind = self.config.wind_mps
         pos = turn_positions(pos, vel, t.ravel(), turn_rate, wind).reshape(*t.shape, -1, 3)
-        grow = self.config.cull_factor
-        errors = [None] * len(starts) if sigma is None else list(sigma(t))
-        return [
-            Track.of(p, distance, m, grow, e)
-            for p, m, e in zip(pos, extra, errors, strict=True)
-        ]
+        errors = None if sigma is None else sigma(t)
+        return Track.levels(pos, distance, extra, self.config.cull_factor, errors)
 
     def reach(self, speed: float, duration: float) -> float:
         """The farthest (3-D) an ownship at ``speed`` can get from its start in ``duration``."""

@@ -373,13 +373,14 @@ class SearchTree:
     def best_child(self, node: int) -> int | None:
         """The most visited child of ``node`` (ties: higher Q, then lower action), or None."""
         kids = self.children_of(node)
-        visits = self.visits[kids]
-        kids, visits = kids[visits > 0], visits[visits > 0]
-        if kids.size == 0:
-            return None
-        q = self.value_sum[kids] / visits
-        order = np.lexsort((self.action[kids], -q, -visits))
-        return int(kids[order[0]])
+        best, chosen = None, None
+        # a few children: plain Python numbers cost less than array calls (and divide alike)
+        for kid, n, total, action in zip(kids.tolist(), self.visits[kids].tolist(),
+                                         self.value_sum[kids].tolist(),
+                                         self.action[kids].tolist(), strict=True):  # fmt: skip
+            if n > 0 and (best is None or (-n, -(total / n), action) < best):
+                best, chosen = (-n, -(total / n), action), kid
+        return chosen
 
     def best_line(self, node: int) -> list[int]:
         """``node`` and the most visited path below it: what the search expects to follow."""
