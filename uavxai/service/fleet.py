@@ -7,7 +7,9 @@ power, for the fleet's objective ``sum_k R_k / 2^lambda`` over all K users
   the cluster's centroid (the nearest lattice column) at the lattice height that is best for
   its own users alone at equal power; association = cluster; equal power (levels all L-1).
 - ``plan_fleet`` (the ``fleet`` planner): from the k-means baselines of seeds 0 and 1 (0-4
-  where N K <= 40; one per distinct partition of the users) a descent: a vectorised
+  where N K <= 40; one per distinct partition of the users; in the shared band where
+  N K > 40, the 2 of seeds 0-4 with the fewest users short of QoS by ``qos_shortfall``, where
+  N K > 120 only those tied at the fewest) a descent: a vectorised
   best-improvement local search over the whole fleet (a UAV moves 1 or 4 lattice steps, a
   user's level changes, a user changes UAV; candidates scored from the incumbent's received
   powers), in the shared band ``block_power`` (each UAV's best levels
