@@ -161,11 +161,21 @@ def kmeans_baseline(problem: FleetProblem, seed: int = 0) -> FleetPlan:
     """The naive fleet: k-means clusters, each UAV above its centroid (the nearest lattice
     column) at the best lattice height for its own users at equal power, association =
     cluster, equal power."""
-    xy = problem.fleet.channel.users[:, :2]
-    labels, centres = kmeans(xy, problem.fleet.n, seed)
+    labels, centres = kmeans(problem.fleet.channel.users[:, :2], problem.fleet.n, seed)
+    return equal_power(problem, kmeans_positions(problem, labels, centres), labels)
+
+
+def kmeans_positions(problem: FleetProblem, labels: np.ndarray, centres: np.ndarray):
+    """The baseline's UAV positions ``(N, 3)`` for these clusters: above each centroid (the
+    nearest lattice column) at the height best for its own users (``best_heights``)."""
     columns = snap(problem.space, np.column_stack([centres, np.zeros(len(centres))]))[:, :2]
-    positions = best_heights(problem, columns, labels)
-    return make_plan(problem, positions, labels, np.full(len(xy), problem.power_levels - 1))
+    return best_heights(problem, columns, labels)
+
+
+def equal_power(problem: FleetProblem, positions: np.ndarray, association: np.ndarray):
+    """The plan with every user at the top level (each UAV's budget split equally)."""
+    levels = np.full(problem.fleet.k, problem.power_levels - 1)
+    return make_plan(problem, positions, association, levels)
 
 
 # --------------------------------------------------------------------------- local search
@@ -477,42 +487,47 @@ def plan_fleet(problem: FleetProblem, starts: int | None = None) -> FleetPlan:
     the shared band) from each start ``chosen_starts`` keeps (or from every one of ``starts``
     k-means seeds), the best of them, then the coarse relocations."""
     cache = GainCache(problem)
-    firsts = chosen_starts(problem) if starts is None else distinct_starts(problem, starts)
+    firsts = (chosen_starts(problem) if starts is None else
+              [equal_power(problem, *s) for s in distinct_starts(problem, starts)])
     plans = [descend(problem, start, cache) for start in firsts]
     return relocate(problem, max(plans, key=lambda p: p.objective), cache)
 
 
-def distinct_starts(problem: FleetProblem, seeds: int) -> list[FleetPlan]:
-    """The k-means baselines of seeds ``0..seeds-1``, one per distinct partition of the users
-    (a seed whose clusters an earlier seed found starts the same descent, its UAVs numbered
-    otherwise)."""
-    firsts: dict[frozenset, FleetPlan] = {}
+Start = tuple[np.ndarray, np.ndarray]  # a k-means baseline's positions (N, 3) and association
+
+
+def distinct_starts(problem: FleetProblem, seeds: int) -> list[Start]:
+    """The positions and association of the k-means baselines of seeds ``0..seeds-1``, one
+    per distinct partition of the users (a seed whose clusters an earlier seed found starts
+    the same descent, its UAVs numbered otherwise), found before the heights are searched."""
+    firsts: dict[frozenset, Start] = {}
     for seed in range(seeds):
-        start = kmeans_baseline(problem, seed)
-        firsts.setdefault(partition(start), start)
+        labels, centres = kmeans(problem.fleet.channel.users[:, :2], problem.fleet.n, seed)
+        if partition(labels) not in firsts:
+            firsts[partition(labels)] = (kmeans_positions(problem, labels, centres), labels)
     return list(firsts.values())
 
 
 def chosen_starts(problem: FleetProblem) -> list[FleetPlan]:
-    """The starts the planner descends from. OFDMA, and small fleets in the shared band:
-    every distinct one of ``planner_starts`` seeds. Larger fleets in the shared band: the
-    descents of different partitions end a factor 2-30 apart (each user below QoS halves the
-    objective) and a descent costs 30-80 ms, so ``SCREENED_STARTS`` seeds are screened by
-    ``qos_shortfall`` (under 1 ms each) and only the 2 with the fewest users that cannot meet
-    QoS are descended (ties in seed order); where N K > ``LARGE_FLEET`` only those tied at the
-    fewest (at most 2). docs/service/fleet.md, round four."""
+    """The starts the planner descends from (k-means baselines). OFDMA, and small fleets in
+    the shared band: every distinct one of ``planner_starts`` seeds. Larger fleets in the
+    shared band: the descents of different partitions end a factor 2-30 apart (each user
+    below QoS halves the objective) and a descent costs 30-80 ms, so ``SCREENED_STARTS`` seeds
+    are screened by ``qos_shortfall`` (under 1 ms each) and only the 2 with the fewest users
+    that cannot meet QoS are descended (ties in seed order); where N K > ``LARGE_FLEET`` only
+    those tied at the fewest (at most 2). docs/service/fleet.md, round four."""
     fleet = problem.fleet
     if fleet.channel.access != "shared" or fleet.n * fleet.k <= SMALL_FLEET:
-        return distinct_starts(problem, planner_starts(problem))
-    screened = sorted(((qos_shortfall(problem, s), i), s) for i, s in
+        return [equal_power(problem, *s) for s in distinct_starts(problem, planner_starts(problem))]
+    screened = sorted(((qos_shortfall(problem, *s), i), s) for i, s in
                       enumerate(distinct_starts(problem, SCREENED_STARTS)))
     fewest = screened[0][0][0]
-    return [s for (short, _), s in screened[:PLANNER_STARTS]
+    return [equal_power(problem, *s) for (short, _), s in screened[:PLANNER_STARTS]
             if fleet.n * fleet.k <= LARGE_FLEET or short == fewest]
 
 
-def qos_shortfall(problem: FleetProblem, plan: FleetPlan) -> int:
-    """How many users ``plan``'s positions and association leave below the QoS rate however
+def qos_shortfall(problem: FleetProblem, positions: np.ndarray, association: np.ndarray) -> int:
+    """How many users UAVs at ``positions`` with this association leave below QoS however
     each UAV splits its power (shared band, power continuous). With every UAV at its full
     budget ``P_n``, user k of UAV n meets QoS (SINR ``gamma_q = 2^(qos / B) - 1``) exactly when
     its share of the budget is at least ``s_k = gamma_q / (1 + gamma_q) (1 + (I_k + sigma^2) /
@@ -520,15 +535,15 @@ def qos_shortfall(problem: FleetProblem, plan: FleetPlan) -> int:
     smallest shares that sum to at most 1, the rest fall short. A screen of a start's
     partition, not the descent's outcome: levels are discrete and the descent moves the UAVs."""
     fleet, c = problem.fleet, problem.fleet.channel
-    gains = fleet.gains(plan.positions)
+    gains = fleet.gains(positions)
     full = fleet.p_max_w
     gamma = 2.0 ** (c.qos_rate_bps / fleet.user_bandwidth_hz()) - 1.0
-    served = gains[plan.association, np.arange(fleet.k)] * full[plan.association]
+    served = gains[association, np.arange(fleet.k)] * full[association]
     others = full @ gains - served
     share = gamma / (1.0 + gamma) * (1.0 + (others + c.noise_w) / served)
     short = 0
     for n in range(fleet.n):
-        mine = np.sort(share[plan.association == n])
+        mine = np.sort(share[association == n])
         short += len(mine) - int(np.searchsorted(np.cumsum(mine), 1.0, side="right"))
     return short
 
@@ -542,10 +557,10 @@ def planner_starts(problem: FleetProblem) -> int:
     return SMALL_STARTS if problem.fleet.n * problem.fleet.k <= SMALL_FLEET else PLANNER_STARTS
 
 
-def partition(plan: FleetPlan) -> frozenset[tuple[int, ...]]:
+def partition(association: np.ndarray) -> frozenset[tuple[int, ...]]:
     """The users each UAV serves, whatever the UAVs' numbering."""
-    n = int(plan.association.max()) + 1
-    return frozenset(tuple(np.flatnonzero(plan.association == i)) for i in range(n))
+    n = int(association.max()) + 1
+    return frozenset(tuple(np.flatnonzero(association == i)) for i in range(n))
 
 
 # --------------------------------------------------------------------------- the reference
