@@ -7,7 +7,9 @@ power, for the fleet's objective ``sum_k R_k / 2^lambda`` over all K users
   the cluster's centroid (the nearest lattice column) at the lattice height that is best for
   its own users alone at equal power; association = cluster; equal power (levels all L-1).
 - ``plan_fleet`` (the ``fleet`` planner): from the k-means baselines of seeds 0 and 1 (0-4
-  where N K <= 40; one per distinct partition of the users) a descent: a vectorised
+  where N K <= 40; one per distinct partition of the users; in the shared band where
+  N K > 40, the 2 of seeds 0-4 with the fewest users short of QoS by ``qos_shortfall``, where
+  N K > 120 only those tied at the fewest) a descent: a vectorised
   best-improvement local search over the whole fleet (a UAV moves 1 or 4 lattice steps, a
   user's level changes, a user changes UAV; candidates scored from the incumbent's received
   powers), in the shared band ``block_power`` (each UAV's best levels
@@ -49,9 +51,11 @@ REFERENCE_STEPS = (1, 2, 4, 8)
 COARSE_EVERY = 5  # the relocation's coarse lattice: every 5th point per axis (50 m apart)
 RELOCATIONS = 3  # at most this many coarse jumps per plan
 POWER_ROUNDS = 1  # exact per-UAV power passes per descent
-PLANNER_STARTS = 2  # k-means seeds the planner searches from
+PLANNER_STARTS = 2  # k-means seeds the planner descends from (OFDMA: seeds 0-1)
 SMALL_STARTS = 5  # ... where N K <= SMALL_FLEET: a descent there costs a few ms
 SMALL_FLEET = 40
+SCREENED_STARTS = 5  # shared band, N K > SMALL_FLEET: seeds screened by their QoS shortfall
+LARGE_FLEET = 120  # ... where N K > LARGE_FLEET only the starts tied at the fewest shortfalls
 EXACT_POWER_K = 12  # the planner's exact per-UAV power DP up to this many users (5-25 ms)
 REFERENCE_STARTS = 4  # k-means seeds the reference starts from, besides the planner's answer
 EXHAUSTIVE_LIMIT = 2_000_000  # fleets the reference enumerates before it searches instead
@@ -157,11 +161,21 @@ def kmeans_baseline(problem: FleetProblem, seed: int = 0) -> FleetPlan:
     """The naive fleet: k-means clusters, each UAV above its centroid (the nearest lattice
     column) at the best lattice height for its own users at equal power, association =
     cluster, equal power."""
-    xy = problem.fleet.channel.users[:, :2]
-    labels, centres = kmeans(xy, problem.fleet.n, seed)
+    labels, centres = kmeans(problem.fleet.channel.users[:, :2], problem.fleet.n, seed)
+    return equal_power(problem, kmeans_positions(problem, labels, centres), labels)
+
+
+def kmeans_positions(problem: FleetProblem, labels: np.ndarray, centres: np.ndarray):
+    """The baseline's UAV positions ``(N, 3)`` for these clusters: above each centroid (the
+    nearest lattice column) at the height best for its own users (``best_heights``)."""
     columns = snap(problem.space, np.column_stack([centres, np.zeros(len(centres))]))[:, :2]
-    positions = best_heights(problem, columns, labels)
-    return make_plan(problem, positions, labels, np.full(len(xy), problem.power_levels - 1))
+    return best_heights(problem, columns, labels)
+
+
+def equal_power(problem: FleetProblem, positions: np.ndarray, association: np.ndarray):
+    """The plan with every user at the top level (each UAV's budget split equally)."""
+    levels = np.full(problem.fleet.k, problem.power_levels - 1)
+    return make_plan(problem, positions, association, levels)
 
 
 # --------------------------------------------------------------------------- local search
@@ -469,32 +483,84 @@ def descend(problem: FleetProblem, plan: FleetPlan, cache: GainCache) -> FleetPl
 
 
 def plan_fleet(problem: FleetProblem, starts: int | None = None) -> FleetPlan:
-    """The fleet planner (module docstring): from each of ``starts`` k-means starts (default
-    ``planner_starts``) the descent (local search, exact per-UAV power in the shared band),
-    the best of them, then the coarse relocations."""
+    """The fleet planner (module docstring): the descent (local search, exact per-UAV power in
+    the shared band) from each start ``chosen_starts`` keeps (or from every one of ``starts``
+    k-means seeds), the best of them, then the coarse relocations."""
     cache = GainCache(problem)
-    firsts: dict[frozenset, FleetPlan] = {}
-    for seed in range(planner_starts(problem) if starts is None else starts):
-        # a seed whose clusters an earlier seed found starts the same descent (its UAVs
-        # numbered otherwise): one descent per distinct partition of the users
-        start = kmeans_baseline(problem, seed)
-        firsts.setdefault(partition(start), start)
-    plans = [descend(problem, start, cache) for start in firsts.values()]
+    firsts = (chosen_starts(problem) if starts is None else
+              [equal_power(problem, *s) for s in distinct_starts(problem, starts)])
+    plans = [descend(problem, start, cache) for start in firsts]
     return relocate(problem, max(plans, key=lambda p: p.objective), cache)
 
 
+Start = tuple[np.ndarray, np.ndarray]  # a k-means baseline's positions (N, 3) and association
+
+
+def distinct_starts(problem: FleetProblem, seeds: int) -> list[Start]:
+    """The positions and association of the k-means baselines of seeds ``0..seeds-1``, one
+    per distinct partition of the users (a seed whose clusters an earlier seed found starts
+    the same descent, its UAVs numbered otherwise), found before the heights are searched."""
+    firsts: dict[frozenset, Start] = {}
+    for seed in range(seeds):
+        labels, centres = kmeans(problem.fleet.channel.users[:, :2], problem.fleet.n, seed)
+        if partition(labels) not in firsts:
+            firsts[partition(labels)] = (kmeans_positions(problem, labels, centres), labels)
+    return list(firsts.values())
+
+
+def chosen_starts(problem: FleetProblem) -> list[FleetPlan]:
+    """The starts the planner descends from (k-means baselines). OFDMA, and small fleets in
+    the shared band: every distinct one of ``planner_starts`` seeds. Larger fleets in the
+    shared band: the descents of different partitions end a factor 2-30 apart (each user
+    below QoS halves the objective) and a descent costs 30-80 ms, so ``SCREENED_STARTS`` seeds
+    are screened by ``qos_shortfall`` (under 1 ms each) and only the 2 with the fewest users
+    that cannot meet QoS are descended (ties in seed order); where N K > ``LARGE_FLEET`` only
+    those tied at the fewest (at most 2). docs/service/fleet.md, round four."""
+    fleet = problem.fleet
+    if fleet.channel.access != "shared" or fleet.n * fleet.k <= SMALL_FLEET:
+        return [equal_power(problem, *s) for s in distinct_starts(problem, planner_starts(problem))]
+    screened = sorted(((qos_shortfall(problem, *s), i), s) for i, s in
+                      enumerate(distinct_starts(problem, SCREENED_STARTS)))
+    fewest = screened[0][0][0]
+    return [equal_power(problem, *s) for (short, _), s in screened[:PLANNER_STARTS]
+            if fleet.n * fleet.k <= LARGE_FLEET or short == fewest]
+
+
+def qos_shortfall(problem: FleetProblem, positions: np.ndarray, association: np.ndarray) -> int:
+    """How many users UAVs at ``positions`` with this association leave below QoS however
+    each UAV splits its power (shared band, power continuous). With every UAV at its full
+    budget ``P_n``, user k of UAV n meets QoS (SINR ``gamma_q = 2^(qos / B) - 1``) exactly when
+    its share of the budget is at least ``s_k = gamma_q / (1 + gamma_q) (1 + (I_k + sigma^2) /
+    (g_k P_n))`` (``I_k`` the other UAVs' power at k); the most users a UAV can hold are its
+    smallest shares that sum to at most 1, the rest fall short. A screen of a start's
+    partition, not the descent's outcome: levels are discrete and the descent moves the UAVs."""
+    fleet, c = problem.fleet, problem.fleet.channel
+    gains = fleet.gains(positions)
+    full = fleet.p_max_w
+    gamma = 2.0 ** (c.qos_rate_bps / fleet.user_bandwidth_hz()) - 1.0
+    served = gains[association, np.arange(fleet.k)] * full[association]
+    others = full @ gains - served
+    share = gamma / (1.0 + gamma) * (1.0 + (others + c.noise_w) / served)
+    short = 0
+    for n in range(fleet.n):
+        mine = np.sort(share[association == n])
+        short += len(mine) - int(np.searchsorted(np.cumsum(mine), 1.0, side="right"))
+    return short
+
+
 def planner_starts(problem: FleetProblem) -> int:
-    """How many k-means seeds the planner starts from: in the shared band the descents of
-    different partitions end in optima a factor 2 apart (each more user below QoS halves
-    the objective), and the best partition is often not the first seeds' (N = 3, K = 10:
-    the 5th seed's); small fleets try more, where a descent costs a few ms."""
+    """How many k-means seeds the planner descends from where it does not screen them
+    (``chosen_starts``): in the shared band the descents of different partitions end in
+    optima a factor 2 apart (each more user below QoS halves the objective), and the best
+    partition is often not the first seeds' (N = 3, K = 10: the 5th seed's); small fleets
+    try more, where a descent costs a few ms."""
     return SMALL_STARTS if problem.fleet.n * problem.fleet.k <= SMALL_FLEET else PLANNER_STARTS
 
 
-def partition(plan: FleetPlan) -> frozenset[tuple[int, ...]]:
+def partition(association: np.ndarray) -> frozenset[tuple[int, ...]]:
     """The users each UAV serves, whatever the UAVs' numbering."""
-    n = int(plan.association.max()) + 1
-    return frozenset(tuple(np.flatnonzero(plan.association == i)) for i in range(n))
+    n = int(association.max()) + 1
+    return frozenset(tuple(np.flatnonzero(association == i)) for i in range(n))
 
 
 # --------------------------------------------------------------------------- the reference
