@@ -164,3 +164,23 @@ def test_fleet_delivered_bits_are_recomputed_from_service_csv(fleet_run: Path) -
         for row in csv.DictReader(f):
             assert int(row["user"]) in summary["fleet"][int(row["uav"])]["users_served"]
     assert summary["mission"]["delivered_bits"] == pytest.approx(sum(bits.values()), rel=0.01)
+
+
+def test_fleet_yaml_stations_are_kept_apart_for_orbits_and_nmac() -> None:
+    """fleet.yaml seed 3 placed two stations 286 m apart at one height (orbits of 106 m:
+    member 0 came within 144 m of a member); each pair is now 2r + NMAC apart or a layer."""
+    from uavxai.dynamics.orbit import scenario_orbit_radius
+    from uavxai.service.stage import plan_service
+    from uavxai.sim.fleet import HEIGHT_HOLD_M, fleet_stations, orbit_separation
+
+    sc = load_scenario(FLEET).with_seed(3)
+    sep = orbit_separation(sc)
+    r, nmac = scenario_orbit_radius(sc), sc.avoidance.nmac
+    assert sep.horizontal_m == pytest.approx(2 * r + nmac.horizontal_m)
+    assert sep.vertical_m == pytest.approx(nmac.vertical_m + 2 * HEIGHT_HOLD_M)
+    stations = fleet_stations(sc, plan_service(sc).users).positions
+    for i in range(3):
+        for j in range(i + 1, 3):
+            d = stations[i] - stations[j]
+            horizontal, vertical = math.hypot(d[0], d[1]), abs(d[2])
+            assert horizontal >= sep.horizontal_m or vertical >= sep.vertical_m, (i, j)

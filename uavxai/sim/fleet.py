@@ -29,6 +29,9 @@ from uavxai.surveillance.tracker import truth_beliefs
 from uavxai.vocabulary import Outcome
 
 FLOOR_MARGIN_M = 20.0  # stations at least this far above the world's floor
+# Two stations' layers: the NMAC height plus this much each member may stray from its
+# station's height while it orbits in turbulence (docs/fleet.md, "Orbits kept apart")
+HEIGHT_HOLD_M = 15.0
 
 
 class MemberWorld:
@@ -317,6 +320,32 @@ def fleet_stations(scenario: Scenario, users: Sequence) -> object:
     floor = min(space.lo[2] + FLOOR_MARGIN_M, space.hi[2])
     space = dataclasses.replace(space, lo=np.array([*space.lo[:2], floor]))
     problem = FleetProblem(
-        FleetChannel.of(channel, scenario.fleet.size), space, scenario.comms.power_levels
+        FleetChannel.of(channel, scenario.fleet.size), space, scenario.comms.power_levels,
+        orbit_separation(scenario),
     )
-    return plan_fleet(problem)
+    try:
+        return plan_fleet(problem)
+    except ValueError as e:  # the separation does not fit in the users' region
+        from uavxai.errors import UserError
+
+        raise UserError(
+            f"fleet.size = {scenario.fleet.size}: the members' stations cannot be kept apart "
+            f"in comms.users.region and world.h ({e}); allowed: fewer UAVs, a larger region "
+            "or a taller world"
+        ) from e
+
+
+def orbit_separation(scenario: Scenario):
+    """How far apart the members' stations are kept (docs/fleet.md, "Orbits kept apart"): two
+    UAVs each on its orbit of radius r about stations d apart come as near as d - 2r, so
+    stations at least 2r + the NMAC horizontal distance apart never meet in the NMAC cylinder
+    whatever the orbits' phases; or, a layer of their own, at least the NMAC height plus
+    twice ``HEIGHT_HOLD_M`` apart in height."""
+    from uavxai.dynamics.orbit import scenario_orbit_radius
+    from uavxai.service.fleet import Separation
+
+    nmac = scenario.avoidance.nmac
+    return Separation(
+        horizontal_m=2.0 * scenario_orbit_radius(scenario) + nmac.horizontal_m,
+        vertical_m=nmac.vertical_m + 2.0 * HEIGHT_HOLD_M,
+    )
