@@ -122,10 +122,18 @@ class IntentPicture:
         return out
 
 
+# Member j's command path over its view of the world (``uavxai.sim.run.member_paths``: MAVLink
+# system ``bridge.system_id + j``); None: the direct path onto its row
+MemberPath = Callable[[int, MemberWorld], object] | None
+
+
 class Member:
     """Fleet member ``j`` (1-based) of the world: its episode, mission and battery."""
 
-    def __init__(self, scenario: Scenario, world, j: int, station, planner, max_steps: int):
+    def __init__(
+        self, scenario: Scenario, world, j: int, station, planner, max_steps: int,
+        path: MemberPath = None,
+    ) -> None:  # fmt: skip
         from uavxai.sim.build import start_episode
 
         self.j = j
@@ -133,10 +141,11 @@ class Member:
         own = scenario.ownship.model_copy(update={"start": start})
         config = MissionConfig.from_scenario(scenario.model_copy(update={"ownship": own}), station)
         view = MemberWorld(world, world.member_rows[j - 1])
-        path = DirectPath(view)
+        path = DirectPath(view) if path is None else path(j, view)
         self.mission = Mission(config, path.announce)
         self.energy = Energy()
         self.outcome: Outcome | None = None
+        self._closed, self._counters = False, None
         self.ep = start_episode(
             scenario, view, planner, path, config.station, max_steps=max_steps,
             picture=IntentPicture(world), mission=self.mission,
@@ -159,6 +168,13 @@ class Member:
             self.ep.path.orbit(*c.home, c.radius_m, c.clockwise, c.speed_mps, self.ep.state.t)
         return outcome
 
+    def close(self) -> dict[str, int] | None:
+        """Close the member's command path (its bridge and link) once; its link's counters
+        (None: the direct path)."""
+        if not self._closed:
+            self._closed, self._counters = True, self.ep.path.close()
+        return self._counters
+
     def entry(self, fleet_outcome: str) -> dict:
         """The member's ``summary.fleet`` object (delivery added by the service)."""
         ep = self.ep
@@ -178,8 +194,8 @@ class Fleet(EngineStep):
     """The fleet's members beside the run's ownship (member 0): at each of its decisions every
     member still flying decides, from its own picture, with its own planner; every sample each
     member is judged. A member's collision, failure or exit ends everyone's episode with that
-    outcome; the fleet completes when every UAV has (the ownship waits for the others under
-    its avoidance planner, its mission suspended: nothing more is served)."""
+    outcome; the fleet completes when every UAV has (the ownship, done first, waits for the
+    others orbiting its home, as the members do: nothing more is served)."""
 
     def __init__(
         self,
@@ -187,20 +203,22 @@ class Fleet(EngineStep):
         stations: np.ndarray,
         planner: Callable[[int], object],
         max_steps: int,
+        path: MemberPath = None,
     ) -> None:
         self.scenario = scenario
         self.stations = np.asarray(stations, dtype=float)
         self._planner = planner  # member j -> its planner, seeded
         self._max_steps = max_steps
+        self._path = path
         self.members: list[Member] = []
         self._waiting = False
 
     def on_start(self, ep: Episode) -> None:
         for j in range(1, len(self.stations)):
             m = Member(self.scenario, ep.world, j, self.stations[j], self._planner(j),
-                       self._max_steps)  # fmt: skip
+                       self._max_steps, self._path)  # fmt: skip
+            self.members.append(m)  # before it begins: closed whatever happens
             m.ep.begin()
-            self.members.append(m)
 
     def uavs(self, ep: Episode) -> list[tuple[Mission, int]]:
         """Each UAV's mission and world row, member 0 first."""
@@ -224,7 +242,7 @@ class Fleet(EngineStep):
             main.outcome = None
             if not self._waiting:
                 self._waiting = True
-                main.suspend()
+                main.hold_home()
 
     def on_end(self, ep: Episode, summary: dict) -> None:
         own = {
@@ -238,6 +256,14 @@ class Fleet(EngineStep):
             "station": list(ep.mission.config.station),
         }
         summary["fleet"] = [own, *(m.entry(summary["outcome"]) for m in self.members)]
+        for entry, m in zip(summary["fleet"][1:], self.members, strict=True):
+            counters = m.close()
+            if counters is not None:  # its bridge's, as summary.link is member 0's
+                entry["link"] = counters
+
+    def close(self) -> None:
+        for m in self.members:
+            m.close()
 
 
 class FleetService(EngineStep):
@@ -267,6 +293,7 @@ class FleetService(EngineStep):
             for n, users in enumerate(self.mine)
         ]
         self._breaks = [OrbitBreak() for _ in self.mine]
+        self.qos_bps = float(scenario.comms.qos_rate_bps)
         self._files = service_files(out)
         if self._files:
             self._users, self._service = self._files
@@ -280,14 +307,23 @@ class FleetService(EngineStep):
             self._users.write(
                 "".join(f"{t:.3f},{k},{u[0]:.3f},{u[1]:.3f}\n" for k, u in enumerate(users))
             )
+        rates, serving = np.zeros(len(users)), np.zeros((len(users), 3))
         for n, (mission, row) in enumerate(self.fleet.uavs(ep)):
+            mine, pos = self.mine[n], state.pos[row]
+            serving[mine] = pos
             if not (mission.serving and mission.outcome is None):
                 continue
-            mine, pos = self.mine[n], state.pos[row]
             planned, avoiding = self._breaks[n].planned(mission, t, pos)
             rows = self.delivery[n].sample(t, pos, users[mine], dt, planned, avoiding)
+            rates[mine] = [r[4] for r in rows]
             if self._files:
                 self._service.write(service_lines(rows, n, mine))
+        # what the recording draws (the run's Service sets the same for one UAV): every user,
+        # its rate now (0: its UAV is not serving), and its UAV, where the link is drawn from
+        ep.sample_metrics.update(users_xyz=users.copy(), qos_bps=self.qos_bps,
+                                 user_rates_bps=rates, user_uav_xyz=serving)  # fmt: skip
+        if ep.mission.serving:
+            ep.sample_metrics["delivered_rate_bps"] = float(rates[self.mine[0]].sum())
         self.walk.advance(dt)
 
     def on_end(self, ep: Episode, summary: dict) -> None:
@@ -319,9 +355,17 @@ def fleet_stations(scenario: Scenario, users: Sequence) -> object:
     # two members placed at 50 m flew out of the world at 32 s)
     floor = min(space.lo[2] + FLOOR_MARGIN_M, space.hi[2])
     space = dataclasses.replace(space, lo=np.array([*space.lo[:2], floor]))
+    sep = orbit_separation(scenario)
+    if scenario.fleet.spacing_m < sep.horizontal_m:  # the homes are orbited too, at one height
+        from uavxai.errors import UserError
+
+        raise UserError(
+            f"fleet.spacing_m {scenario.fleet.spacing_m:g} m: members done orbit their homes "
+            f"(their starts, abreast at one height) and would meet; allowed: at least "
+            f"{sep.horizontal_m:.0f} m (twice the orbit radius + the NMAC horizontal distance)"
+        )
     problem = FleetProblem(
-        FleetChannel.of(channel, scenario.fleet.size), space, scenario.comms.power_levels,
-        orbit_separation(scenario),
+        FleetChannel.of(channel, scenario.fleet.size), space, scenario.comms.power_levels, sep
     )
     try:
         return plan_fleet(problem)
