@@ -258,8 +258,8 @@ class Fleet(EngineStep):
         summary["fleet"] = [own, *(m.entry(summary["outcome"]) for m in self.members)]
         for entry, m in zip(summary["fleet"][1:], self.members, strict=True):
             counters = m.close()
-            if counters is not None:  # its bridge's, as summary.link is member 0's
-                entry["link"] = counters
+            if counters is not None:  # its bridge's, as summary.bridge is member 0's
+                entry["bridge"] = counters
 
     def close(self) -> None:
         for m in self.members:

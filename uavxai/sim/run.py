@@ -158,9 +158,9 @@ def run_episode(
     # (the intruders, with an instant decision; everyone, with a latency).
     planner = Companion(sc.avoidance.planner, config, checkpoint, scenario=sc)
     channel = Channel.from_scenario(sc, users=service.users)
-    link = mavlink if mavlink is not None else sc.bridge.mavlink
+    url = mavlink if mavlink is not None else sc.bridge.mavlink
     steps, observers = run_parts(
-        spec, channel, service.power_w, out, placement, member_paths(sc, link)
+        spec, channel, service.power_w, out, placement, member_paths(sc, url)
     )
     record = sc.log.rerun if record is None else record
     if record or spawn or rerun_file is not None:
@@ -181,7 +181,7 @@ def run_episode(
         result = fly(
             spec,
             planner,
-            path=mavlink_path(sc, link, out / "link.tlog" if sc.bridge.tlog else None),
+            path=mavlink_path(sc, url, out / "link.tlog" if sc.bridge.tlog else None),
             observers=observers,
             engine_steps=steps,
         )
