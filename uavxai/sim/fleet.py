@@ -157,15 +157,17 @@ class Member:
         return self.outcome is None
 
     def sample(self) -> Outcome | None:
-        """Judge the sample just flown; the member's outcome when it ends now. A member done
-        orbits its home, judged on as long as the fleet flies."""
+        """Judge the sample just flown; the member's outcome when it changes now. A member
+        done holds at home (``Mission.hold_home``: the orbit re-sent every decision, so its
+        bridge's command watchdog never levels its wings and sends it out of the world, as a
+        single orbit command did), judged on as long as the fleet flies: a collision, failure
+        or exit after it is done still ends the fleet."""
         _, outcome = self.ep.sample()
-        if self.outcome is not None or outcome is None:
+        if outcome is None or outcome is self.outcome:
             return None
         self.outcome = outcome
         if outcome is Outcome.COMPLETED:
-            c = self.mission.config
-            self.ep.path.orbit(*c.home, c.radius_m, c.clockwise, c.speed_mps, self.ep.state.t)
+            self.mission.hold_home()
         return outcome
 
     def close(self) -> dict[str, int] | None:
@@ -225,9 +227,8 @@ class Fleet(EngineStep):
         return [(ep.mission, 0)] + [(m.mission, m.ep.world.row) for m in self.members]
 
     def on_decision(self, ep: Episode, event) -> None:
-        for m in self.members:
-            if m.flying:
-                m.ep.decide()
+        for m in self.members:  # flying or holding at home
+            m.ep.decide()
 
     def on_sample(self, ep: Episode, state: TrafficState) -> None:
         main = ep.mission
