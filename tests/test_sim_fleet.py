@@ -225,6 +225,24 @@ def test_fleet_yaml_stations_are_kept_apart_for_orbits_and_nmac() -> None:
 
 
 # ------------------------------------------------------------------------ MAVLink per member
+def test_member_links_listen_on_ports_of_their_own_and_send_to_the_same_peer() -> None:
+    from uavxai.sim.run import member_link
+
+    assert member_link("udpin:0.0.0.0:14550", 2) == "udpin:0.0.0.0:14552"
+    assert member_link("tcpin:127.0.0.1:5760", 1) == "tcpin:127.0.0.1:5761"
+    assert member_link("udp:127.0.0.1:14550", 3) == "udp:127.0.0.1:14553"
+    assert member_link("udpout:127.0.0.1:14550", 2) == "udpout:127.0.0.1:14550"
+    assert member_link("tcp:127.0.0.1:5760", 2) == "tcp:127.0.0.1:5760"
+    assert member_link("udpin:0.0.0.0:14550", 0) == "udpin:0.0.0.0:14550"
+    assert member_link(None, 2) is None
+
+
+def test_a_fleet_past_the_last_mavlink_system_id_is_refused() -> None:
+    with pytest.raises(ScenarioError, match="member 2 would be MAVLink system 256"):
+        fleet_scenario(bridge={"system_id": 254})
+    assert fleet_scenario(bridge={"system_id": 253}).fleet.size == 3
+
+
 def test_a_ground_station_sees_the_fleet_each_member_its_own_system(tmp_path: Path) -> None:
     """`uavxai run --mavlink udpout:...` of a fleet of three: a real pymavlink listener on
     127.0.0.1 hears systems 1, 2, 3 (bridge.system_id + i), each with HEARTBEAT, SYS_STATUS,
@@ -346,3 +364,15 @@ def test_fleet_recording_has_every_member_where_it_flew(fleet_run: Path) -> None
             checked += 1
     assert checked > 100 and seen == set(range(len(fleet)))  # every UAV's links drawn
     assert (fleet_run / "run.png").stat().st_size > 10_000
+
+
+def test_members_have_adsb_addresses_of_their_own_and_always_carry_it() -> None:
+    """Member i had intruder-i's address, and the receiver merged their tracks."""
+    from uavxai.surveillance.adsb import icao_address, ident_from_icao, is_cooperative
+
+    ids = ["ownship-0", "ownship-1", "ownship-2", "intruder-1", "intruder-2", "intruder-17"]
+    addresses = [icao_address(i) for i in ids]
+    assert len(set(addresses)) == len(ids)
+    assert [ident_from_icao(a) for a in addresses] == ids
+    assert is_cooperative("ownship-1", 1.0, seed=3)  # all intruders non-cooperative
+    assert not is_cooperative("intruder-1", 1.0, seed=3)
