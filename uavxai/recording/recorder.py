@@ -71,8 +71,11 @@ class RunRecorder:
         if self.enabled:
             self._log_styles()
 
-    def _open_sinks(self, bounds: dict[str, tuple[float, float]] | None) -> None:
-        """Attach the file and/or viewer, with the blueprint framed on ``bounds``.
+    def _open_sinks(
+        self, bounds: dict[str, tuple[float, float]] | None, member_trails: Sequence[str] = ()
+    ) -> None:
+        """Attach the file and/or viewer, with the blueprint framed on ``bounds`` (and a
+        fleet's ``member_trails`` drawn whole).
 
         Deferred until the bounds are known; what was logged before waits in the stream's
         buffer and goes out to the sinks when they are attached.
@@ -87,7 +90,8 @@ class RunRecorder:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             sinks.append(rr.FileSink(self.path))
         # The blueprint must go with the sinks: one given only at init is not written to files.
-        self._stream.set_sinks(*sinks, default_blueprint=default_blueprint(bounds))
+        blueprint = default_blueprint(bounds, member_trails)
+        self._stream.set_sinks(*sinks, default_blueprint=blueprint)
 
     def _spawn_viewer(self) -> bool:
         """Start the rerun viewer installed with rerun-sdk (next to this Python, so an
@@ -150,7 +154,9 @@ class RunRecorder:
         if origin is not None:
             frame = origin if isinstance(origin, LocalFrame) else LocalFrame.from_origin(origin)
             self._mission.frame = frame
-        self._open_sinks(bounds)
+        ids = ("ownship", *intruder_ids)
+        paths, members = aircraft_paths(ids), member_rows(ids)
+        self._open_sinks(bounds, [ent.trail_path(paths[n]) for n in members])
         log = self._stream.log
         self._stream.set_time(ent.SIM_TIME, duration=0.0)
         self._stream.set_time(ent.DECISION, sequence=self._decision)
@@ -188,9 +194,7 @@ class RunRecorder:
         g = np.asarray(goal, dtype=np.float64).reshape(1, 3)
         log(ent.GOAL, rr.Points3D(g, radii=15.0, colors=(241, 196, 15), labels="goal"), static=True)
         mesh = _mesh(INTRUDER_COLOR)
-        ids = ("ownship", *intruder_ids)
-        members = member_rows(ids)
-        for n, path in enumerate(aircraft_paths(ids)[1:], start=1):
+        for n, path in enumerate(paths[1:], start=1):
             if n in members:
                 self._log_own_styles(path)  # a fleet's member, as the ownship
             else:
