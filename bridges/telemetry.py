@@ -23,7 +23,7 @@ import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 from uavxai.dynamics.geodesy import LocalFrame
-from uavxai.dynamics.state import TrafficState
+from uavxai.dynamics.state import TrafficState, is_member
 from uavxai.geometry import wrap_angle
 
 from .operator import ARDUPLANE_MODES, FAILSAFE_MODE
@@ -206,7 +206,8 @@ def autopilot_version() -> mavlink.MAVLink_autopilot_version_message:
 
 
 def adsb_vehicles(state: TrafficState, frame: LocalFrame) -> list:
-    """One ADSB_VEHICLE per intruder (rows 1..N)."""
+    """One ADSB_VEHICLE per intruder (rows 1..N); a fleet's other members (``ownship-i``)
+    are systems of their own on the link, not traffic."""
     if state.n < 2:
         return []
     pos, vel = state.pos[1:], state.vel[1:]
@@ -217,6 +218,8 @@ def adsb_vehicles(state: TrafficState, frame: LocalFrame) -> list:
     )
     messages = []
     for k, ident in enumerate(state.ids[1:]):
+        if is_member(ident):
+            continue
         number = intruder_number(ident, k + 1)
         messages.append(
             mavlink.MAVLink_adsb_vehicle_message(

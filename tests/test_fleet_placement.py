@@ -330,3 +330,46 @@ def test_largest_fleets_descend_only_the_starts_tied_at_the_fewest_shortfalls(se
     short = sorted(fl.qos_shortfall(p, *s) for s in fl.distinct_starts(p, fl.SCREENED_STARTS))
     chosen = [fl.qos_shortfall(p, s.positions, s.association) for s in fl.chosen_starts(p)]
     assert chosen == [short[0]] * min(fl.PLANNER_STARTS, short.count(short[0]))
+
+
+# ------------------------------------------------------------------------- orbits kept apart
+def clustered(n: int, access: str, separation) -> fl.FleetProblem:
+    """N UAVs over one tight crowd (20 users within 60 m of one point): the objective alone
+    stacks the UAVs over it."""
+    xy = 1000.0 + np.random.default_rng(7).uniform(-60.0, 60.0, size=(20, 2))
+    p = fl.fleet_problem(xy, n, access, "al_hourani")
+    return fl.FleetProblem(p.fleet, p.space, p.power_levels, separation)
+
+
+@pytest.mark.parametrize("access", ["shared", "ofdma"])
+@pytest.mark.parametrize(
+    ("n", "horizontal", "vertical"), [(3, 365.0, 61.0), (2, 365.0, 1e9)]  # layers; none
+)
+def test_planner_keeps_stations_apart_over_a_clustered_crowd(
+    access: str, n: int, horizontal: float, vertical: float
+) -> None:
+    sep = fl.Separation(horizontal, vertical)
+    free = fl.plan_fleet(clustered(n, access, None))
+    assert sep.violations(free.positions)  # the case: unconstrained, they crowd together
+    kept = fl.plan_fleet(clustered(n, access, sep))
+    assert kept.positions.shape == (n, 3) and sep.violations(kept.positions) == []
+    for i, j in itertools.combinations(range(n), 2):
+        d = kept.positions[i] - kept.positions[j]
+        assert np.hypot(d[0], d[1]) >= horizontal or abs(d[2]) >= vertical
+    assert kept.objective == pytest.approx(
+        fl.make_plan(clustered(n, access, sep), kept.positions, kept.association,
+                     kept.levels).objective, rel=1e-9)  # fmt: skip
+
+
+def test_separate_moves_only_the_uavs_too_near_and_refuses_the_impossible() -> None:
+    p = clustered(3, "ofdma", fl.Separation(365.0, 61.0))
+    start = fl.kmeans_baseline(p)
+    stacked = fl.make_plan(p, np.repeat(start.positions[:1], 3, axis=0), start.association,
+                           start.levels)  # fmt: skip
+    apart = fl.separate(p, stacked)
+    np.testing.assert_array_equal(apart.positions[0], stacked.positions[0])
+    assert p.separation.violations(apart.positions) == []
+    assert fl.separate(p, apart) is apart
+    crowded = fl.FleetProblem(p.fleet, p.space, p.power_levels, fl.Separation(2000.0, 1e9))
+    with pytest.raises(ValueError, match="UAV 1 is 2000 m apart"):
+        fl.separate(crowded, stacked)

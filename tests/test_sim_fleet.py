@@ -32,7 +32,6 @@ def fleet_scenario(**over):
 @pytest.mark.parametrize(
     ("over", "named"),
     [
-        ({"log": {"rerun": True}}, "log.rerun"),
         ({"ownship": {"start": START, "goal": [1800, 1000, 120]}}, "ownship.goal"),
         ({"mission": {"service_s": 0}}, "mission.service_s"),
         ({"avoidance": {"decision_latency_s": 0.5}}, "decision_latency_s"),
@@ -49,7 +48,7 @@ def test_a_fleet_refuses_what_it_cannot_fly_by_name(over: dict, named: str) -> N
 def test_members_start_abreast_to_the_right() -> None:
     starts = fleet_scenario().member_starts()
     assert [(round(s.x, 6), round(s.y, 6)) for s in starts] == [
-        (150, 1300), (150, 1000), (150, 700)
+        (150, 1300), (150, 930), (150, 560)
     ]  # fmt: skip
     assert default_scenario("one").member_starts() == [default_scenario("one").ownship.start]
 
@@ -63,7 +62,7 @@ def test_members_fly_in_the_world_after_the_intruders_each_on_its_own_commands()
         s = world.state()
         assert s.ids == ("ownship-0", "intruder-1", "intruder-2", "ownship-1", "ownship-2")
         assert list(world.member_rows) == [3, 4]
-        np.testing.assert_allclose(s.pos[[0, 3, 4], 1], [1300, 1000, 700], atol=1.0)
+        np.testing.assert_allclose(s.pos[[0, 3, 4], 1], [1300, 930, 560], atol=1.0)
         world.command_row(3, bank_cmd_rad=math.radians(25))  # member 1 turns right, alone
         world.lookahead(120, 12)  # the intruders may fly ahead; the members may not
         assert world.ahead_ticks > 0 and world._lead[3] == world._lead[4] == 0
@@ -83,7 +82,7 @@ def test_one_ownship_keeps_its_name() -> None:
 
 # ------------------------------------------------------------------------- cooperation
 def _crossing(sc):
-    """Member 0 (y 1300) is sent south-east, member 1 (y 1000) north-east: flown straight,
+    """Member 0 (y 1300) is sent south-east, member 1 (y 930) north-east: flown straight,
     they meet where their legs cross, at the same time."""
     return np.array([[1350.0, 700.0, 120.0], [1350.0, 1600.0, 120.0]])
 
@@ -101,7 +100,7 @@ def test_two_members_on_a_collision_course_keep_clear_of_each_other() -> None:
     )
     stations = _crossing(sc)
     # flown straight from their starts, the two legs come within this of each other
-    a0, a1 = np.array([150.0, 1300.0]), np.array([150.0, 1000.0])
+    a0, a1 = (np.array([s.x, s.y]) for s in sc.member_starts())
     d0, d1 = stations[0, :2] - a0, stations[1, :2] - a1
     t = np.linspace(0, 1, 2001)[:, None]
     straight = np.min(np.linalg.norm((a0 + t * d0) - (a1 + t * d1), axis=1))
@@ -123,11 +122,50 @@ def test_two_members_on_a_collision_course_keep_clear_of_each_other() -> None:
     assert [e["id"] for e in r.summary["fleet"]] == ["ownship-0", "ownship-1"]
 
 
+def test_member_0_done_first_orbits_its_home_until_the_last_is_done() -> None:
+    """Member 0's station is near its home, member 1's far: member 0 is done first and waits,
+    orbiting its home (fleet.yaml seed 0 before: it flew on past home, out of the world)."""
+    from uavxai.avoidance.planners import make_planner
+    from uavxai.avoidance.types import PlannerConfig
+    from uavxai.dynamics.orbit import scenario_orbit_radius
+    from uavxai.sim.build import fly
+    from uavxai.sim.episode import Observer
+    from uavxai.sim.fleet import Fleet
+    from uavxai.sim.spec import episode_spec
+    from uavxai.sim.steps import Energy
+
+    sc = fleet_scenario(fleet={"size": 2}, intruders={"count": 0}, mission={"service_s": 5})
+    stations = np.array([[500.0, 1300.0, 120.0], [1300.0, 600.0, 120.0]])
+
+    def planner(j: int):
+        p = make_planner(sc.avoidance.planner, PlannerConfig.from_scenario(sc))
+        p.reset(200 + j)
+        return p
+
+    class Track(Observer):
+        holding: list[tuple[float, float, float]] = []
+
+        def on_sample(self, ep, state) -> None:
+            if ep.mission.holding:
+                self.holding.append((state.t, *state.pos[0, :2]))
+
+    spec = episode_spec(sc, dynamics="jsbsim", service_point=stations[0], mission=True)
+    fleet = Fleet(sc, stations, planner, spec.max_steps)
+    r = fly(spec, planner(0), engine_steps=[Energy(), fleet], observers=[Track()])
+    assert r.outcome is Outcome.COMPLETED, r.summary.get("failure")
+    held = np.array(Track.holding)
+    assert held[-1, 0] - held[0, 0] > 30  # member 0 waited (56 s when written)
+    home = np.array([START["x"], START["y"]])
+    d = np.hypot(*(held[:, 1:] - home).T)
+    assert d.max() < 2.0 * scenario_orbit_radius(sc)  # about its home, not flown past it
+
+
 # ------------------------------------------------------------------------------ whole run
 @pytest.fixture(scope="module")
 def fleet_run(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("fleet")
-    assert main(["run", str(FLEET), "--out", str(out), "--force"]) == 0
+    rrd = out / "run.rrd"
+    assert main(["run", str(FLEET), "--out", str(out), "--force", "--rerun", str(rrd)]) == 0
     return out
 
 
@@ -164,3 +202,177 @@ def test_fleet_delivered_bits_are_recomputed_from_service_csv(fleet_run: Path) -
         for row in csv.DictReader(f):
             assert int(row["user"]) in summary["fleet"][int(row["uav"])]["users_served"]
     assert summary["mission"]["delivered_bits"] == pytest.approx(sum(bits.values()), rel=0.01)
+
+
+def test_fleet_yaml_stations_are_kept_apart_for_orbits_and_nmac() -> None:
+    """fleet.yaml seed 3 placed two stations 286 m apart at one height (orbits of 106 m:
+    member 0 came within 144 m of a member); each pair is now 2r + NMAC apart or a layer."""
+    from uavxai.dynamics.orbit import scenario_orbit_radius
+    from uavxai.service.stage import plan_service
+    from uavxai.sim.fleet import HEIGHT_HOLD_M, fleet_stations, orbit_separation
+
+    sc = load_scenario(FLEET).with_seed(3)
+    sep = orbit_separation(sc)
+    r, nmac = scenario_orbit_radius(sc), sc.avoidance.nmac
+    assert sep.horizontal_m == pytest.approx(2 * r + nmac.horizontal_m)
+    assert sep.vertical_m == pytest.approx(nmac.vertical_m + 2 * HEIGHT_HOLD_M)
+    stations = fleet_stations(sc, plan_service(sc).users).positions
+    for i in range(3):
+        for j in range(i + 1, 3):
+            d = stations[i] - stations[j]
+            horizontal, vertical = math.hypot(d[0], d[1]), abs(d[2])
+            assert horizontal >= sep.horizontal_m or vertical >= sep.vertical_m, (i, j)
+
+
+# ------------------------------------------------------------------------ MAVLink per member
+def test_member_links_listen_on_ports_of_their_own_and_send_to_the_same_peer() -> None:
+    from uavxai.sim.run import member_link
+
+    assert member_link("udpin:0.0.0.0:14550", 2) == "udpin:0.0.0.0:14552"
+    assert member_link("tcpin:127.0.0.1:5760", 1) == "tcpin:127.0.0.1:5761"
+    assert member_link("udp:127.0.0.1:14550", 3) == "udp:127.0.0.1:14553"
+    assert member_link("udpout:127.0.0.1:14550", 2) == "udpout:127.0.0.1:14550"
+    assert member_link("tcp:127.0.0.1:5760", 2) == "tcp:127.0.0.1:5760"
+    assert member_link("udpin:0.0.0.0:14550", 0) == "udpin:0.0.0.0:14550"
+    assert member_link(None, 2) is None
+
+
+def test_a_fleet_past_the_last_mavlink_system_id_is_refused() -> None:
+    with pytest.raises(ScenarioError, match="member 2 would be MAVLink system 256"):
+        fleet_scenario(bridge={"system_id": 254})
+    assert fleet_scenario(bridge={"system_id": 253}).fleet.size == 3
+
+
+def test_a_ground_station_sees_the_fleet_each_member_its_own_system(tmp_path: Path) -> None:
+    """`uavxai run --mavlink udpout:...` of a fleet of three: a real pymavlink listener on
+    127.0.0.1 hears systems 1, 2, 3 (bridge.system_id + i), each with HEARTBEAT, SYS_STATUS,
+    GLOBAL_POSITION_INT, ATTITUDE and VFR_HUD, each GLOBAL_POSITION_INT where trajectory.csv
+    has that member then; the intruder as ADSB_VEHICLE, the members not; and every member's
+    planner commands reached its autopilot as MAVLink through its own bridge."""
+    import yaml
+    from test_integration_run import Listener, free_udp_port
+
+    from uavxai.dynamics.geodesy import LocalFrame
+    from uavxai.surveillance.adsb import ident_from_icao
+
+    scenario = tmp_path / "fleet3.yaml"
+    scenario.write_text(yaml.safe_dump({
+        "name": "fleet3", "seed": 3, "fleet": {"size": 3}, "ownship": {"start": START},
+        "intruders": {"count": 1}, "mission": {"service_s": 10},
+        "avoidance": {"max_steps": 30, "mcts": {"simulations": 60, "depth": 3}},
+        "log": {"rerun": False},
+    }))  # fmt: skip
+    port, out = free_udp_port(), tmp_path / "out"
+    listener = Listener(port)
+    listener.start()
+    try:
+        rc = main(["run", str(scenario), "--out", str(out), "--mavlink",
+                   f"udpout:127.0.0.1:{port}"])  # fmt: skip
+    finally:
+        listener.close()
+    assert rc == 0
+    sc, msgs = load_scenario(scenario), listener.msgs
+    systems = [sc.bridge.system_id + i for i in range(3)]
+    for kind in ("HEARTBEAT", "SYS_STATUS", "GLOBAL_POSITION_INT", "ATTITUDE", "VFR_HUD"):
+        assert sorted({m.get_srcSystem() for m in msgs[kind]}) == systems, kind
+    summary = json.loads((out / "summary.json").read_text())
+    flown_s = summary["flight_time_s"]
+    for system in systems:
+        own = [m for m in msgs["GLOBAL_POSITION_INT"] if m.get_srcSystem() == system]
+        assert len(own) >= 4 * flown_s * 0.8  # >= 4 Hz of simulated time (UDP may drop some)
+    rows: dict[tuple[str, int], tuple[float, float, float]] = {}
+    with (out / "trajectory.csv").open() as f:
+        for r in csv.DictReader(f):
+            rows[(r["id"], round(float(r["t"]) * 1000))] = (float(r["x"]), float(r["y"]),
+                                                             float(r["h"]))  # fmt: skip
+    frame = LocalFrame.from_origin(sc.world.origin)
+    for i, system in enumerate(systems):
+        near = 0
+        for m in (m for m in msgs["GLOBAL_POSITION_INT"] if m.get_srcSystem() == system):
+            at = rows.get((f"ownship-{i}", m.time_boot_ms))
+            if at is None:
+                continue  # telemetry at 10 Hz, trajectory.csv at its own rate
+            x, y, _ = frame.to_local(m.lat / 1e7, m.lon / 1e7, 0.0)
+            assert math.hypot(x - at[0], y - at[1]) < 1.0, (system, m.time_boot_ms)
+            assert m.relative_alt / 1000 == pytest.approx(at[2], abs=0.01)
+            near += 1
+        assert near >= 10, system
+    # the traffic member 0's ADS-B receiver hears, relayed as ADSB_VEHICLE: each report near
+    # the track of the aircraft its address names (within the receiver's position error);
+    # members 1 and 2 under addresses of their own (in the intruders' block member i was
+    # intruder-i, and the tracker merged the two), member 0 not at all
+    tracks: dict[str, list] = {}
+    for (ident, _), xyz in rows.items():
+        tracks.setdefault(ident, []).append(xyz)
+    heard = set()
+    for m in msgs["ADSB_VEHICLE"]:
+        ident = ident_from_icao(m.ICAO_address)
+        x, y, _ = frame.to_local(m.lat / 1e7, m.lon / 1e7, 0.0)
+        track = np.array(tracks[ident])
+        assert np.min(np.hypot(track[:, 0] - x, track[:, 1] - y)) < 30.0, ident
+        heard.add(ident)
+    assert {"ownship-1", "ownship-2"} <= heard and "ownship-0" not in heard
+    for entry in summary["fleet"][1:]:
+        assert entry["bridge"]["commands"] > 0  # the member's planner, as MAVLink bytes
+    assert summary["bridge"]["commands"] > 0
+
+
+# ------------------------------------------------------------------------------ recording
+def test_fleet_recording_has_every_member_where_it_flew(fleet_run: Path) -> None:
+    """The run's real run.rrd read back: member 0 at world/ownship (N = 1's paths), members
+    1.. at world/ownship-i, each with its trail; each pose where trajectory.csv has it; each
+    user's link drawn from the UAV that serves it (users.csv, users_served); run.png drawn."""
+    from test_recording_recorder import chunks_by_path, column
+
+    summary = json.loads((fleet_run / "summary.json").read_text())
+    fleet = summary["fleet"]
+    chunks = chunks_by_path(fleet_run / "run.rrd")
+    paths = ["/world/ownship"] + [f"/world/ownship-{i}" for i in range(1, len(fleet))]
+    ms = lambda t_ns: round(t_ns / 1e6)  # noqa: E731 - rerun's ns and the CSVs' s, to the ms
+    rows: dict[str, dict[int, np.ndarray]] = {}
+    with (fleet_run / "trajectory.csv").open() as f:
+        for r in csv.DictReader(f):
+            xyz = np.array([float(r["x"]), float(r["y"]), float(r["h"])])
+            rows.setdefault(r["id"], {})[round(float(r["t"]) * 1000)] = xyz
+    for entry, path in zip(fleet, paths, strict=True):
+        assert f"{path}/trail" in chunks, path
+        times, translation = column(chunks[path], "Transform3D:translation")
+        track = rows[entry["id"]]
+        matched = [np.asarray(p[0]) - track[ms(t)] for t, p in zip(times, translation, strict=True)
+                   if ms(t) in track]  # fmt: skip
+        assert len(matched) > 100, path
+        assert np.abs(np.array(matched)).max() < 1e-2, path
+        _, strips = column(chunks[f"{path}/trail"], "LineStrips3D:strips")
+        assert len(strips) > 10
+    assert not any("ownship" in p for p in chunks if p.startswith("/world/intruders"))
+    users: dict[tuple[int, int], np.ndarray] = {}
+    with (fleet_run / "users.csv").open() as f:
+        for r in csv.DictReader(f):
+            users[(round(float(r["t"]) * 1000), int(r["user"]))] = np.array(
+                [float(r["x"]), float(r["y"])]
+            )
+    owner = {k: n for n, u in enumerate(fleet) for k in u["users_served"]}
+    times, links = column(chunks["/world/links"], "LineStrips3D:strips")
+    seen, checked = set(), 0
+    for t, strips in zip(times, links, strict=True):
+        for uav, user in strips:
+            k = min(owner, key=lambda k: np.linalg.norm(users[(ms(t), k)] - np.asarray(user)[:2]))
+            n = owner[k]  # the user at the link's end, and the UAV that serves it
+            assert np.linalg.norm(np.asarray(user)[:2] - users[(ms(t), k)]) < 1e-2
+            assert np.linalg.norm(np.asarray(uav) - rows[fleet[n]["id"]][ms(t)]) < 1e-2
+            seen.add(n)
+            checked += 1
+    assert checked > 100 and seen == set(range(len(fleet)))  # every UAV's links drawn
+    assert (fleet_run / "run.png").stat().st_size > 10_000
+
+
+def test_members_have_adsb_addresses_of_their_own_and_always_carry_it() -> None:
+    """Member i had intruder-i's address, and the receiver merged their tracks."""
+    from uavxai.surveillance.adsb import icao_address, ident_from_icao, is_cooperative
+
+    ids = ["ownship-0", "ownship-1", "ownship-2", "intruder-1", "intruder-2", "intruder-17"]
+    addresses = [icao_address(i) for i in ids]
+    assert len(set(addresses)) == len(ids)
+    assert [ident_from_icao(a) for a in addresses] == ids
+    assert is_cooperative("ownship-1", 1.0, seed=3)  # all intruders non-cooperative
+    assert not is_cooperative("intruder-1", 1.0, seed=3)

@@ -19,6 +19,11 @@ def member_id(n: int) -> str:
     return f"{OWNSHIP_ID}-{n}"
 
 
+def is_member(ident: str) -> bool:
+    """Whether ``ident`` names a fleet member (:func:`member_id`)."""
+    return ident.startswith(f"{OWNSHIP_ID}-")
+
+
 def intruder_id(n: int) -> str:
     """Public name of intruder ``n`` (1-based), as in trajectory.csv and rerun paths."""
     return f"intruder-{n}"

@@ -10,6 +10,7 @@ cursor makes the viewer draw them as one growing line.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 import rerun as rr
@@ -63,7 +64,9 @@ def _eye(bounds: dict[str, tuple[float, float]]) -> rrb.EyeControls3D:
     )
 
 
-def _scene(bounds: dict[str, tuple[float, float]] | None) -> rrb.Spatial3DView:
+def _scene(
+    bounds: dict[str, tuple[float, float]] | None, member_trails: Sequence[str] = ()
+) -> rrb.Spatial3DView:
     def trails(seconds: int | None = None) -> list:
         return [rr.LineStrips3D.from_fields().visualizer(), _history(seconds)]
 
@@ -72,7 +75,11 @@ def _scene(bounds: dict[str, tuple[float, float]] | None) -> rrb.Spatial3DView:
         origin=ent.WORLD,
         # 100 m cells: the default 1 m grid is solid grey at the scale of a flight area.
         line_grid=rrb.LineGrid3D(visible=True, spacing=100.0),
-        overrides={ent.OWNSHIP_TRAIL: trails(), ent.INTRUDER_TRAILS: trails(INTRUDER_TRAIL_S)},
+        overrides={
+            ent.OWNSHIP_TRAIL: trails(),
+            ent.INTRUDER_TRAILS: trails(INTRUDER_TRAIL_S),
+            **{path: trails() for path in member_trails},  # a fleet's other members
+        },
         eye_controls=_eye(bounds) if bounds is not None else None,
     )
 
@@ -146,10 +153,13 @@ def _explanations() -> rrb.TextLogView:
     )
 
 
-def default_blueprint(bounds: dict[str, tuple[float, float]] | None = None) -> rrb.Blueprint:
-    """The layout; with the flight-area ``bounds`` the 3-D camera starts framed on them."""
+def default_blueprint(
+    bounds: dict[str, tuple[float, float]] | None = None, member_trails: Sequence[str] = ()
+) -> rrb.Blueprint:
+    """The layout; with the flight-area ``bounds`` the 3-D camera starts framed on them;
+    ``member_trails`` (a fleet's members' trail paths) drawn whole, as the ownship's."""
     side = rrb.Vertical(_map(bounds), _rates(), row_shares=[1, 1])
-    top = rrb.Horizontal(_scene(bounds), side, column_shares=[5, 2])
+    top = rrb.Horizontal(_scene(bounds, member_trails), side, column_shares=[5, 2])
     left = rrb.Vertical(top, _metrics(), row_shares=[2, 1])
     right = rrb.Vertical(_status(), _tree(), _explanations(), row_shares=[1, 4, 3])
     return rrb.Blueprint(

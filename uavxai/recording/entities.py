@@ -8,7 +8,7 @@ DECISION = "decision"  # sequence timeline, one step per planner decision
 
 WORLD = "world"
 OWNSHIP = "world/ownship"
-OWNSHIP_TRAIL = "world/ownship/trail"
+OWNSHIP_TRAIL = "world/ownship/trail"  # trail_path(OWNSHIP)
 INTRUDERS = "world/intruders"
 INTRUDER_TRAILS = "world/intruders/trails"  # all intruder trails, one strip each per row
 USERS = "world/users"
@@ -57,6 +57,16 @@ def intruder_path(aircraft_id: str, fallback_n: int) -> str:
     prefix, _, tail = aircraft_id.rpartition("-")
     n = tail if prefix == "intruder" and tail.isdigit() else str(fallback_n)
     return f"{INTRUDERS}/{n}"
+
+
+def member_path(member_id: str) -> str:
+    """``world/ownship-i`` for fleet member ``ownship-i`` (i >= 1; member 0 is
+    ``world/ownship`` with everything N = 1 records); its trail below it, ``/trail``."""
+    return f"{WORLD}/{member_id}"
+
+
+def trail_path(aircraft_path: str) -> str:
+    return f"{aircraft_path}/trail"
 
 
 def metric_path(name: str) -> str:

@@ -221,8 +221,13 @@ class MissionLog:
             )
         if not np.all(np.isfinite(rate)) or np.any(rate < 0):
             raise UserError("log_users: rate_bps must be finite rates >= 0 bit/s")
-        if uav.shape != (3,):
-            raise UserError(f"log_users: uav_pos must be (3,) metres, got {uav.shape}")
+        if uav.shape == (3,):
+            uav = np.broadcast_to(uav, users.shape)  # one UAV serves them all
+        elif uav.shape != users.shape:
+            raise UserError(
+                f"log_users: uav_pos must be (3,) metres or each user's serving UAV "
+                f"({len(users)}, 3), got {uav.shape}"
+            )
         qos = float(qos_bps)
         if not math.isfinite(qos) or qos < 0:
             raise UserError(f"log_users: qos_bps must be a finite rate >= 0 bit/s, got {qos_bps}")
@@ -337,7 +342,7 @@ class MissionLog:
 
         # links: from the UAV to each user that gets a rate, fainter the weaker the link
         served = rates > 0.0
-        uav = np.repeat(np.stack([u for *_, u in rows.items]), lengths, axis=0)
+        uav = np.concatenate([u for *_, u in rows.items])  # each user's serving UAV
         ends = np.stack([uav[served], users[served]], axis=1).reshape(-1, 3)
         ratio = np.where(qos > 0, rates / np.where(qos > 0, qos, 1.0), ABOVE_SPAN)[served]
         link_colors = colors[served].copy()

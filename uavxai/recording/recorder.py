@@ -31,7 +31,7 @@ from uavxai.recording import entities as ent
 from uavxai.recording.aircraft_model import aircraft_mesh
 from uavxai.recording.blueprint import default_blueprint
 from uavxai.recording.mission_log import MissionLog
-from uavxai.recording.traffic_log import TrafficLog, aircraft_paths
+from uavxai.recording.traffic_log import TrafficLog, aircraft_paths, member_rows
 from uavxai.recording.tree_graph import tree_graph
 
 log = logging.getLogger(__name__)
@@ -39,6 +39,7 @@ FILE_FLUSH_S = 30.0
 LIVE_FLUSH_S = 0.5
 
 OWNSHIP_COLOR = (255, 165, 0)
+TRAIL_POINTS = 1.5  # trail width, ui points
 INTRUDER_COLOR = (220, 60, 60)
 PLAN_COLOR = (46, 204, 113)
 
@@ -70,8 +71,11 @@ class RunRecorder:
         if self.enabled:
             self._log_styles()
 
-    def _open_sinks(self, bounds: dict[str, tuple[float, float]] | None) -> None:
-        """Attach the file and/or viewer, with the blueprint framed on ``bounds``.
+    def _open_sinks(
+        self, bounds: dict[str, tuple[float, float]] | None, member_trails: Sequence[str] = ()
+    ) -> None:
+        """Attach the file and/or viewer, with the blueprint framed on ``bounds`` (and a
+        fleet's ``member_trails`` drawn whole).
 
         Deferred until the bounds are known; what was logged before waits in the stream's
         buffer and goes out to the sinks when they are attached.
@@ -86,7 +90,8 @@ class RunRecorder:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             sinks.append(rr.FileSink(self.path))
         # The blueprint must go with the sinks: one given only at init is not written to files.
-        self._stream.set_sinks(*sinks, default_blueprint=default_blueprint(bounds))
+        blueprint = default_blueprint(bounds, member_trails)
+        self._stream.set_sinks(*sinks, default_blueprint=blueprint)
 
     def _spawn_viewer(self) -> bool:
         """Start the rerun viewer installed with rerun-sdk (next to this Python, so an
@@ -106,12 +111,8 @@ class RunRecorder:
     def _log_styles(self) -> None:
         log = self._stream.log
         log(ent.WORLD, rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-        log(ent.OWNSHIP, _mesh(OWNSHIP_COLOR), static=True)
-        # The ownship trail sits below the ownship's transform in the entity tree (docs/recording)
-        # but is drawn in world coordinates, so it opts out of that transform.
-        log(ent.OWNSHIP_TRAIL, rr.CoordinateFrame(f"tf#/{ent.WORLD}"), static=True)
-        trail_radius = rr.Radius.ui_points(1.5)
-        log(ent.OWNSHIP_TRAIL, _line_style(OWNSHIP_COLOR, trail_radius), static=True)
+        self._log_own_styles(ent.OWNSHIP)
+        trail_radius = rr.Radius.ui_points(TRAIL_POINTS)
         log(ent.INTRUDER_TRAILS, _line_style((*INTRUDER_COLOR, 160), trail_radius), static=True)
         log(ent.PLAN, _line_style(PLAN_COLOR, rr.Radius.ui_points(3.0)), static=True)
         for name in ent.METRIC_NAMES:
@@ -153,7 +154,9 @@ class RunRecorder:
         if origin is not None:
             frame = origin if isinstance(origin, LocalFrame) else LocalFrame.from_origin(origin)
             self._mission.frame = frame
-        self._open_sinks(bounds)
+        ids = ("ownship", *intruder_ids)
+        paths, members = aircraft_paths(ids), member_rows(ids)
+        self._open_sinks(bounds, [ent.trail_path(paths[n]) for n in members])
         log = self._stream.log
         self._stream.set_time(ent.SIM_TIME, duration=0.0)
         self._stream.set_time(ent.DECISION, sequence=self._decision)
@@ -191,8 +194,20 @@ class RunRecorder:
         g = np.asarray(goal, dtype=np.float64).reshape(1, 3)
         log(ent.GOAL, rr.Points3D(g, radii=15.0, colors=(241, 196, 15), labels="goal"), static=True)
         mesh = _mesh(INTRUDER_COLOR)
-        for path in aircraft_paths(("ownship", *intruder_ids))[1:]:
-            log(path, mesh, static=True)
+        for n, path in enumerate(paths[1:], start=1):
+            if n in members:
+                self._log_own_styles(path)  # a fleet's member, as the ownship
+            else:
+                log(path, mesh, static=True)
+
+    def _log_own_styles(self, path: str) -> None:
+        """An ownship's (or fleet member's) model and trail style."""
+        log, trail = self._stream.log, ent.trail_path(path)
+        log(path, _mesh(OWNSHIP_COLOR), static=True)
+        # The trail sits below the aircraft's transform in the entity tree (docs/recording)
+        # but is drawn in world coordinates, so it opts out of that transform.
+        log(trail, rr.CoordinateFrame(f"tf#/{ent.WORLD}"), static=True)
+        log(trail, _line_style(OWNSHIP_COLOR, rr.Radius.ui_points(TRAIL_POINTS)), static=True)
 
     def ready(self) -> None:
         """Nothing to wait for in-process (see :meth:`RecorderProcess.ready`)."""
@@ -216,7 +231,8 @@ class RunRecorder:
         """The users (K, 3) where they are at ``t`` with their current rates (K,) bit/s.
 
         Colours users by rate against ``qos_bps`` (red below, green at or above, grey with no
-        rate), draws a link from ``uav_pos`` to each user with a rate, the rate bars, their map
+        rate), draws a link from ``uav_pos`` (3,) (or each user's serving UAV, (K, 3): a fleet) to
+        each user with a rate, the rate bars, their map
         points and the status text. Cheap (copies); sent in batches.
         """
         if not self.enabled:

@@ -15,7 +15,7 @@ import numpy as np
 import pyarrow as pa
 import rerun as rr
 
-from uavxai.dynamics.state import OWNSHIP_ID, TrafficState
+from uavxai.dynamics.state import OWNSHIP_ID, TrafficState, is_member
 from uavxai.recording import entities as ent
 from uavxai.recording.aircraft_model import attitude_quaternions
 
@@ -23,8 +23,18 @@ TRAIL_BLOCK = 5  # frames per trail segment: 0.5 s at 10 Hz, shorter than the mo
 
 
 def aircraft_paths(ids: tuple[str, ...]) -> list[str]:
-    """Entity path of each row of a TrafficState (row 0 the ownship)."""
-    return [ent.OWNSHIP if i == OWNSHIP_ID else ent.intruder_path(i, n) for n, i in enumerate(ids)]
+    """Entity path of each row of a TrafficState: row 0 the ownship (a fleet's member 0 too),
+    a fleet's other members ``world/ownship-i``, the intruders ``world/intruders/N``."""
+    return [
+        ent.OWNSHIP if n == 0 or i == OWNSHIP_ID
+        else ent.member_path(i) if is_member(i) else ent.intruder_path(i, n)
+        for n, i in enumerate(ids)
+    ]  # fmt: skip
+
+
+def member_rows(ids: tuple[str, ...]) -> list[int]:
+    """The rows of a fleet's members other than row 0 (none with one ownship)."""
+    return [n for n, i in enumerate(ids) if n > 0 and is_member(i)]
 
 
 class TrafficLog:
@@ -33,6 +43,8 @@ class TrafficLog:
         self._trail_block = trail_block
         self._ids: tuple[str, ...] | None = None
         self._paths: list[str] = []
+        self._members: list[int] = []  # a fleet's members' rows (not row 0): trails of their own
+        self._intruders: list[int] = []
         self._t: list[float] = []
         self._k: list[int] = []
         self._pos: list[np.ndarray] = []
@@ -49,6 +61,8 @@ class TrafficLog:
             self.flush()
             self._ids = tuple(state.ids)
             self._paths = aircraft_paths(self._ids)
+            self._members = member_rows(self._ids)
+            self._intruders = [n for n in range(1, len(self._ids)) if n not in self._members]
             self._trail_end = None
         self._t.append(float(state.t))
         self._k.append(int(decision))
@@ -82,12 +96,16 @@ class TrafficLog:
         stops = ends + int(carried)
         starts = np.concatenate([[0], stops[:-1]])
         own, others, own_len, other_len = [], [], [], []
+        members = self._members
+        fleet: list[list[np.ndarray]] = [[] for _ in members]
         for a, b in zip(starts, stops, strict=True):
             seg = ext[a : b + 1]  # (L, N, 3)
             own.append(seg[:, 0])
-            others.append(seg[:, 1:].transpose(1, 0, 2).reshape(-1, 3))
+            for strips, row in zip(fleet, members, strict=True):
+                strips.append(seg[:, row])
+            others.append(seg[:, self._intruders].transpose(1, 0, 2).reshape(-1, 3))
             own_len.append(len(seg))
-            other_len.extend([len(seg)] * (seg.shape[1] - 1))
+            other_len.extend([len(seg)] * len(self._intruders))
         self._trail_end = pos[-1]
         index = [
             rr.TimeColumn(ent.SIM_TIME, duration=t[ends]),
@@ -95,7 +113,11 @@ class TrafficLog:
         ]
         strips = rr.LineStrips3D.columns(strips=_strips_array(np.concatenate(own), own_len))
         self._stream.send_columns(ent.OWNSHIP_TRAIL, indexes=index, columns=strips)
-        n_intruders = pos.shape[1] - 1
+        for row, member in zip(members, fleet, strict=True):
+            strips = rr.LineStrips3D.columns(strips=_strips_array(np.concatenate(member), own_len))
+            path = ent.trail_path(self._paths[row])
+            self._stream.send_columns(path, indexes=index, columns=strips)
+        n_intruders = len(self._intruders)
         if n_intruders:
             arr = _strips_array(np.concatenate(others), other_len)
             strips = rr.LineStrips3D.columns(strips=arr).partition([n_intruders] * len(ends))

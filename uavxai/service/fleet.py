@@ -64,12 +64,37 @@ IMPROVES = 1.0 + 1e-12  # a candidate must beat the incumbent by more than round
 
 
 @dataclass(frozen=True)
+class Separation:
+    """How far apart two stations must be (docs/fleet.md, "Orbits kept apart"): at least
+    ``horizontal_m`` apart horizontally, or at least ``vertical_m`` apart in height (a layer
+    of its own), so that UAVs orbiting them never share the NMAC cylinder."""
+
+    horizontal_m: float
+    vertical_m: float
+
+    def apart(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """Whether stations ``a (..., 3)`` and ``b (..., 3)`` are apart (broadcast)."""
+        d = a - b
+        return (np.hypot(d[..., 0], d[..., 1]) >= self.horizontal_m) | (
+            np.abs(d[..., 2]) >= self.vertical_m
+        )
+
+    def violations(self, positions: np.ndarray) -> list[tuple[int, int]]:
+        """The pairs of stations ``(N, 3)`` that are not apart."""
+        n = len(positions)
+        return [(i, j) for i, j in itertools.combinations(range(n), 2)
+                if not self.apart(positions[i], positions[j])]  # fmt: skip
+
+
+@dataclass(frozen=True)
 class FleetProblem:
-    """One placement problem: the fleet's channel, the lattice the UAVs hover on, levels L."""
+    """One placement problem: the fleet's channel, the lattice the UAVs hover on, levels L;
+    with ``separation`` the planner's stations keep it (None: stations may coincide)."""
 
     fleet: FleetChannel
     space: SearchSpace
     power_levels: int
+    separation: Separation | None = None
 
 
 def fleet_problem(
@@ -358,8 +383,43 @@ def move_candidates(problem: FleetProblem, plan: FleetPlan, steps: tuple[int, ..
     moves = move_offsets(space.step_m, steps)
     who = np.repeat(np.arange(N), len(moves))
     where = (plan.positions[:, None, :] + moves[None]).reshape(-1, 3)
-    keep = space.contains(where)
+    keep = space.contains(where) & kept_apart(problem, plan.positions, who, where)
     return who[keep], where[keep]
+
+
+def kept_apart(problem: FleetProblem, positions, who: np.ndarray, where: np.ndarray):
+    """Whether moving UAV ``who[c]`` to ``where[c]`` keeps it apart from every other UAV of
+    ``positions`` ``(C,)`` (all True without a separation)."""
+    sep = problem.separation
+    if sep is None:
+        return np.ones(len(who), dtype=bool)
+    ok = sep.apart(where[:, None, :], np.asarray(positions)[None])  # (C, N)
+    ok[np.arange(len(who)), who] = True  # a UAV is not kept apart from itself
+    return ok.all(axis=1)
+
+
+def separate(problem: FleetProblem, plan: FleetPlan) -> FleetPlan:
+    """The plan with its stations kept apart (``problem.separation``): each UAV in turn, if it
+    is too near one before it, moves to the nearest lattice point apart from all of those
+    (association and levels kept). The planner's search starts from here and only moves
+    where the separation holds, so its answer keeps it too."""
+    sep = problem.separation
+    if sep is None or not sep.violations(plan.positions):
+        return plan
+    points = np.stack(np.meshgrid(*problem.space.axes(), indexing="ij"), -1).reshape(-1, 3)
+    positions = plan.positions.copy()
+    for n in range(1, len(positions)):
+        if all(sep.apart(positions[n], positions[m]) for m in range(n)):
+            continue
+        ok = sep.apart(points[:, None, :], positions[None, :n]).all(axis=1)
+        if not ok.any():
+            raise ValueError(
+                f"no station for UAV {n} is {sep.horizontal_m:.0f} m apart horizontally or "
+                f"{sep.vertical_m:.0f} m in height from the others on this lattice"
+            )
+        d = np.linalg.norm(points[ok] - positions[n], axis=1)
+        positions[n] = points[ok][int(np.argmin(d))]
+    return make_plan(problem, positions, plan.association, plan.levels)
 
 
 def local_search(
@@ -456,6 +516,7 @@ def relocate(problem: FleetProblem, plan: FleetPlan, cache: GainCache) -> FleetP
         inc = Incumbent.of(problem, plan, problem.fleet.gains(plan.positions))
         who = np.repeat(np.arange(N), len(points))
         values = move_scores(problem, inc, who, np.tile(table, (N, 1)))
+        values[~kept_apart(problem, plan.positions, who, np.tile(points, (N, 1)))] = -np.inf
         i = int(np.argmax(values))
         if not values[i] > plan.objective * IMPROVES:
             break
@@ -485,11 +546,13 @@ def descend(problem: FleetProblem, plan: FleetPlan, cache: GainCache) -> FleetPl
 def plan_fleet(problem: FleetProblem, starts: int | None = None) -> FleetPlan:
     """The fleet planner (module docstring): the descent (local search, exact per-UAV power in
     the shared band) from each start ``chosen_starts`` keeps (or from every one of ``starts``
-    k-means seeds), the best of them, then the coarse relocations."""
+    k-means seeds), the best of them, then the coarse relocations. With
+    ``problem.separation`` every start is ``separate``d and every move keeps it: the
+    answer's stations are apart."""
     cache = GainCache(problem)
     firsts = (chosen_starts(problem) if starts is None else
               [equal_power(problem, *s) for s in distinct_starts(problem, starts)])
-    plans = [descend(problem, start, cache) for start in firsts]
+    plans = [descend(problem, separate(problem, start), cache) for start in firsts]
     return relocate(problem, max(plans, key=lambda p: p.objective), cache)
 
 

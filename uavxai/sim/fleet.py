@@ -29,6 +29,9 @@ from uavxai.surveillance.tracker import truth_beliefs
 from uavxai.vocabulary import Outcome
 
 FLOOR_MARGIN_M = 20.0  # stations at least this far above the world's floor
+# Two stations' layers: the NMAC height plus this much each member may stray from its
+# station's height while it orbits in turbulence (docs/fleet.md, "Orbits kept apart")
+HEIGHT_HOLD_M = 15.0
 
 
 class MemberWorld:
@@ -119,10 +122,18 @@ class IntentPicture:
         return out
 
 
+# Member j's command path over its view of the world (``uavxai.sim.run.member_paths``: MAVLink
+# system ``bridge.system_id + j``); None: the direct path onto its row
+MemberPath = Callable[[int, MemberWorld], object] | None
+
+
 class Member:
     """Fleet member ``j`` (1-based) of the world: its episode, mission and battery."""
 
-    def __init__(self, scenario: Scenario, world, j: int, station, planner, max_steps: int):
+    def __init__(
+        self, scenario: Scenario, world, j: int, station, planner, max_steps: int,
+        path: MemberPath = None,
+    ) -> None:  # fmt: skip
         from uavxai.sim.build import start_episode
 
         self.j = j
@@ -130,10 +141,11 @@ class Member:
         own = scenario.ownship.model_copy(update={"start": start})
         config = MissionConfig.from_scenario(scenario.model_copy(update={"ownship": own}), station)
         view = MemberWorld(world, world.member_rows[j - 1])
-        path = DirectPath(view)
+        path = DirectPath(view) if path is None else path(j, view)
         self.mission = Mission(config, path.announce)
         self.energy = Energy()
         self.outcome: Outcome | None = None
+        self._closed, self._counters = False, None
         self.ep = start_episode(
             scenario, view, planner, path, config.station, max_steps=max_steps,
             picture=IntentPicture(world), mission=self.mission,
@@ -145,16 +157,25 @@ class Member:
         return self.outcome is None
 
     def sample(self) -> Outcome | None:
-        """Judge the sample just flown; the member's outcome when it ends now. A member done
-        orbits its home, judged on as long as the fleet flies."""
+        """Judge the sample just flown; the member's outcome when it changes now. A member
+        done holds at home (``Mission.hold_home``: the orbit re-sent every decision, so its
+        bridge's command watchdog never levels its wings and sends it out of the world, as a
+        single orbit command did), judged on as long as the fleet flies: a collision, failure
+        or exit after it is done still ends the fleet."""
         _, outcome = self.ep.sample()
-        if self.outcome is not None or outcome is None:
+        if outcome is None or outcome is self.outcome:
             return None
         self.outcome = outcome
         if outcome is Outcome.COMPLETED:
-            c = self.mission.config
-            self.ep.path.orbit(*c.home, c.radius_m, c.clockwise, c.speed_mps, self.ep.state.t)
+            self.mission.hold_home()
         return outcome
+
+    def close(self) -> dict[str, int] | None:
+        """Close the member's command path (its bridge and link) once; its link's counters
+        (None: the direct path)."""
+        if not self._closed:
+            self._closed, self._counters = True, self.ep.path.close()
+        return self._counters
 
     def entry(self, fleet_outcome: str) -> dict:
         """The member's ``summary.fleet`` object (delivery added by the service)."""
@@ -175,8 +196,8 @@ class Fleet(EngineStep):
     """The fleet's members beside the run's ownship (member 0): at each of its decisions every
     member still flying decides, from its own picture, with its own planner; every sample each
     member is judged. A member's collision, failure or exit ends everyone's episode with that
-    outcome; the fleet completes when every UAV has (the ownship waits for the others under
-    its avoidance planner, its mission suspended: nothing more is served)."""
+    outcome; the fleet completes when every UAV has (the ownship, done first, waits for the
+    others orbiting its home, as the members do: nothing more is served)."""
 
     def __init__(
         self,
@@ -184,29 +205,30 @@ class Fleet(EngineStep):
         stations: np.ndarray,
         planner: Callable[[int], object],
         max_steps: int,
+        path: MemberPath = None,
     ) -> None:
         self.scenario = scenario
         self.stations = np.asarray(stations, dtype=float)
         self._planner = planner  # member j -> its planner, seeded
         self._max_steps = max_steps
+        self._path = path
         self.members: list[Member] = []
         self._waiting = False
 
     def on_start(self, ep: Episode) -> None:
         for j in range(1, len(self.stations)):
             m = Member(self.scenario, ep.world, j, self.stations[j], self._planner(j),
-                       self._max_steps)  # fmt: skip
+                       self._max_steps, self._path)  # fmt: skip
+            self.members.append(m)  # before it begins: closed whatever happens
             m.ep.begin()
-            self.members.append(m)
 
     def uavs(self, ep: Episode) -> list[tuple[Mission, int]]:
         """Each UAV's mission and world row, member 0 first."""
         return [(ep.mission, 0)] + [(m.mission, m.ep.world.row) for m in self.members]
 
     def on_decision(self, ep: Episode, event) -> None:
-        for m in self.members:
-            if m.flying:
-                m.ep.decide()
+        for m in self.members:  # flying or holding at home
+            m.ep.decide()
 
     def on_sample(self, ep: Episode, state: TrafficState) -> None:
         main = ep.mission
@@ -221,7 +243,7 @@ class Fleet(EngineStep):
             main.outcome = None
             if not self._waiting:
                 self._waiting = True
-                main.suspend()
+                main.hold_home()
 
     def on_end(self, ep: Episode, summary: dict) -> None:
         own = {
@@ -235,6 +257,14 @@ class Fleet(EngineStep):
             "station": list(ep.mission.config.station),
         }
         summary["fleet"] = [own, *(m.entry(summary["outcome"]) for m in self.members)]
+        for entry, m in zip(summary["fleet"][1:], self.members, strict=True):
+            counters = m.close()
+            if counters is not None:  # its bridge's, as summary.bridge is member 0's
+                entry["bridge"] = counters
+
+    def close(self) -> None:
+        for m in self.members:
+            m.close()
 
 
 class FleetService(EngineStep):
@@ -264,6 +294,7 @@ class FleetService(EngineStep):
             for n, users in enumerate(self.mine)
         ]
         self._breaks = [OrbitBreak() for _ in self.mine]
+        self.qos_bps = float(scenario.comms.qos_rate_bps)
         self._files = service_files(out)
         if self._files:
             self._users, self._service = self._files
@@ -277,14 +308,23 @@ class FleetService(EngineStep):
             self._users.write(
                 "".join(f"{t:.3f},{k},{u[0]:.3f},{u[1]:.3f}\n" for k, u in enumerate(users))
             )
+        rates, serving = np.zeros(len(users)), np.zeros((len(users), 3))
         for n, (mission, row) in enumerate(self.fleet.uavs(ep)):
+            mine, pos = self.mine[n], state.pos[row]
+            serving[mine] = pos
             if not (mission.serving and mission.outcome is None):
                 continue
-            mine, pos = self.mine[n], state.pos[row]
             planned, avoiding = self._breaks[n].planned(mission, t, pos)
             rows = self.delivery[n].sample(t, pos, users[mine], dt, planned, avoiding)
+            rates[mine] = [r[4] for r in rows]
             if self._files:
                 self._service.write(service_lines(rows, n, mine))
+        # what the recording draws (the run's Service sets the same for one UAV): every user,
+        # its rate now (0: its UAV is not serving), and its UAV, where the link is drawn from
+        ep.sample_metrics.update(users_xyz=users.copy(), qos_bps=self.qos_bps,
+                                 user_rates_bps=rates, user_uav_xyz=serving)  # fmt: skip
+        if ep.mission.serving:
+            ep.sample_metrics["delivered_rate_bps"] = float(rates[self.mine[0]].sum())
         self.walk.advance(dt)
 
     def on_end(self, ep: Episode, summary: dict) -> None:
@@ -316,7 +356,41 @@ def fleet_stations(scenario: Scenario, users: Sequence) -> object:
     # two members placed at 50 m flew out of the world at 32 s)
     floor = min(space.lo[2] + FLOOR_MARGIN_M, space.hi[2])
     space = dataclasses.replace(space, lo=np.array([*space.lo[:2], floor]))
+    sep = orbit_separation(scenario)
+    if scenario.fleet.spacing_m < sep.horizontal_m:  # the homes are orbited too, at one height
+        from uavxai.errors import UserError
+
+        raise UserError(
+            f"fleet.spacing_m {scenario.fleet.spacing_m:g} m: members done orbit their homes "
+            f"(their starts, abreast at one height) and would meet; allowed: at least "
+            f"{sep.horizontal_m:.0f} m (twice the orbit radius + the NMAC horizontal distance)"
+        )
     problem = FleetProblem(
-        FleetChannel.of(channel, scenario.fleet.size), space, scenario.comms.power_levels
+        FleetChannel.of(channel, scenario.fleet.size), space, scenario.comms.power_levels, sep
     )
-    return plan_fleet(problem)
+    try:
+        return plan_fleet(problem)
+    except ValueError as e:  # the separation does not fit in the users' region
+        from uavxai.errors import UserError
+
+        raise UserError(
+            f"fleet.size = {scenario.fleet.size}: the members' stations cannot be kept apart "
+            f"in comms.users.region and world.h ({e}); allowed: fewer UAVs, a larger region "
+            "or a taller world"
+        ) from e
+
+
+def orbit_separation(scenario: Scenario):
+    """How far apart the members' stations are kept (docs/fleet.md, "Orbits kept apart"): two
+    UAVs each on its orbit of radius r about stations d apart come as near as d - 2r, so
+    stations at least 2r + the NMAC horizontal distance apart never meet in the NMAC cylinder
+    whatever the orbits' phases; or, a layer of their own, at least the NMAC height plus
+    twice ``HEIGHT_HOLD_M`` apart in height."""
+    from uavxai.dynamics.orbit import scenario_orbit_radius
+    from uavxai.service.fleet import Separation
+
+    nmac = scenario.avoidance.nmac
+    return Separation(
+        horizontal_m=2.0 * scenario_orbit_radius(scenario) + nmac.horizontal_m,
+        vertical_m=nmac.vertical_m + 2.0 * HEIGHT_HOLD_M,
+    )

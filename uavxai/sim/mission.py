@@ -99,6 +99,8 @@ class Mission(EngineStep):
         self._own_xy: tuple[float, float] | None = None
         self._horizon_s = 16.0
         self.suspended = False  # the operator flies elsewhere (uavxai.sim.operator)
+        self.holding = False  # done, orbiting home for the others (a fleet's member 0)
+        self._hold_conflict = False
 
     # ------------------------------------------------------------------------- phases
     def _enter(self, phase: Phase, t: float, why: str, ep: Episode) -> None:
@@ -147,7 +149,7 @@ class Mission(EngineStep):
         return self.phase in (Phase.ON_STATION, Phase.AVOIDING) and not self.suspended
 
     def on_sample(self, ep: Episode, state: TrafficState) -> None:
-        if self.suspended:
+        if self.suspended or self.holding:
             return
         c, p, t = self.config, state.pos[0], state.t
         self._own_xy = (float(p[0]), float(p[1]))
@@ -192,7 +194,10 @@ class Mission(EngineStep):
     # ------------------------------------------------------------------------ decisions
     def decide(self, ep: Episode, own: Ownship, intruders: list[Intruder]) -> Decision | None:
         """On station: the orbit's decision (re-sent, the orbit ahead checked), or None when
-        the avoidance planner must fly (transit, return, a conflict on the orbit)."""
+        the avoidance planner must fly (transit, return, a conflict on the orbit). Holding
+        (:meth:`hold_home`): the orbit about home, checked the same way."""
+        if self.holding:
+            return self._hold(ep, own, intruders)
         if not self.serving:
             return None
         c, t = self.config, ep.state.t
@@ -218,6 +223,20 @@ class Mission(EngineStep):
             self.config = dataclasses.replace(c, station=(c.station[0], c.station[1], float(h)))
         if not self.serving:
             ep.path.altitude(float(h), ep.state.t)
+
+    def hold_home(self) -> None:
+        """Done, and waiting for the rest of its fleet (``uavxai.sim.fleet``): orbit home,
+        as the other members do when done, rather than fly on past it (fleet.yaml seed 0:
+        member 0 crossed its home at 27 m/s and left the world); nothing more is served, and
+        the phases stop."""
+        self.holding = True
+
+    def _hold(self, ep: Episode, own: Ownship, intruders: list[Intruder]) -> Decision | None:
+        c = self.config
+        orbit = Orbit(c.home, c.radius_m, c.clockwise, ep.path.cruise_speed(c.speed_mps))
+        step = orbit_step(ep, orbit, own, intruders, self._hold_conflict)
+        self._hold_conflict = step.conflict is not None
+        return step.decision
 
     def suspend(self) -> None:
         """The operator took the aircraft elsewhere (GUIDED, LOITER, RTL, an uploaded

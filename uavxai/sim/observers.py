@@ -201,7 +201,8 @@ class Rerun(Observer):
         if "users_xyz" in ep.sample_metrics:
             qos = ep.sample_metrics.get("qos_bps", 0.0)
             rates = ep.sample_metrics["user_rates_bps"]
-            rec.log_users(t, ep.sample_metrics["users_xyz"], rates, qos, state.pos[0])
+            uav = ep.sample_metrics.get("user_uav_xyz", state.pos[0])  # a fleet: each user's
+            rec.log_users(t, ep.sample_metrics["users_xyz"], rates, qos, uav)
         route = ep.operator.route if ep.operator is not None else None
         if route is not None:  # the operator's mode flies, the mission waits
             rec.log_phase(t, f"{ep.operator.mode.value} (operator)")

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from uavxai.dynamics.state import TrafficState
+from uavxai.dynamics.state import TrafficState, is_member
 from uavxai.outputs import write_output
 from uavxai.sim.episode import DecisionEvent, Episode, Observer
 from uavxai.sim.steps import Energy
@@ -37,8 +37,10 @@ class QuickLook(Observer):
         self.soc: list[float] = []
         self.airspeed: list[float] = []
         self.users: np.ndarray | None = None
+        self.own_id = "ownship"  # a fleet's member 0: "ownship-0"
 
     def on_start(self, ep: Episode) -> None:
+        self.own_id = str(ep.state.ids[0])
         self._take(ep, ep.state)
 
     def on_period(self, ep: Episode, event: DecisionEvent, flown_min_m: float) -> None:
@@ -77,6 +79,8 @@ class QuickLook(Observer):
         t, own = np.array(self.t), np.array(self.own)
         fig, axes = plt.subplots(2, 2, figsize=(11.0, 8.0), dpi=100)
         self._top_view(axes[0, 0], own, goal)
+        if summary.get("fleet"):
+            self._fleet_view(axes[0, 0], summary["fleet"])
         ax = axes[0, 1]
         ax.plot(t, self.sep, color="tab:blue", label="nearest intruder")
         ax.axhline(self.d_min_m, color="tab:red", linestyle="--", label=f"d_min {self.d_min_m:g} m")
@@ -111,16 +115,33 @@ class QuickLook(Observer):
 
     def _top_view(self, ax, own: np.ndarray, goal: tuple) -> None:
         (gx, gy, _), where = goal
-        for k, xy in enumerate(self.others.values()):
+        intruders = [xy for i, xy in self.others.items() if not is_member(i)]
+        for k, xy in enumerate(intruders):
             xy_a = np.array(xy)
             ax.plot(*xy_a.T, color="0.6", linewidth=0.5, alpha=0.6,
                     label="intruders" if k == 0 else None)  # fmt: skip
             ax.plot(*xy_a[-1], marker=".", color="0.4")
-        ax.plot(own[:, 0], own[:, 1], color="tab:blue", linewidth=2.0, label="ownship")
+        ax.plot(own[:, 0], own[:, 1], color="tab:blue", linewidth=2.0, label=self.own_id)
         ax.plot(*own[0, :2], marker="o", color="tab:blue", label="start")
         ax.plot(gx, gy, marker="*", markersize=14, color="tab:red", label=where)
         if self.users is not None:
             ax.scatter(*self.users[:, :2].T, s=12, color="tab:green", label="users (start)")
         ax.set(xlabel="x east (m)", ylabel="y north (m)", title="track, top view")
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.legend(fontsize=8, loc="best")
+
+    def _fleet_view(self, ax, fleet: list[dict]) -> None:
+        """A fleet's other members' tracks (member 0 is the ownship's), each in its colour,
+        and every member's station (a cross in the member's colour)."""
+        colors = ("tab:blue", "tab:orange", "tab:purple", "tab:brown", "tab:pink", "tab:olive",
+                  "tab:cyan", "tab:gray")  # fmt: skip
+        for n, entry in enumerate(fleet):
+            color = colors[n % len(colors)]
+            xy = np.array(self.others.get(entry["id"], []))
+            if n > 0 and len(xy):
+                ax.plot(*xy.T, color=color, linewidth=2.0, label=entry["id"])
+                ax.plot(*xy[0], marker="o", color=color)
+            ax.plot(*entry["station"][:2], marker="X", markersize=9, color=color,
+                    label="stations" if n == 0 else None)  # fmt: skip
         ax.set_aspect("equal", adjustable="datalim")
         ax.legend(fontsize=8, loc="best")

@@ -91,6 +91,39 @@ def mavlink_path(scenario: Scenario, link: str | None, tlog: Path | None = None)
     return build
 
 
+def member_paths(scenario: Scenario, link: str | None):
+    """Fleet member j's command path (docs/fleet.md, "MAVLink per member"): its own bridge,
+    MAVLink system ``bridge.system_id + j`` with its home below its own start, its planner's
+    commands MAVLink bytes to that system, on its own connection to ``link`` (a link that
+    listens, ``udpin``/``udp``/``tcpin``, on port + j). The traffic (ADSB_VEHICLE) is member
+    0's bridge's to publish; no tlog of its own."""
+    sc = scenario
+    starts = sc.member_starts()
+
+    def build(j: int, view) -> MavlinkPath:
+        member = sc.model_copy(update={
+            "bridge": sc.bridge.model_copy(update={"system_id": sc.bridge.system_id + j}),
+            "ownship": sc.ownship.model_copy(update={"start": starts[j]}),
+        })  # fmt: skip
+        path = mavlink_path(member, member_link(link, j))(view)
+        path.show_truth_traffic(False)
+        return path
+
+    return build
+
+
+def member_link(link: str | None, j: int) -> str | None:
+    """Member j's connection string: a listening link's port + j (two sockets cannot listen on
+    one port), any other link as it is (each member its own socket to the same peer)."""
+    if link is None or j == 0:
+        return link
+    kind, sep, rest = link.partition(":")
+    host, _, port = rest.rpartition(":")
+    if kind in ("udpin", "udp", "tcpin") and port.isdigit():
+        return f"{kind}{sep}{host}:{int(port) + j}"
+    return link
+
+
 def run_spec(scenario: Scenario, service, point=None) -> EpisodeSpec:
     """The episode `uavxai run` flies for ``scenario`` (at its seed): in JSBSim, to the
     scenario's goal (``point``, else ``service``'s point, unless it names one), the mission if
@@ -125,15 +158,11 @@ def run_episode(
     # (the intruders, with an instant decision; everyone, with a latency).
     planner = Companion(sc.avoidance.planner, config, checkpoint, scenario=sc)
     channel = Channel.from_scenario(sc, users=service.users)
-    steps, observers = run_parts(spec, channel, service.power_w, out, placement)
+    url = mavlink if mavlink is not None else sc.bridge.mavlink
+    steps, observers = run_parts(
+        spec, channel, service.power_w, out, placement, member_paths(sc, url)
+    )
     record = sc.log.rerun if record is None else record
-    if placement is not None and (spawn or rerun_file is not None):
-        from uavxai.errors import UserError
-
-        raise UserError(
-            f"fleet.size = {sc.fleet.size}: a fleet's recording is not built yet; allowed: "
-            "no --spawn or --rerun with a fleet (docs/fleet.md)"
-        )
     if record or spawn or rerun_file is not None:
         # --spawn records to the file too: a viewer problem never loses the run's recording
         link = (channel, service.power_w)  # the recorder's metrics/sum_rate_bps
@@ -152,11 +181,7 @@ def run_episode(
         result = fly(
             spec,
             planner,
-            path=mavlink_path(
-                sc,
-                mavlink if mavlink is not None else sc.bridge.mavlink,
-                out / "link.tlog" if sc.bridge.tlog else None,
-            ),
+            path=mavlink_path(sc, url, out / "link.tlog" if sc.bridge.tlog else None),
             observers=observers,
             engine_steps=steps,
         )
@@ -167,7 +192,7 @@ def run_episode(
 
 
 def run_parts(
-    spec: EpisodeSpec, channel, power_w: np.ndarray, out: Path, placement=None
+    spec: EpisodeSpec, channel, power_w: np.ndarray, out: Path, placement=None, paths=None
 ) -> tuple[list[EngineStep], list[Observer]]:
     """What a run adds to its episode: its engine steps, in their order after the picture,
     the operators and the mission (the battery: home at its reserve, the end when empty; then,
@@ -181,7 +206,7 @@ def run_parts(
     if placement is not None:  # a fleet (docs/fleet.md): its members, then its service
         from uavxai.sim.fleet import Fleet, FleetService
 
-        fleet = Fleet(sc, placement.positions, _member_planner(sc), spec.max_steps)
+        fleet = Fleet(sc, placement.positions, _member_planner(sc), spec.max_steps, paths)
         steps += [fleet, FleetService(sc, channel, placement, fleet, out)]
     elif spec.mission is not None:
         steps.append(Service(sc, channel, power_w, out, replan=_replanner(sc), energy=energy))

@@ -33,7 +33,7 @@ from dataclasses import dataclass, field, fields
 import numpy as np
 
 from uavxai.dynamics.geodesy import LocalFrame
-from uavxai.dynamics.state import TrafficState
+from uavxai.dynamics.state import TrafficState, is_member, member_id
 from uavxai.errors import UserError
 from uavxai.scenario import Scenario, checked
 from uavxai.scenario import Surveillance as SurveillanceSection
@@ -159,8 +159,9 @@ def _number(ident: str) -> int:
 
 def is_cooperative(ident: str, share_noncooperative: float, seed: int) -> bool:
     """Whether intruder ``ident`` carries ADS-B: a uniform draw from a stream of its own
-    number, so the answer does not depend on which other intruders exist."""
-    if share_noncooperative <= 0:
+    number, so the answer does not depend on which other intruders exist. A fleet's members
+    always do (docs/fleet.md: they see each other through ADS-B)."""
+    if share_noncooperative <= 0 or is_member(ident):
         return True
     if share_noncooperative >= 1:
         return False
@@ -301,16 +302,23 @@ class Surveillance:
 # The same address block and flags as the bridge's truth telemetry
 # (uavxai.bridges.telemetry), so a ground station sees one kind of traffic.
 ICAO_BLOCK = 0xF00000
+# A fleet's members ("ownship-i") from a block of their own below it: in the intruders' block
+# member i was intruder-i's address, and the receiver merged the two into one track
+MEMBER_ICAO_BLOCK = 0xE00000
 _MIN_COURSE_SPEED_MPS = 0.5
 
 
 def icao_address(ident: str) -> int:
-    """ICAO address of intruder ``ident`` ("intruder-N" -> ICAO_BLOCK + N)."""
-    return ICAO_BLOCK + _number(ident)
+    """ICAO address of ``ident``: "intruder-N" -> ICAO_BLOCK + N, fleet member "ownship-i"
+    -> MEMBER_ICAO_BLOCK + i."""
+    return (MEMBER_ICAO_BLOCK if is_member(ident) else ICAO_BLOCK) + _number(ident)
 
 
 def ident_from_icao(address: int) -> str:
-    return f"intruder-{int(address) - ICAO_BLOCK}"
+    address = int(address)
+    if MEMBER_ICAO_BLOCK <= address < ICAO_BLOCK:
+        return member_id(address - MEMBER_ICAO_BLOCK)
+    return f"intruder-{address - ICAO_BLOCK}"
 
 
 def adsb_fields(report: Report, frame: LocalFrame) -> dict[str, int | bytes]:
@@ -351,7 +359,7 @@ def adsb_fields(report: Report, frame: LocalFrame) -> dict[str, int | bytes]:
         "heading": heading,
         "hor_velocity": hor,
         "ver_velocity": ver,
-        "callsign": f"INTR{number:02d}"[:8].encode("ascii"),
+        "callsign": f"{'UAV' if is_member(report.id) else 'INTR'}{number:02d}"[:8].encode(),
         "emitter_type": mavlink.ADSB_EMITTER_TYPE_UAV,
         "tslc": min(255, max(0, round(report.t_delivered - report.t_measured))),
         "flags": flags,

@@ -78,7 +78,7 @@ class Fleet(Section):
     ``ownship.start``; member i starts ``i * spacing_m`` to the right of it, abreast."""
 
     size: Annotated[int, Field(ge=1, le=MAX_FLEET)] = 1
-    spacing_m: Annotated[float, Field(ge=50, le=5_000)] = 300.0
+    spacing_m: Annotated[float, Field(ge=50, le=5_000)] = 370.0
 
 
 # ------------------------------------------------------------------------------------- scenario

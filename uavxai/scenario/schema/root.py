@@ -133,11 +133,16 @@ class Scenario(Section):
             (self.encounters is not None, "encounters"),
             (bool(self.operator.commands), "operator.commands"),
             (self.avoidance.decision_latency_s > 0, "avoidance.decision_latency_s > 0"),
-            (self.log.rerun, "log.rerun: true (a fleet's recording is not built yet)"),
         ]
         for bad, setting in refused:
             if bad:
                 raise ValueError(f"{what} cannot be flown with {setting}; allowed: fleet.size 1")
+        last = self.bridge.system_id + n - 1
+        if last > 255:
+            raise ValueError(
+                f"{what}: member {n - 1} would be MAVLink system {last} (bridge.system_id + "
+                "its number); allowed: bridge.system_id + fleet.size - 1 <= 255"
+            )
         k = self.comms.users.k
         if k < n:
             raise ValueError(f"{what} needs at least {n} users (one per UAV), got {k}")
