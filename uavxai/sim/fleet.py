@@ -39,14 +39,18 @@ class MemberWorld:
     member's own episode sees it: its row first, the others after in the world's order; its
     commands go to its row. The fleet steps the world; this view never does."""
 
-    lost_intruders: list[str] = []  # the world's own episode reports those
-
     def __init__(self, world, row: int) -> None:
         self._world = world
         self.row = row
         self.scenario = world.scenario
         self.dt = world.dt
         self._seen: tuple[TrafficState, TrafficState] | None = None  # (world's, reordered)
+
+    @property
+    def lost_intruders(self) -> list[str]:
+        """None here: the world's own episode (member 0's) reports the intruders lost (a new
+        list each time, not one shared by every member's view)."""
+        return []
 
     def state(self) -> TrafficState:
         s = self._world.state()
