@@ -121,6 +121,36 @@ def test_resume_needs_an_interrupted_campaign_folder(tmp_path, capsys) -> None:
     assert "give one of them" in capsys.readouterr().err
 
 
+def test_the_digest_covers_the_bridge_and_aircraft_beside_the_package(tmp_path) -> None:
+    """A source checkout keeps bridges/ and aircraft/ beside the package (the editable
+    install maps them in): a change there is other code, as one inside the package is."""
+    import importlib.util
+    import shutil
+
+    from uavxai.paths import aircraft_dir, installation_digest, source_digest
+
+    package = Path(source_digest.__code__.co_filename).parent
+    spec = importlib.util.find_spec("uavxai.bridges")
+    bridges = Path(next(iter(spec.submodule_search_locations)))
+    assert source_digest() == installation_digest(package, bridges, aircraft_dir())
+    skip = shutil.ignore_patterns("__pycache__")
+    copies = {name: tmp_path / name for name in ("pkg", "bridges", "aircraft")}
+    for name, src in zip(copies, (package, bridges, aircraft_dir()), strict=True):
+        shutil.copytree(src, copies[name], ignore=skip, symlinks=True)
+    before = installation_digest(*copies.values())
+    telemetry = copies["bridges"] / "telemetry.py"
+    telemetry.write_text(telemetry.read_text() + "#")
+    assert installation_digest(*copies.values()) != before
+    # a wheel: the bridge inside the package is counted once, with the package
+    inside = copies["pkg"] / "bridges"
+    shutil.copytree(copies["bridges"], inside)
+    wheel = installation_digest(copies["pkg"], inside, copies["aircraft"])
+    assert len(wheel) == len(source_digest(copies["pkg"])) + 8
+    telemetry = inside / "telemetry.py"
+    telemetry.write_text(telemetry.read_text() + "#")
+    assert installation_digest(copies["pkg"], inside, copies["aircraft"]) != wheel
+
+
 def test_the_journal_names_the_code_that_flew_it(tmp_path, capsys) -> None:
     """Rows flown by other code (another commit of the same version) are not taken over:
     the journal's header carries a digest of uavxai's files, and a resume compares it."""

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import importlib.util
 import os
 from importlib.resources import files
 from pathlib import Path
@@ -116,7 +117,20 @@ def source_digest(root: Path | None = None) -> str:
 
 @functools.cache  # read once: the files of a running process's package do not change
 def _installed_digest() -> str:
-    return _digest(Path(__file__).resolve().parent) + _digest(aircraft_dir().resolve())[:8]
+    spec = importlib.util.find_spec("uavxai.bridges")  # found, not imported (a higher layer)
+    bridges = Path(next(iter(spec.submodule_search_locations)))
+    return installation_digest(Path(__file__).parent, bridges, aircraft_dir())
+
+
+def installation_digest(package: Path, bridges: Path, aircraft: Path) -> str:
+    """:func:`source_digest` of an installation: its ``package`` folder, and the MAVLink
+    bridge (``uavxai.bridges``) and ``aircraft`` where they live outside it. A wheel keeps
+    them inside the package; a source checkout beside it, where an editable install maps them
+    in: their code and data fly every episode too (found when campaigns flown from other
+    checkouts of this repository imported this checkout's bridge, unseen by the digest)."""
+    package, bridges = package.resolve(), bridges.resolve()
+    beside = "" if bridges.is_relative_to(package) else _digest(bridges)[:8]
+    return _digest(package) + beside + _digest(aircraft.resolve())[:8]
 
 
 def _digest(root: Path) -> str:
