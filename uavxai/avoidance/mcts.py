@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -193,9 +193,9 @@ def predict_levels(
     cfg = model.config
     pos, vel = intruder_arrays(intruders)
     turn = intruder_turn_rates(intruders, cfg)
-    margin = intruder_margin(
+    margin = with_keep(intruder_margin(
         cfg, vel, np.zeros(len(intruders)) if turn is None else turn, *_track_errors(intruders)
-    )
+    ), intruders)  # fmt: skip
     sigma = None
     if cfg.risk == "probability":  # the track error as a chance, not a wall (avoidance.risk)
         sigma = track_sigma(cfg, len(intruders), *_track_errors(intruders))
@@ -203,6 +203,19 @@ def predict_levels(
     return model.predict_levels(
         pos, vel, hold_s, starts, turn_rate=turn, margin=margin, sigma=sigma
     )
+
+
+def with_keep(
+    margin: Callable[[np.ndarray], np.ndarray] | None, intruders: Sequence[Intruder]
+) -> Callable[[np.ndarray], np.ndarray] | None:
+    """``margin`` with each track's ``keep_m`` (a fleet member's clearance) added at every
+    instant; ``margin`` itself when every ``keep_m`` is 0 (traffic alone: nothing changes)."""
+    keep = np.array([i.keep_m for i in intruders], dtype=float)
+    if not keep.any():
+        return margin
+    if margin is None:
+        return lambda t: np.broadcast_to(keep, (*np.shape(t), keep.size)).copy()
+    return lambda t: margin(t) + keep
 
 
 def _track_errors(intruders: Sequence[Intruder]) -> tuple[np.ndarray, np.ndarray]:

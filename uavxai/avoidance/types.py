@@ -63,6 +63,9 @@ class Intruder:
     sigma_m: float = 0.0  # 1-sigma horizontal position uncertainty, m
     sigma_v: float = 0.0  # 1-sigma velocity uncertainty, m/s
     age_s: float = 0.0  # age of the report the estimate rests on, s
+    # separation to keep beyond d_min from it, m: a fleet member's cooperative clearance
+    # (uavxai.sim.fleet.IntentPicture, docs/fleet.md); 0 for traffic
+    keep_m: float = 0.0
 
 
 INTRUDER_MODELS = ("cv", "ct", "reachable")

@@ -23,7 +23,7 @@ from uavxai.geometry import turn_rate_of_bank
 from uavxai.scenario import Scenario
 from uavxai.sim.command import DirectPath
 from uavxai.sim.episode import EngineStep, Episode
-from uavxai.sim.mission import Mission, MissionConfig
+from uavxai.sim.mission import Mission, MissionConfig, Phase
 from uavxai.sim.steps import Energy, OrbitBreak, service_files
 from uavxai.surveillance.tracker import truth_beliefs
 from uavxai.vocabulary import Outcome
@@ -32,6 +32,7 @@ FLOOR_MARGIN_M = 20.0  # stations at least this far above the world's floor
 # Two stations' layers: the NMAC height plus this much each member may stray from its
 # station's height while it orbits in turbulence (docs/fleet.md, "Orbits kept apart")
 HEIGHT_HOLD_M = 15.0
+MOVING = (Phase.TRANSIT, Phase.RETURNING)  # a UAV's phases off its station's orbit
 
 
 class MemberWorld:
@@ -104,26 +105,46 @@ class IntentPicture:
     """A member's picture: every other aircraft's exact state, and for the fleet's aircraft
     their intent, the turn their autopilot is commanded to fly (the chosen branch's first
     action, or the loiter law's bank) as the track's turn rate; the intruders' turn is the one
-    they fly now (non-cooperative)."""
+    they fly now (non-cooperative). A fleet track also gets the fleet's clearance
+    (``keep_m``, :func:`fleet_keep_m`) while either of the two is moving (``moving(row)``:
+    transit or returning); two settled ones are kept apart by the placement and spacing."""
 
     receiver = None
     truth = True
 
-    def __init__(self, world) -> None:
+    def __init__(
+        self, world, row: int, keep_m: float = 0.0, moving: Callable[[int], bool] | None = None
+    ) -> None:
         self._world = world
+        self._row = row
+        self._keep_m = keep_m
+        self._moving = moving
 
     def __call__(self, state: TrafficState) -> list[Intruder]:
         w = self._world
         fleet = {w.ids[r]: r for r in w.fleet_rows}
+        moving = self._moving
+        me_moving = moving is not None and moving(self._row)
         out = []
         for b in truth_beliefs(state):
             row = fleet.get(str(b.id))
             if row is not None:
                 bank = w.aircraft[row].read_command()["bank_cmd_rad"]
                 speed = max(float(np.hypot(b.vx, b.vy)), 1.0)
-                b = dataclasses.replace(b, turn_rate=turn_rate_of_bank(bank, speed))
+                keep = me_moving or (moving is not None and moving(row))
+                b = dataclasses.replace(b, turn_rate=turn_rate_of_bank(bank, speed),
+                                        keep_m=self._keep_m if keep else 0.0)  # fmt: skip
             out.append(b)
         return out
+
+
+def fleet_keep_m(scenario: Scenario) -> float:
+    """The clearance a member keeps beyond ``d_min`` from another member while either is
+    moving (docs/fleet.md, "Kept apart in transit"): out to the NMAC horizontal distance plus
+    ``HEIGHT_HOLD_M`` (what a flown path strays from the planner's model), as a sphere, which
+    holds the NMAC cylinder; never less than nothing."""
+    a = scenario.avoidance
+    return max(a.nmac.horizontal_m + HEIGHT_HOLD_M - a.d_min_m, 0.0)
 
 
 # Member j's command path over its view of the world (``uavxai.sim.run.member_paths``: MAVLink
@@ -136,7 +157,7 @@ class Member:
 
     def __init__(
         self, scenario: Scenario, world, j: int, station, planner, max_steps: int,
-        path: MemberPath = None,
+        path: MemberPath = None, moving: Callable[[int], bool] | None = None,
     ) -> None:  # fmt: skip
         from uavxai.sim.build import start_episode
 
@@ -152,7 +173,8 @@ class Member:
         self._closed, self._counters = False, None
         self.ep = start_episode(
             scenario, view, planner, path, config.station, max_steps=max_steps,
-            picture=IntentPicture(world), mission=self.mission,
+            picture=IntentPicture(world, view.row, fleet_keep_m(scenario), moving),
+            mission=self.mission,
             engine_steps=[self.mission, self.energy],
         )  # fmt: skip
 
@@ -222,9 +244,21 @@ class Fleet(EngineStep):
     def on_start(self, ep: Episode) -> None:
         for j in range(1, len(self.stations)):
             m = Member(self.scenario, ep.world, j, self.stations[j], self._planner(j),
-                       self._max_steps, self._path)  # fmt: skip
+                       self._max_steps, self._path, self._moving(ep))  # fmt: skip
             self.members.append(m)  # before it begins: closed whatever happens
             m.ep.begin()
+
+    def _moving(self, ep: Episode) -> Callable[[int], bool]:
+        """World row -> whether that UAV is moving (in transit or returning, not holding at
+        home): where the placement and the spacing do not keep it apart from the others."""
+
+        def moving(row: int) -> bool:
+            for mission, r in self.uavs(ep):
+                if r == row:
+                    return mission.phase in MOVING and not mission.holding
+            return False
+
+        return moving
 
     def uavs(self, ep: Episode) -> list[tuple[Mission, int]]:
         """Each UAV's mission and world row, member 0 first."""
