@@ -6,6 +6,7 @@ Real JSBSim and the real MCTS planner throughout."""
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -91,6 +92,7 @@ def test_two_members_on_a_collision_course_keep_clear_of_each_other() -> None:
     from uavxai.avoidance.planners import make_planner
     from uavxai.avoidance.types import PlannerConfig
     from uavxai.sim.build import fly
+    from uavxai.sim.episode import Observer
     from uavxai.sim.fleet import Fleet
     from uavxai.sim.spec import episode_spec
     from uavxai.sim.steps import Energy
@@ -111,15 +113,69 @@ def test_two_members_on_a_collision_course_keep_clear_of_each_other() -> None:
         p.reset(100 + j)
         return p
 
+    class Apart(Observer):
+        gaps: list[tuple[float, float]] = []  # (horizontal, vertical) between the two
+
+        def on_sample(self, ep, state) -> None:
+            a, b = (state.ids.index(f"ownship-{i}") for i in (0, 1))
+            d = state.pos[a] - state.pos[b]
+            self.gaps.append((float(np.hypot(d[0], d[1])), abs(float(d[2]))))
+
     spec = episode_spec(sc, dynamics="jsbsim", service_point=stations[0], mission=True)
     fleet = Fleet(sc, stations, planner, spec.max_steps)
-    r = fly(spec, planner(0), engine_steps=[Energy(), fleet])
+    r = fly(spec, planner(0), engine_steps=[Energy(), fleet], observers=[Apart()])
     member = fleet.members[0]
     assert r.outcome is Outcome.COMPLETED, r.summary.get("failure")
     assert member.outcome is Outcome.COMPLETED
     assert r.min_separation_m >= sc.avoidance.d_min_m
     assert member.ep.min_separation_m >= sc.avoidance.d_min_m
     assert [e["id"] for e in r.summary["fleet"]] == ["ownship-0", "ownship-1"]
+    # both in transit: kept out of each other's NMAC cylinder, not only d_min apart (issue 32,
+    # round 3's seed 4: 119 m apart and 19 m in height while one kept d_min = 50 m)
+    nmac = sc.avoidance.nmac
+    gaps = np.array(Apart.gaps)
+    inside = (gaps[:, 0] < nmac.horizontal_m) & (gaps[:, 1] < nmac.vertical_m)
+    assert not inside.any(), gaps[inside][:5]
+
+
+def test_a_member_keeps_the_fleet_clearance_from_members_moving_and_d_min_from_traffic() -> None:
+    from uavxai.dynamics.world import JSBSimWorld
+    from uavxai.sim.fleet import IntentPicture, MemberWorld, fleet_keep_m
+
+    sc = fleet_scenario(intruders={"count": 2})
+    keep = fleet_keep_m(sc)
+    assert keep == pytest.approx(152.4 + 15.0 - sc.avoidance.d_min_m)
+    with JSBSimWorld(sc) as world:
+        view_row = 3  # ownship-1 looks; rows: ownship-0, intruder-1, intruder-2, ownship-1, -2
+        moving = {0: False, 3: False, 4: True}
+        picture = IntentPicture(world, view_row, keep, lambda r: moving[r])
+        view = MemberWorld(world, view_row)  # its own row first, as its episode sees it
+        kept = {str(b.id): b.keep_m for b in picture(view.state())}
+        # ownship-0 and ownship-1 both settled: the placement keeps them apart, not the planner
+        assert kept == {"ownship-0": 0.0, "intruder-1": 0.0, "intruder-2": 0.0,
+                        "ownship-2": keep}  # fmt: skip
+        moving[3] = True  # the viewer moving: every member, never an intruder
+        kept = {str(b.id): b.keep_m for b in picture(view.state())}
+        assert kept["ownship-0"] == kept["ownship-2"] == keep
+        assert kept["intruder-1"] == kept["intruder-2"] == 0.0
+
+
+def test_the_planner_adds_a_tracks_keep_to_its_margin_and_nothing_without_one() -> None:
+    from uavxai.avoidance.mcts import predict_levels
+    from uavxai.avoidance.model import EncounterModel
+    from uavxai.avoidance.types import Intruder, PlannerConfig
+
+    cfg = PlannerConfig.from_scenario(default_scenario("keep"))
+    model = EncounterModel(cfg)
+    pair = [Intruder(id=i, x=800.0, y=1000.0 + 300 * i, h=120.0, vx=-20.0, vy=0.0) for i in (1, 2)]
+    plain = predict_levels(model, pair, cfg.depth, cfg.action_hold_s)
+    kept = predict_levels(model, [pair[0], dataclasses.replace(pair[1], keep_m=100.0)],
+                          cfg.depth, cfg.action_hold_s)  # fmt: skip
+    for p, k in zip(plain, kept, strict=True):
+        base = np.zeros_like(k.margin) if p.margin is None else p.margin
+        np.testing.assert_allclose(k.margin[:, 0], base[:, 0])  # the intruder's as it was
+        np.testing.assert_allclose(k.margin[:, 1], base[:, 1] + 100.0)
+        np.testing.assert_array_equal(k.pos, p.pos)
 
 
 def test_member_0_done_first_orbits_its_home_until_the_last_is_done() -> None:

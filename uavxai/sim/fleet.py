@@ -23,7 +23,7 @@ from uavxai.geometry import turn_rate_of_bank
 from uavxai.scenario import Scenario
 from uavxai.sim.command import DirectPath
 from uavxai.sim.episode import EngineStep, Episode
-from uavxai.sim.mission import Mission, MissionConfig, Phase
+from uavxai.sim.mission import Mission, MissionConfig
 from uavxai.sim.steps import Energy, OrbitBreak, service_files
 from uavxai.surveillance.tracker import truth_beliefs
 from uavxai.vocabulary import Outcome
@@ -32,7 +32,6 @@ FLOOR_MARGIN_M = 20.0  # stations at least this far above the world's floor
 # Two stations' layers: the NMAC height plus this much each member may stray from its
 # station's height while it orbits in turbulence (docs/fleet.md, "Orbits kept apart")
 HEIGHT_HOLD_M = 15.0
-MOVING = (Phase.TRANSIT, Phase.RETURNING)  # a UAV's phases off its station's orbit
 
 
 class MemberWorld:
@@ -107,7 +106,7 @@ class IntentPicture:
     action, or the loiter law's bank) as the track's turn rate; the intruders' turn is the one
     they fly now (non-cooperative). A fleet track also gets the fleet's clearance
     (``keep_m``, :func:`fleet_keep_m`) while either of the two is moving (``moving(row)``:
-    transit or returning); two settled ones are kept apart by the placement and spacing."""
+    off its orbit); two on their orbits are kept apart by the placement and the spacing."""
 
     receiver = None
     truth = True
@@ -249,13 +248,16 @@ class Fleet(EngineStep):
             m.ep.begin()
 
     def _moving(self, ep: Episode) -> Callable[[int], bool]:
-        """World row -> whether that UAV is moving (in transit or returning, not holding at
-        home): where the placement and the spacing do not keep it apart from the others."""
+        """World row -> whether that UAV is moving: off its orbit (in transit, avoiding,
+        returning, or avoiding while it holds at home), where the placement and the spacing
+        do not keep it apart from the others (fleet.yaml seed 4: a member avoiding off its
+        orbit, counted as on station, flew towards another's orbit and then turned home
+        across it, 124 m from it)."""
 
         def moving(row: int) -> bool:
             for mission, r in self.uavs(ep):
                 if r == row:
-                    return mission.phase in MOVING and not mission.holding
+                    return not mission.on_orbit
             return False
 
         return moving
