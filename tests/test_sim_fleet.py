@@ -138,26 +138,29 @@ def test_two_members_on_a_collision_course_keep_clear_of_each_other() -> None:
     assert not inside.any(), gaps[inside][:5]
 
 
-def test_a_member_keeps_the_fleet_clearance_from_members_moving_and_d_min_from_traffic() -> None:
+def test_a_member_keeps_the_fleet_clearance_from_members_less_than_a_layer_apart_only() -> None:
     from uavxai.dynamics.world import JSBSimWorld
-    from uavxai.sim.fleet import IntentPicture, MemberWorld, fleet_keep_m
+    from uavxai.sim.fleet import IntentPicture, MemberWorld, fleet_keep_m, orbit_separation
 
     sc = fleet_scenario(intruders={"count": 2})
-    keep = fleet_keep_m(sc)
+    keep, layer = fleet_keep_m(sc), orbit_separation(sc).vertical_m
     assert keep == pytest.approx(152.4 + 15.0 - sc.avoidance.d_min_m)
+    assert layer == pytest.approx(30.48 + 30.0)
     with JSBSimWorld(sc) as world:
-        view_row = 3  # ownship-1 looks; rows: ownship-0, intruder-1, intruder-2, ownship-1, -2
-        moving = {0: False, 3: False, 4: True}
-        picture = IntentPicture(world, view_row, keep, lambda r: moving[r])
-        view = MemberWorld(world, view_row)  # its own row first, as its episode sees it
-        kept = {str(b.id): b.keep_m for b in picture(view.state())}
-        # ownship-0 and ownship-1 both settled: the placement keeps them apart, not the planner
-        assert kept == {"ownship-0": 0.0, "intruder-1": 0.0, "intruder-2": 0.0,
-                        "ownship-2": keep}  # fmt: skip
-        moving[3] = True  # the viewer moving: every member, never an intruder
-        kept = {str(b.id): b.keep_m for b in picture(view.state())}
-        assert kept["ownship-0"] == kept["ownship-2"] == keep
-        assert kept["intruder-1"] == kept["intruder-2"] == 0.0
+        picture = IntentPicture(world, keep, layer)
+        view = MemberWorld(world, 3)  # ownship-1 looks, its own row first
+        s = view.state()
+        ids = list(s.ids)
+        s.pos[ids.index("ownship-2"), 2] = s.pos[0, 2] + layer + 0.5  # in a layer of its own
+        s.pos[ids.index("ownship-0"), 2] = s.pos[0, 2] - layer + 0.5  # not quite
+        s.pos[ids.index("intruder-1"), 2] = s.pos[0, 2]  # traffic at its height
+        kept = {str(b.id): b.keep_m for b in picture(s)}
+        assert kept == {"ownship-0": keep, "intruder-1": 0.0, "intruder-2": 0.0,
+                        "ownship-2": 0.0}  # fmt: skip
+        # the clearance holds the NMAC cylinder wherever it applies: a sphere of d_min + keep
+        # less than a layer apart in height still reaches the NMAC horizontal distance
+        nmac = sc.avoidance.nmac
+        assert math.sqrt((sc.avoidance.d_min_m + keep) ** 2 - layer**2) >= nmac.horizontal_m
 
 
 def test_the_planner_adds_a_tracks_keep_to_its_margin_and_nothing_without_one() -> None:

@@ -104,44 +104,41 @@ class IntentPicture:
     """A member's picture: every other aircraft's exact state, and for the fleet's aircraft
     their intent, the turn their autopilot is commanded to fly (the chosen branch's first
     action, or the loiter law's bank) as the track's turn rate; the intruders' turn is the one
-    they fly now (non-cooperative). A fleet track also gets the fleet's clearance
-    (``keep_m``, :func:`fleet_keep_m`) while either of the two is moving (``moving(row)``:
-    off its orbit); two on their orbits are kept apart by the placement and the spacing."""
+    they fly now (non-cooperative). A fleet track less than ``layer_m`` from it in height (not
+    in a layer of its own) also gets the fleet's clearance ``keep_m`` (:func:`fleet_keep_m`).
+    Only the planner reads it, and the planner flies a member only off its orbit (in transit,
+    avoiding, returning): on their orbits the placement and the spacing keep members apart."""
 
     receiver = None
     truth = True
 
-    def __init__(
-        self, world, row: int, keep_m: float = 0.0, moving: Callable[[int], bool] | None = None
-    ) -> None:
+    def __init__(self, world, keep_m: float = 0.0, layer_m: float = 0.0) -> None:
         self._world = world
-        self._row = row
         self._keep_m = keep_m
-        self._moving = moving
+        self._layer_m = layer_m
 
     def __call__(self, state: TrafficState) -> list[Intruder]:
         w = self._world
         fleet = {w.ids[r]: r for r in w.fleet_rows}
-        moving = self._moving
-        me_moving = moving is not None and moving(self._row)
+        own_h = float(state.pos[0, 2])
         out = []
         for b in truth_beliefs(state):
             row = fleet.get(str(b.id))
             if row is not None:
                 bank = w.aircraft[row].read_command()["bank_cmd_rad"]
                 speed = max(float(np.hypot(b.vx, b.vy)), 1.0)
-                keep = me_moving or (moving is not None and moving(row))
-                b = dataclasses.replace(b, turn_rate=turn_rate_of_bank(bank, speed),
-                                        keep_m=self._keep_m if keep else 0.0)  # fmt: skip
+                keep = self._keep_m if abs(b.h - own_h) < self._layer_m else 0.0
+                b = dataclasses.replace(b, turn_rate=turn_rate_of_bank(bank, speed), keep_m=keep)
             out.append(b)
         return out
 
 
 def fleet_keep_m(scenario: Scenario) -> float:
-    """The clearance a member keeps beyond ``d_min`` from another member while either is
-    moving (docs/fleet.md, "Kept apart in transit"): out to the NMAC horizontal distance plus
-    ``HEIGHT_HOLD_M`` (what a flown path strays from the planner's model), as a sphere, which
-    holds the NMAC cylinder; never less than nothing."""
+    """The clearance a member's planner keeps beyond ``d_min`` from another member not in a
+    layer of its own (docs/fleet.md, "Kept apart in transit"): out to the NMAC horizontal
+    distance plus ``HEIGHT_HOLD_M`` (what a flown path strays from the planner's model), as
+    a sphere, which holds the NMAC cylinder wherever the two are less than a layer apart in
+    height (``orbit_separation``: 60.5 m; the sphere then reaches 155 m out); never negative."""
     a = scenario.avoidance
     return max(a.nmac.horizontal_m + HEIGHT_HOLD_M - a.d_min_m, 0.0)
 
@@ -156,7 +153,7 @@ class Member:
 
     def __init__(
         self, scenario: Scenario, world, j: int, station, planner, max_steps: int,
-        path: MemberPath = None, moving: Callable[[int], bool] | None = None,
+        path: MemberPath = None,
     ) -> None:  # fmt: skip
         from uavxai.sim.build import start_episode
 
@@ -172,7 +169,8 @@ class Member:
         self._closed, self._counters = False, None
         self.ep = start_episode(
             scenario, view, planner, path, config.station, max_steps=max_steps,
-            picture=IntentPicture(world, view.row, fleet_keep_m(scenario), moving),
+            picture=IntentPicture(world, fleet_keep_m(scenario),
+                                  orbit_separation(scenario).vertical_m),
             mission=self.mission,
             engine_steps=[self.mission, self.energy],
         )  # fmt: skip
@@ -243,24 +241,9 @@ class Fleet(EngineStep):
     def on_start(self, ep: Episode) -> None:
         for j in range(1, len(self.stations)):
             m = Member(self.scenario, ep.world, j, self.stations[j], self._planner(j),
-                       self._max_steps, self._path, self._moving(ep))  # fmt: skip
+                       self._max_steps, self._path)  # fmt: skip
             self.members.append(m)  # before it begins: closed whatever happens
             m.ep.begin()
-
-    def _moving(self, ep: Episode) -> Callable[[int], bool]:
-        """World row -> whether that UAV is moving: off its orbit (in transit, avoiding,
-        returning, or avoiding while it holds at home), where the placement and the spacing
-        do not keep it apart from the others (fleet.yaml seed 4: a member avoiding off its
-        orbit, counted as on station, flew towards another's orbit and then turned home
-        across it, 124 m from it)."""
-
-        def moving(row: int) -> bool:
-            for mission, r in self.uavs(ep):
-                if r == row:
-                    return not mission.on_orbit
-            return False
-
-        return moving
 
     def uavs(self, ep: Episode) -> list[tuple[Mission, int]]:
         """Each UAV's mission and world row, member 0 first."""

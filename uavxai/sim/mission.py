@@ -145,14 +145,6 @@ class Mission(EngineStep):
         )
 
     @property
-    def on_orbit(self) -> bool:
-        """Flying its orbit (the station's, or home's while holding), not the planner: where
-        a fleet's placement and spacing keep it apart from the others (uavxai.sim.fleet)."""
-        if self.holding:
-            return not self._hold_conflict
-        return self.phase == Phase.ON_STATION and not self.suspended
-
-    @property
     def serving(self) -> bool:
         return self.phase in (Phase.ON_STATION, Phase.AVOIDING) and not self.suspended
 
