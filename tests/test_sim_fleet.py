@@ -244,6 +244,40 @@ def test_fleet_run_flies_every_member_and_reports_each(fleet_run: Path) -> None:
     assert {u["id"] for u in fleet} <= ids and "ownship" not in ids
 
 
+def member_nmacs(trajectory: Path, nmac) -> list[tuple[float, str, str]]:
+    """Every sample of trajectory.csv where two members are inside each other's NMAC
+    cylinder: (t, one, other)."""
+    at: dict[str, dict[str, tuple[float, float, float]]] = {}
+    for row in csv.DictReader(trajectory.open()):
+        if row["id"].startswith("ownship-"):
+            at.setdefault(row["t"], {})[row["id"]] = (
+                float(row["x"]), float(row["y"]), float(row["h"])
+            )  # fmt: skip
+    found = []
+    for t, pos in at.items():
+        ids = sorted(pos)
+        for i, a in enumerate(ids):
+            for b in ids[i + 1 :]:
+                (xa, ya, ha), (xb, yb, hb) = pos[a], pos[b]
+                level = abs(ha - hb) < nmac.vertical_m
+                if level and math.hypot(xa - xb, ya - yb) < nmac.horizontal_m:
+                    found.append((float(t), a, b))
+    return found
+
+
+def test_members_returning_across_an_orbit_keep_out_of_its_nmac_cylinder(tmp_path: Path) -> None:
+    """fleet.yaml seed 4, round 3 of docs/fleet.md: member 2, returning home, crossed member
+    1's orbit 119 m from it and 19 m in height (an NMAC) while its planner kept d_min = 50 m,
+    and then came within 48 m of an intruder. With the fleet's clearance: completed, every
+    member, and no two members inside each other's NMAC cylinder in any sample."""
+    assert main(["run", str(FLEET), "--seed", "4", "--out", str(tmp_path), "--force"]) == 0
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["outcome"] == "completed"
+    assert [u["outcome"] for u in summary["fleet"]] == ["completed"] * 3
+    nmac = load_scenario(FLEET).avoidance.nmac
+    assert member_nmacs(tmp_path / "trajectory.csv", nmac) == []
+
+
 def test_fleet_delivered_bits_are_recomputed_from_service_csv(fleet_run: Path) -> None:
     summary = json.loads((fleet_run / "summary.json").read_text())
     dt = 1.0 / load_scenario(FLEET).dynamics.trajectory_hz
