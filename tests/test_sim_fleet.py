@@ -144,7 +144,7 @@ def test_a_member_keeps_the_fleet_clearance_from_members_less_than_a_layer_apart
 
     sc = fleet_scenario(intruders={"count": 2})
     keep, layer = fleet_keep_m(sc), orbit_separation(sc).vertical_m
-    assert keep == pytest.approx(152.4 + 15.0 - sc.avoidance.d_min_m)
+    assert keep == pytest.approx(math.hypot(152.4, 30.48) - sc.avoidance.d_min_m)
     assert layer == pytest.approx(30.48 + 30.0)
     with JSBSimWorld(sc) as world:
         picture = IntentPicture(world, keep, layer)
@@ -157,10 +157,11 @@ def test_a_member_keeps_the_fleet_clearance_from_members_less_than_a_layer_apart
         kept = {str(b.id): b.keep_m for b in picture(s)}
         assert kept == {"ownship-0": keep, "intruder-1": 0.0, "intruder-2": 0.0,
                         "ownship-2": 0.0}  # fmt: skip
-        # the clearance holds the NMAC cylinder wherever it applies: a sphere of d_min + keep
-        # less than a layer apart in height still reaches the NMAC horizontal distance
+        # the clearance's sphere holds the NMAC cylinder: at the NMAC height it still reaches
+        # the NMAC horizontal distance
         nmac = sc.avoidance.nmac
-        assert math.sqrt((sc.avoidance.d_min_m + keep) ** 2 - layer**2) >= nmac.horizontal_m
+        reach = math.sqrt((sc.avoidance.d_min_m + keep) ** 2 - nmac.vertical_m**2)
+        assert reach >= nmac.horizontal_m - 1e-9
 
 
 def test_the_planner_adds_a_tracks_keep_to_its_margin_and_nothing_without_one() -> None:

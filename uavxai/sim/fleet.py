@@ -135,12 +135,14 @@ class IntentPicture:
 
 def fleet_keep_m(scenario: Scenario) -> float:
     """The clearance a member's planner keeps beyond ``d_min`` from another member not in a
-    layer of its own (docs/fleet.md, "Kept apart in transit"): out to the NMAC horizontal
-    distance plus ``HEIGHT_HOLD_M`` (what a flown path strays from the planner's model), as
-    a sphere, which holds the NMAC cylinder wherever the two are less than a layer apart in
-    height (``orbit_separation``: 60.5 m; the sphere then reaches 155 m out); never negative."""
+    layer of its own (docs/fleet.md, "Kept apart in transit"): the smallest sphere that holds
+    the NMAC cylinder (its radius the cylinder's corner, hypot(152.4, 30.48) = 155.4 m), no
+    more: members orbiting neighbouring homes come 158 m near (``fleet.spacing_m`` 370 m less
+    two 106 m radii), and a larger sphere put a member avoiding at home in conflict with its
+    neighbour's orbit on every branch (round 5: fleet.yaml seeds 16 and 18 left the world
+    there, 44 m from its edge); never negative."""
     a = scenario.avoidance
-    return max(a.nmac.horizontal_m + HEIGHT_HOLD_M - a.d_min_m, 0.0)
+    return max(float(np.hypot(a.nmac.horizontal_m, a.nmac.vertical_m)) - a.d_min_m, 0.0)
 
 
 # Member j's command path over its view of the world (``uavxai.sim.run.member_paths``: MAVLink
