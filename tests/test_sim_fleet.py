@@ -22,6 +22,7 @@ from uavxai.vocabulary import Outcome
 
 FLEET = Path(__file__).resolve().parents[1] / "scenarios" / "fleet.yaml"
 START = {"x": 150, "y": 1300, "h": 120, "heading_deg": 90, "speed_mps": 20}
+WORLD = {"x": [-400, 2000]}  # fleet.yaml's: the homes' orbits clear of the edges
 
 
 def fleet_scenario(**over):
@@ -318,6 +319,47 @@ def test_fleet_yaml_stations_are_kept_apart_for_orbits_and_nmac() -> None:
             assert horizontal >= sep.horizontal_m or vertical >= sep.vertical_m, (i, j)
 
 
+def test_fleet_yaml_homes_are_orbited_clear_of_every_edge_of_the_world() -> None:
+    """Rounds 1-6 of docs/fleet.md: every out-of-bounds was at fleet.yaml's homes, orbited 44 m
+    inside the west edge. Each home orbit now keeps one turn diameter + the NMAC horizontal
+    distance inside every edge, and a fleet whose homes cannot is refused by name."""
+    from uavxai.dynamics.orbit import scenario_orbit_radius
+    from uavxai.errors import UserError
+    from uavxai.sim.fleet import check_homes
+
+    sc = load_scenario(FLEET)
+    r, need = scenario_orbit_radius(sc), 2 * scenario_orbit_radius(sc) + 152.4
+    assert check_homes(sc).horizontal_m == pytest.approx(need)
+    w = sc.world
+    for s in sc.member_starts():
+        edge = min(s.x - w.x[0], w.x[1] - s.x, s.y - w.y[0], w.y[1] - s.y) - r
+        assert edge >= need
+    # the same homes in the default 2 km world: member 0's orbit is 44 m inside the west edge
+    with pytest.raises(UserError, match=r"member 0's home \(150, 1300\).* 44 m from the edge"):
+        check_homes(fleet_scenario())
+    # the start 1 m farther from the edge than the rule needs passes; 1 m nearer does not
+    for x, ok in ((r + need + 1, True), (r + need - 1, False)):
+        sc = fleet_scenario(ownship={"start": {**START, "x": x}})
+        if ok:
+            check_homes(sc)
+        else:
+            with pytest.raises(UserError, match=f"allowed: at least {need:.0f} m"):
+                check_homes(sc)
+    with pytest.raises(UserError, match="fleet.spacing_m 300 m"):
+        check_homes(fleet_scenario(fleet={"size": 2, "spacing_m": 300}, world=WORLD))
+
+
+def test_validate_refuses_a_fleet_whose_homes_are_near_the_edge(tmp_path: Path, capsys) -> None:
+    import yaml
+
+    scenario = tmp_path / "edge.yaml"
+    scenario.write_text(yaml.safe_dump({"name": "edge", "fleet": {"size": 3},
+                                        "ownship": {"start": START}}))  # fmt: skip
+    assert main(["validate", str(scenario)]) == 2
+    assert "member 0's home" in capsys.readouterr().err
+    assert main(["validate", str(FLEET)]) == 0
+
+
 # ------------------------------------------------------------------------ MAVLink per member
 def test_member_links_listen_on_ports_of_their_own_and_send_to_the_same_peer() -> None:
     from uavxai.sim.run import member_link
@@ -352,6 +394,7 @@ def test_a_ground_station_sees_the_fleet_each_member_its_own_system(tmp_path: Pa
     scenario = tmp_path / "fleet3.yaml"
     scenario.write_text(yaml.safe_dump({
         "name": "fleet3", "seed": 3, "fleet": {"size": 3}, "ownship": {"start": START},
+        "world": WORLD,
         "intruders": {"count": 1}, "mission": {"service_s": 10},
         "avoidance": {"max_steps": 30, "mcts": {"simulations": 60, "depth": 3}},
         "log": {"rerun": False},

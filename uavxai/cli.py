@@ -600,6 +600,10 @@ def cmd_validate(args: argparse.Namespace) -> int:
     from uavxai.service.stage import check_planner_fits
 
     check_planner_fits(sc)
+    if sc.fleet.size > 1:  # the homes are checked where the run would check them
+        from uavxai.sim.fleet import check_homes
+
+        check_homes(sc)
     print(
         f"{args.scenario}: valid scenario '{sc.name}' (seed {sc.seed}): {sc.comms.users.k} users, "
         f"{sc.intruders.n} intruders, service planner {sc.service.planner}, avoidance planner "

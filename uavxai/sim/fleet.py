@@ -381,15 +381,7 @@ def fleet_stations(scenario: Scenario, users: Sequence) -> object:
     # two members placed at 50 m flew out of the world at 32 s)
     floor = min(space.lo[2] + FLOOR_MARGIN_M, space.hi[2])
     space = dataclasses.replace(space, lo=np.array([*space.lo[:2], floor]))
-    sep = orbit_separation(scenario)
-    if scenario.fleet.spacing_m < sep.horizontal_m:  # the homes are orbited too, at one height
-        from uavxai.errors import UserError
-
-        raise UserError(
-            f"fleet.spacing_m {scenario.fleet.spacing_m:g} m: members done orbit their homes "
-            f"(their starts, abreast at one height) and would meet; allowed: at least "
-            f"{sep.horizontal_m:.0f} m (twice the orbit radius + the NMAC horizontal distance)"
-        )
+    sep = check_homes(scenario)
     problem = FleetProblem(
         FleetChannel.of(channel, scenario.fleet.size), space, scenario.comms.power_levels, sep
     )
@@ -403,6 +395,39 @@ def fleet_stations(scenario: Scenario, users: Sequence) -> object:
             f"in comms.users.region and world.h ({e}); allowed: fewer UAVs, a larger region "
             "or a taller world"
         ) from e
+
+
+def check_homes(scenario: Scenario):
+    """Refuse homes (the members' starts) the fleet cannot orbit safely (docs/fleet.md, "The
+    homes"), and return the stations' separation (:func:`orbit_separation`). Members done orbit
+    their homes at one height, so the homes are at least the stations' horizontal separation
+    apart (``fleet.spacing_m``); and each home orbit stays at least that far, one turn diameter
+    + the NMAC horizontal distance, inside every edge of the world: room for a member avoiding
+    there to turn about without leaving it (fleet.yaml's homes, 44 m inside the west edge, were
+    every out-of-bounds of rounds 1-6)."""
+    from uavxai.dynamics.orbit import scenario_orbit_radius
+    from uavxai.errors import UserError
+
+    sep = orbit_separation(scenario)
+    need = sep.horizontal_m
+    if scenario.fleet.spacing_m < need:  # the homes are orbited too, at one height
+        raise UserError(
+            f"fleet.spacing_m {scenario.fleet.spacing_m:g} m: members done orbit their homes "
+            f"(their starts, abreast at one height) and would meet; allowed: at least "
+            f"{need:.0f} m (twice the orbit radius + the NMAC horizontal distance)"
+        )
+    r, w = scenario_orbit_radius(scenario), scenario.world
+    for i, s in enumerate(scenario.member_starts()):
+        edge = min(s.x - w.x[0], w.x[1] - s.x, s.y - w.y[0], w.y[1] - s.y) - r
+        if edge < need:
+            raise UserError(
+                f"fleet.size = {scenario.fleet.size}: member {i}'s home ({s.x:.0f}, {s.y:.0f}) "
+                f"is orbited (radius {r:.0f} m) {edge:.0f} m from the edge of the world x "
+                f"{list(w.x)}, y {list(w.y)}; allowed: at least {need:.0f} m (one turn "
+                "diameter + the NMAC horizontal distance): ownship.start farther from the "
+                "edges, a smaller fleet.spacing_m or a larger world"
+            )
+    return sep
 
 
 def orbit_separation(scenario: Scenario):
