@@ -165,6 +165,44 @@ def test_a_member_keeps_the_fleet_clearance_from_members_less_than_a_layer_apart
         assert reach >= nmac.horizontal_m - 1e-9
 
 
+def test_member_0_plans_with_the_members_intent_and_clearance_and_its_own_surveillance() -> None:
+    """Member 0's picture (issue 32): its ADS-B tracks of the members give way to what the
+    members share (exact state, the commanded turn, the clearance when less than a layer apart),
+    the intruders stay as its surveillance believes them; it never tracks onboard."""
+    from uavxai.dynamics.world import JSBSimWorld
+    from uavxai.geometry import turn_rate_of_bank
+    from uavxai.sim.clock import Clock
+    from uavxai.sim.fleet import IntentPicture, fleet_keep_m, orbit_separation
+    from uavxai.sim.picture import Picture
+
+    sc = fleet_scenario(intruders={"count": 3})
+    assert sc.surveillance.model == "adsb"
+    with JSBSimWorld(sc) as world:
+        world.command_row(world.member_rows[0], bank_cmd_rad=math.radians(20))  # member 1 turns
+        world.step(60)
+        traffic = Picture(sc)
+        s = world.state()
+        traffic.listen(s, Clock.from_scenario(sc))
+        traffic._hear(s, None)
+        picture = IntentPicture.of(sc, world, traffic)
+        assert picture.receiver is None and picture.truth is False
+        ids = list(s.ids)
+        s.pos[ids.index("ownship-2"), 2] = s.pos[0, 2] + orbit_separation(sc).vertical_m + 1
+        seen = {str(b.id): b for b in picture(s)}
+        surveilled = {str(b.id): b for b in traffic(s)}
+        assert {"ownship-1", "ownship-2"} <= set(surveilled)  # it tracks them by ADS-B too
+        assert sorted(seen) == sorted(surveilled)  # each aircraft once
+        for k in ("intruder-1", "intruder-2", "intruder-3"):
+            if k in surveilled:
+                assert seen[k] == surveilled[k]  # surveillance's belief, untouched
+        one = seen["ownship-1"]
+        row = ids.index("ownship-1")
+        assert (one.x, one.y, one.h) == tuple(float(v) for v in s.pos[row])  # shared, exact
+        speed = float(np.hypot(*s.vel[row, :2]))
+        assert one.turn_rate == pytest.approx(turn_rate_of_bank(math.radians(20), speed))
+        assert one.keep_m == fleet_keep_m(sc) and seen["ownship-2"].keep_m == 0.0
+
+
 def test_the_planner_adds_a_tracks_keep_to_its_margin_and_nothing_without_one() -> None:
     from uavxai.avoidance.mcts import predict_levels
     from uavxai.avoidance.model import EncounterModel

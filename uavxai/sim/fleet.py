@@ -101,21 +101,27 @@ class MemberWorld:
 
 
 class IntentPicture:
-    """A member's picture: every other aircraft's exact state, and for the fleet's aircraft
-    their intent, the turn their autopilot is commanded to fly (the chosen branch's first
-    action, or the loiter law's bank) as the track's turn rate; the intruders' turn is the one
-    they fly now (non-cooperative). A fleet track less than ``layer_m`` from it in height (not
-    in a layer of its own) also gets the fleet's clearance ``keep_m`` (:func:`fleet_keep_m`).
-    Only the planner reads it, and the planner flies a member only off its orbit (in transit,
-    avoiding, returning): on their orbits the placement and the spacing keep members apart."""
+    """A member's picture: the fleet's aircraft as they share themselves (exact state, and
+    their intent, the turn their autopilot is commanded to fly: the chosen branch's first
+    action, or the loiter law's bank, as the track's turn rate) and the intruders, whose turn
+    is the one they fly now (non-cooperative): their exact state, or what ``traffic`` (member
+    0's surveillance picture) believes of them. A fleet track less than ``layer_m`` from it in
+    height (not in a layer of its own) also gets the fleet's clearance ``keep_m``
+    (:func:`fleet_keep_m`). Only the planner reads it, and the planner flies a member only off
+    its orbit (in transit, avoiding, returning): on their orbits the placement and the spacing
+    keep members apart."""
 
-    receiver = None
-    truth = True
+    receiver = None  # the beliefs are formed here: member 0's planner never tracks onboard
 
-    def __init__(self, world, keep_m: float = 0.0, layer_m: float = 0.0) -> None:
+    def __init__(self, world, keep_m: float = 0.0, layer_m: float = 0.0, traffic=None) -> None:
         self._world = world
         self._keep_m = keep_m
         self._layer_m = layer_m
+        self._traffic = traffic
+
+    @property
+    def truth(self) -> bool:
+        return self._traffic is None or self._traffic.truth
 
     def __call__(self, state: TrafficState) -> list[Intruder]:
         w = self._world
@@ -129,8 +135,17 @@ class IntentPicture:
                 speed = max(float(np.hypot(b.vx, b.vy)), 1.0)
                 keep = self._keep_m if abs(b.h - own_h) < self._layer_m else 0.0
                 b = dataclasses.replace(b, turn_rate=turn_rate_of_bank(bank, speed), keep_m=keep)
+            elif self._traffic is not None:
+                continue  # an intruder: surveillance's belief below
             out.append(b)
+        if self._traffic is not None:  # its ADS-B tracks of the members give way to the above
+            out += [b for b in self._traffic(state) if str(b.id) not in fleet]
         return out
+
+    @classmethod
+    def of(cls, scenario: Scenario, world, traffic=None) -> IntentPicture:
+        """The picture a fleet member plans from, with the fleet's clearance and layers."""
+        return cls(world, fleet_keep_m(scenario), orbit_separation(scenario).vertical_m, traffic)
 
 
 def fleet_keep_m(scenario: Scenario) -> float:
@@ -171,8 +186,7 @@ class Member:
         self._closed, self._counters = False, None
         self.ep = start_episode(
             scenario, view, planner, path, config.station, max_steps=max_steps,
-            picture=IntentPicture(world, fleet_keep_m(scenario),
-                                  orbit_separation(scenario).vertical_m),
+            picture=IntentPicture.of(scenario, world),
             mission=self.mission,
             engine_steps=[self.mission, self.energy],
         )  # fmt: skip
@@ -241,6 +255,9 @@ class Fleet(EngineStep):
         self._waiting = False
 
     def on_start(self, ep: Episode) -> None:
+        # member 0 plans as the members do: their shared state, intent and clearance, and its
+        # own surveillance of the intruders (the picture it had; still fed as an engine step)
+        ep.picture = IntentPicture.of(self.scenario, ep.world, traffic=ep.picture)
         for j in range(1, len(self.stations)):
             m = Member(self.scenario, ep.world, j, self.stations[j], self._planner(j),
                        self._max_steps, self._path)  # fmt: skip
