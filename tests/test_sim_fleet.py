@@ -398,6 +398,92 @@ def test_validate_refuses_a_fleet_whose_homes_are_near_the_edge(tmp_path: Path, 
     assert main(["validate", str(FLEET)]) == 0
 
 
+# --------------------------------------------------------------------- a member leaving early
+def test_fleet_leave_is_refused_without_a_fleet_or_such_a_member() -> None:
+    with pytest.raises(ScenarioError, match="allowed: fleet.size >= 2"):
+        default_scenario("one", fleet={"leave": {"member": 0, "at_s": 10}})
+    with pytest.raises(ScenarioError, match=r"fleet.leave.member 3.*allowed: 0 .. 2"):
+        fleet_scenario(fleet={"size": 3, "leave": {"member": 3, "at_s": 10}})
+
+
+def test_nearest_stations_moves_the_fleet_least() -> None:
+    from uavxai.sim.fleet import nearest_stations
+
+    at = np.array([[0.0, 0.0, 90.0], [1000.0, 0.0, 90.0], [500.0, 800.0, 90.0]])
+    stations = np.array([[520.0, 790.0, 160.0], [980.0, 30.0, 90.0], [10.0, -20.0, 70.0]])
+    assert nearest_stations(at, stations).tolist() == [2, 1, 0]
+
+
+@pytest.fixture(scope="module")
+def leave_run(tmp_path_factory) -> Path:
+    """fleet.yaml's fleet without intruders, 40 s on station, member 1 leaving at 45 s (all
+    three on station from about 30 s)."""
+    import yaml
+
+    out = tmp_path_factory.mktemp("leave")
+    scenario = out / "leave.yaml"
+    scenario.write_text(yaml.safe_dump({
+        "name": "leave", "seed": 3, "world": WORLD, "ownship": {"start": START},
+        "fleet": {"size": 3, "leave": {"member": 1, "at_s": 45}},
+        "comms": {"access": "ofdma", "users": {"count": 9,
+                                               "mobility": {"model": "random_waypoint"}}},
+        "intruders": {"count": 0}, "mission": {"service_s": 40}, "log": {"rerun": False},
+    }))  # fmt: skip
+    assert main(["run", str(scenario), "--out", str(out / "run"), "--force"]) == 0
+    return out / "run"
+
+
+def test_a_member_leaving_early_has_its_users_re_covered_by_the_others(leave_run: Path) -> None:
+    """Issue 32's must-show, a real flight: member 1 leaves at 45 s; the others are re-planned
+    for the whole crowd, its users are served by them from then on (service.csv), and the QoS
+    shares before and after in the summary are service.csv's."""
+    summary = json.loads((leave_run / "summary.json").read_text())
+    assert summary["outcome"] == "completed"
+    fleet = summary["fleet"]
+    assert [u["outcome"] for u in fleet] == ["completed"] * 3
+    (gone,) = summary["fleet_departures"]
+    t0, mine = gone["t"], gone["users"]
+    assert gone["uav"] == 1 and 45.0 <= t0 < 45.0 + 0.2 and "fleet.leave" in gone["why"]
+    assert fleet[1]["phases"]["returning"] == pytest.approx(t0, abs=0.2)
+    assert mine == fleet[1]["users_served"] and mine
+    assert [k for k, n in enumerate(gone["association_before"]) if n == 1] == mine
+    after = gone["association_after"]
+    assert 1 not in after and -1 not in after  # the whole crowd, by the two left
+    assert fleet[1]["users_served_after"] == []
+    for n in (0, 2):
+        assert fleet[n]["users_served_after"] == [k for k, m in enumerate(after) if m == n]
+        assert fleet[n]["station"] == gone["stations_after"][str(n)]  # flown to it
+    rows = list(csv.DictReader((leave_run / "service.csv").open()))
+    assert not [r for r in rows if r["uav"] == "1" and float(r["t"]) >= t0]
+    for r in rows:  # who serves whom: the plan in force at the time
+        uav, k, t = int(r["uav"]), int(r["user"]), float(r["t"])
+        assert (gone["association_before"] if t < t0 else after)[k] == uav
+    # the QoS shares recomputed from service.csv: per sample anyone served, a user with no row
+    # counts as below QoS
+    qos = load_scenario(FLEET).comms.qos_rate_bps
+    rate: dict[float, dict[int, float]] = {}
+    for r in rows:
+        rate.setdefault(float(r["t"]), {})[int(r["user"])] = float(r["rate_bps"])
+    began = min(float(r["t"]) for r in rows if r["uav"] == "1")
+    windows = {"before": [t for t in rate if began <= t < t0],
+               "after": [t for t in rate if t >= t0]}  # fmt: skip
+    for name, times in windows.items():
+        hits = [rate[t].get(k, 0.0) >= qos for t in times for k in mine]
+        assert gone[f"samples_{name}"] == len(times) > 50
+        assert gone[f"qos_share_{name}"] == pytest.approx(np.mean(hits), abs=1e-12)
+        crowd = [rate[t].get(k, 0.0) >= qos for t in times for k in range(len(after))]
+        assert gone[f"crowd_qos_share_{name}"] == pytest.approx(np.mean(crowd), abs=1e-12)
+    assert gone["qos_share_before"] > 0.9 and gone["qos_share_after"] > 0.5  # re-covered
+    assert gone["recovered_after_s"] is not None and gone["recovered_after_s"] < 30
+    # each UAV's delivery over both plans, recomputed from service.csv
+    dt = 1.0 / load_scenario(FLEET).dynamics.trajectory_hz
+    for n, u in enumerate(fleet):
+        bits = sum(float(r["rate_bps"]) * dt for r in rows if r["uav"] == str(n))
+        assert bits == pytest.approx(u["delivered_bits"], rel=0.01)
+    nmac = load_scenario(FLEET).avoidance.nmac
+    assert member_nmacs(leave_run / "trajectory.csv", nmac) == []
+
+
 # ------------------------------------------------------------------------ MAVLink per member
 def test_member_links_listen_on_ports_of_their_own_and_send_to_the_same_peer() -> None:
     from uavxai.sim.run import member_link

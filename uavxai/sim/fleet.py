@@ -12,6 +12,8 @@ decides every member at each decision and hands each member every sample;
 from __future__ import annotations
 
 import dataclasses
+import itertools
+import math
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
@@ -264,6 +266,10 @@ class Fleet(EngineStep):
             self.members.append(m)  # before it begins: closed whatever happens
             m.ep.begin()
 
+    def episodes(self, ep: Episode) -> list[Episode]:
+        """Each UAV's episode, member 0 (the run's) first."""
+        return [ep, *(m.ep for m in self.members)]
+
     def uavs(self, ep: Episode) -> list[tuple[Mission, int]]:
         """Each UAV's mission and world row, member 0 first."""
         return [(ep.mission, 0)] + [(m.mission, m.ep.world.row) for m in self.members]
@@ -315,35 +321,57 @@ class FleetService(EngineStep):
     one-UAV channel (``FleetChannel.uav_channel``: exact in OFDMA; in the shared band with the
     other UAVs' interference as planned), fading drawn per UAV from its own stream. Writes
     users.csv and service.csv (with ``uav``); adds each UAV's ``delivered_bits`` and
-    ``users_served`` to ``summary.fleet`` and the fleet's totals to ``summary.mission``."""
+    ``users_served`` to ``summary.fleet`` and the fleet's totals to ``summary.mission``.
+
+    A member leaving early (its battery's reserve, or ``fleet.leave``; docs/fleet.md, "A member
+    leaving early"): the members still to serve are re-planned for the whole crowd where it
+    now is (:func:`fleet_stations` with their number), each flown to the new station nearest
+    it, and serve the new association from then on; ``summary.fleet_departures`` says who left
+    when, which UAV served whom before and after, and the QoS share of the departed member's
+    users (and of the crowd) before and after."""
 
     def __init__(self, scenario: Scenario, channel, plan, fleet: Fleet, out: Path | None) -> None:
-        from uavxai.comms.delivery import Delivery
-        from uavxai.comms.fleet import FleetChannel
         from uavxai.comms.mobility import UserMobility
 
-        self.fleet = fleet
+        self.scenario, self.channel, self.fleet = scenario, channel, fleet
         self.walk = UserMobility.from_scenario(scenario, users=channel.users)
-        fc = FleetChannel.of(channel, len(plan.positions))
-        gains = fc.gains(plan.positions)
-        self.mine = [np.flatnonzero(plan.association == n) for n in range(fc.n)]
-        self.delivery = [
-            Delivery(
-                fc.uav_channel(n, gains, plan.association, plan.power_w),
-                plan.power_w[users],
-                rng=np.random.default_rng([scenario.seed, 0x736572, n]),
-            )
-            for n, users in enumerate(self.mine)
-        ]
+        n = len(plan.positions)
+        self.mine = [np.flatnonzero(plan.association == i) for i in range(n)]
+        self.first_mine = list(self.mine)
+        self.delivery = self._deliveries(channel, plan, list(range(n)), ())
+        self.spent: list[list] = [[] for _ in range(n)]  # each UAV's deliveries of past plans
         self._breaks = [OrbitBreak() for _ in self.mine]
         self.qos_bps = float(scenario.comms.qos_rate_bps)
+        self._leave = scenario.fleet.leave
+        self._gone: list[int] = []  # the UAVs that left early, in order
+        self.departures: list[dict] = []
+        self._rates: list[tuple[float, np.ndarray, bool]] = []  # (t, rates, anyone serving)
+        self._first_served: dict[int, float] = {}  # when each UAV began to serve
         self._files = service_files(out)
         if self._files:
             self._users, self._service = self._files
 
+    def _deliveries(self, channel, plan, uavs: list[int], stream: tuple[int, ...]) -> list:
+        """A :class:`Delivery` for each of ``uavs``, plan UAV i serving as fleet UAV
+        ``uavs[i]`` (its fading from its own stream; ``stream`` apart for each re-plan)."""
+        from uavxai.comms.delivery import Delivery
+        from uavxai.comms.fleet import FleetChannel
+
+        fc = FleetChannel.of(channel, len(plan.positions))
+        gains = fc.gains(plan.positions)
+        return [
+            Delivery(
+                fc.uav_channel(i, gains, plan.association, plan.power_w),
+                plan.power_w[plan.association == i],
+                rng=np.random.default_rng([self.scenario.seed, 0x736572, n, *stream]),
+            )
+            for i, n in enumerate(uavs)
+        ]
+
     def on_sample(self, ep: Episode, state: TrafficState) -> None:
         from uavxai.comms.delivery import service_lines
 
+        self._departures(ep, state)
         t, dt = state.t, ep.clock.sample_s
         users = self.walk.positions
         if self._files:
@@ -351,16 +379,20 @@ class FleetService(EngineStep):
                 "".join(f"{t:.3f},{k},{u[0]:.3f},{u[1]:.3f}\n" for k, u in enumerate(users))
             )
         rates, serving = np.zeros(len(users)), np.zeros((len(users), 3))
+        anyone = False
         for n, (mission, row) in enumerate(self.fleet.uavs(ep)):
             mine, pos = self.mine[n], state.pos[row]
             serving[mine] = pos
             if not (mission.serving and mission.outcome is None):
                 continue
+            anyone = True
+            self._first_served.setdefault(n, t)
             planned, avoiding = self._breaks[n].planned(mission, t, pos)
             rows = self.delivery[n].sample(t, pos, users[mine], dt, planned, avoiding)
             rates[mine] = [r[4] for r in rows]
             if self._files:
                 self._service.write(service_lines(rows, n, mine))
+        self._rates.append((t, rates, anyone))  # for the QoS shares before and after a leave
         # what the recording draws (the run's Service sets the same for one UAV): every user,
         # its rate now (0: its UAV is not serving), and its UAV, where the link is drawn from
         ep.sample_metrics.update(users_xyz=users.copy(), qos_bps=self.qos_bps,
@@ -369,24 +401,133 @@ class FleetService(EngineStep):
             ep.sample_metrics["delivered_rate_bps"] = float(rates[self.mine[0]].sum())
         self.walk.advance(dt)
 
+    def _departures(self, ep: Episode, state: TrafficState) -> None:
+        """The scripted leave when due; every UAV that has left early since the last sample
+        re-covered by the others."""
+        episodes = self.fleet.episodes(ep)
+        if self._leave is not None and state.t >= self._leave.at_s - 1e-9:
+            e = episodes[self._leave.member]
+            e.mission.leave(e, f"fleet.leave at {self._leave.at_s:g} s")
+        for n, e in enumerate(episodes):
+            if e.mission.left is not None and n not in self._gone:
+                self._gone.append(n)
+                self._recover(episodes, n, e.mission.left, state)
+
+    def _recover(self, episodes: list[Episode], n: int, why: str, state: TrafficState) -> None:
+        """UAV ``n`` has left: the UAVs still to serve (in transit or on station) re-planned
+        for the whole crowd where it is now, each to the new station nearest it."""
+        from uavxai.sim.mission import Phase
+
+        users = self.walk.positions
+        before = self.association()
+        stay = [
+            m for m, e in enumerate(episodes)
+            if m not in self._gone and e.mission.outcome is None and not e.mission.holding
+            and e.mission.phase is not Phase.RETURNING
+        ]  # fmt: skip
+        record = {"uav": n, "t": round(state.t, 3), "why": why,
+                  "users": [int(k) for k in self.mine[n]],
+                  "association_before": before.tolist()}  # fmt: skip
+        self.mine[n] = np.zeros(0, dtype=np.int64)  # it serves no one from now on
+        if stay:
+            seen = dataclasses.replace(self.channel, users=np.asarray(users, dtype=float))
+            plan = fleet_stations(self.scenario, users, size=len(stay))
+            rows = [episodes[m].state.pos[0] for m in stay]
+            order = nearest_stations(np.array(rows), plan.positions)
+            plan = dataclasses.replace(
+                plan,
+                positions=plan.positions[order],
+                association=np.argsort(order)[plan.association],
+            )  # plan UAV i is now stay[i]'s
+            fresh = self._deliveries(seen, plan, stay, (len(self._gone),))
+            for i, m in enumerate(stay):
+                self.spent[m].append(self.delivery[m])
+                self.delivery[m] = fresh[i]
+                self.mine[m] = np.flatnonzero(plan.association == i)
+                e = episodes[m]
+                e.mission.move_station(e, plan.positions[i], f"UAV {n} left: its users re-covered")
+            record["stations_after"] = {str(m): plan.positions[i].tolist() for i, m in
+                                        enumerate(stay)}  # fmt: skip
+        record["association_after"] = self.association().tolist()
+        self.departures.append(record)
+
+    def association(self) -> np.ndarray:
+        """Each user's UAV now (-1: none)."""
+        out = np.full(self.walk.positions.shape[0], -1, dtype=np.int64)
+        for n, mine in enumerate(self.mine):
+            out[mine] = n
+        return out
+
     def on_end(self, ep: Episode, summary: dict) -> None:
         total = 0.0
-        for entry, d, mine in zip(summary["fleet"], self.delivery, self.mine, strict=True):
-            bits = float(d.summary().get("delivered_bits", 0.0))
+        for n, entry in enumerate(summary["fleet"]):
+            bits = sum(float(d.summary().get("delivered_bits", 0.0))
+                       for d in [*self.spent[n], self.delivery[n]])  # fmt: skip
             entry["delivered_bits"] = bits
-            entry["users_served"] = [int(k) for k in mine]
+            entry["users_served"] = [int(k) for k in self.first_mine[n]]
+            if self._gone:  # the association changed: whom it serves at the end
+                entry["users_served_after"] = [int(k) for k in self.mine[n]]
             total += bits
         summary.setdefault("mission", {})["delivered_bits"] = total
+        if self._gone or self._leave is not None:
+            summary["fleet_departures"] = [self._shares(d) for d in self.departures]
+
+    def _shares(self, record: dict) -> dict:
+        """The QoS share (user-samples at or above the QoS rate, a user not served counting
+        as below it) of the departed UAV's users and of the whole crowd: before, while the
+        departed UAV served, up to its departure; after, from the departure to the last
+        sample anyone served."""
+        t0, users = record["t"], np.array(record["users"], dtype=np.int64)
+        rows = [(t, r) for t, r, anyone in self._rates if anyone]
+        served = self._first_served.get(record["uav"], math.inf)
+        before = [r for t, r in rows if t < t0 and t >= served]
+        after = [r for t, r in rows if t >= t0]
+
+        def share(rs: list[np.ndarray], who: np.ndarray | None) -> float | None:
+            if not rs or (who is not None and len(who) == 0):
+                return None
+            a = np.array(rs) if who is None else np.array(rs)[:, who]
+            return float(np.mean(a >= self.qos_bps))
+
+        back = None  # how long after the departure all its users are first at QoS again
+        for t, r in rows:
+            if t >= t0 and len(users) and np.all(r[users] >= self.qos_bps):
+                back = round(t - t0, 3)
+                break
+        return {
+            **record,
+            "qos_share_before": share(before, users),
+            "qos_share_after": share(after, users),
+            "crowd_qos_share_before": share(before, None),
+            "crowd_qos_share_after": share(after, None),
+            "samples_before": len(before),
+            "samples_after": len(after),
+            "recovered_after_s": back,
+        }
 
     def close(self) -> None:
         for f in self._files:
             f.close()
 
 
-def fleet_stations(scenario: Scenario, users: Sequence) -> object:
-    """The fleet's joint placement for ``users`` on the scenario's channel and lattice
+def nearest_stations(at: np.ndarray, stations: np.ndarray) -> np.ndarray:
+    """Which station each UAV flies to: the assignment of ``stations`` (N, 3) to UAVs at
+    ``at`` (N, 3) with the least total horizontal distance (every order tried: N <= 8), so a
+    re-plan moves each UAV as little as the fleet allows; ``order[i]``: UAV i's station."""
+    best, order = math.inf, None
+    for perm in itertools.permutations(range(len(stations))):
+        d = float(np.hypot(*(stations[list(perm), :2] - at[:, :2]).T).sum())
+        if d < best - 1e-9:
+            best, order = d, perm
+    return np.array(order, dtype=np.int64)
+
+
+def fleet_stations(scenario: Scenario, users: Sequence, size: int | None = None) -> object:
+    """The joint placement of ``size`` UAVs (the fleet's, ``fleet.size``, unless fewer are
+    left to serve) for ``users`` on the scenario's channel and lattice
     (:func:`uavxai.service.fleet.plan_fleet`, fading-free): each UAV's station, the user
     association and the power (a :class:`uavxai.service.fleet.FleetPlan`)."""
+    size = scenario.fleet.size if size is None else size
     from uavxai.comms.channel import Channel
     from uavxai.comms.fleet import FleetChannel
     from uavxai.service.fleet import FleetProblem, plan_fleet
@@ -400,7 +541,7 @@ def fleet_stations(scenario: Scenario, users: Sequence) -> object:
     space = dataclasses.replace(space, lo=np.array([*space.lo[:2], floor]))
     sep = check_homes(scenario)
     problem = FleetProblem(
-        FleetChannel.of(channel, scenario.fleet.size), space, scenario.comms.power_levels, sep
+        FleetChannel.of(channel, size), space, scenario.comms.power_levels, sep
     )
     try:
         return plan_fleet(problem)
@@ -408,7 +549,7 @@ def fleet_stations(scenario: Scenario, users: Sequence) -> object:
         from uavxai.errors import UserError
 
         raise UserError(
-            f"fleet.size = {scenario.fleet.size}: the members' stations cannot be kept apart "
+            f"fleet.size = {size}: the members' stations cannot be kept apart "
             f"in comms.users.region and world.h ({e}); allowed: fewer UAVs, a larger region "
             "or a taller world"
         ) from e

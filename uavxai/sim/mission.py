@@ -96,6 +96,7 @@ class Mission(EngineStep):
         self.outcome: Outcome | None = None
         self.service_points: list[tuple[float, float, float, float]] = []
         self._battery_low = False
+        self.left: str | None = None  # why it went home before its service was done
         self._own_xy: tuple[float, float] | None = None
         self._horizon_s = 16.0
         self.suspended = False  # the operator flies elsewhere (uavxai.sim.operator)
@@ -118,11 +119,18 @@ class Mission(EngineStep):
 
     def battery_reserve(self, ep: Episode) -> None:
         """The battery reached its reserve: go home now, whatever the phase."""
+        self.leave(ep, "battery at reserve")
+
+    def leave(self, ep: Episode, why: str) -> None:
+        """Go home now, whatever the phase, for ``why`` (the battery's reserve, or a fleet's
+        scripted ``fleet.leave``): :attr:`left` says why, once, unless it was going home
+        already (its service done)."""
         if not self._battery_low and self.phase != Phase.RETURNING:
             self._battery_low = True
+            self.left = why
             if ep.operator is not None:  # whatever the operator asked: home, as RTL
-                ep.operator.release(ep, "battery at reserve")
-            self._enter(Phase.RETURNING, ep.state.t, "battery at reserve, returning home", ep)
+                ep.operator.release(ep, why)
+            self._enter(Phase.RETURNING, ep.state.t, f"{why}, returning home", ep)
 
     @property
     def goal(self) -> tuple[float, float, float]:

@@ -370,6 +370,8 @@ def report(summary: dict, out: Path, rerun_file: Path | None, spawn: bool) -> No
         console.print(_safety_line(e))
         if e.get("fleet"):
             console.print(_fleet_line(e["fleet"]))
+            for d in e.get("fleet_departures", []):
+                console.print(_departure_line(d))
         elif e.get("mission", {}).get("delivered_bits") is not None:
             console.print(_mission_line(e["mission"]))
     console.print(f"outputs in {out}/ (summary.json, trajectory.csv, decisions.jsonl, {PLOT})")
@@ -416,6 +418,24 @@ def _fleet_line(fleet: list[dict]) -> str:
         )
 
     return "  fleet: " + "; ".join(one(u) for u in fleet)
+
+
+def _departure_line(d: dict) -> str:
+    """A fleet member that left early: whom its users went to, their QoS share before and
+    after (docs/fleet.md, "A member leaving early")."""
+
+    def pct(share: float | None) -> str:
+        return "-" if share is None else f"{100 * share:.0f} %"
+
+    to = sorted({d["association_after"][k] for k in d["users"]} - {-1})
+    back = d["recovered_after_s"]
+    return (
+        f"  UAV {d['uav']} left at {d['t']:.0f} s ({d['why']}): its {len(d['users'])} users "
+        f"re-covered by UAV {', '.join(map(str, to)) or '-'}; their QoS share "
+        f"{pct(d['qos_share_before'])} before, {pct(d['qos_share_after'])} after (the crowd's "
+        f"{pct(d['crowd_qos_share_before'])}, {pct(d['crowd_qos_share_after'])}); all at QoS "
+        f"again {'never' if back is None else f'{back:.1f} s after'}"
+    )
 
 
 def _mission_line(m: dict) -> str:

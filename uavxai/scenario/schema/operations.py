@@ -73,12 +73,22 @@ class Mission(Section):
 MAX_FLEET = 8  # members are JSBSim executives flown and planned for on the simulation's core
 
 
+class FleetLeave(Section):
+    """A member that leaves early, scripted (docs/fleet.md, "A member leaving early"): at
+    ``at_s`` (s of simulated time) member ``member`` turns for home as at its battery's
+    reserve; the others' placement is re-planned for the whole crowd."""
+
+    member: Annotated[int, Field(ge=0, le=MAX_FLEET - 1)]
+    at_s: Annotated[float, Field(gt=0, le=86_400, allow_inf_nan=False)]
+
+
 class Fleet(Section):
     """How many ownships fly the mission together (docs/fleet.md): member 0 is the ownship at
     ``ownship.start``; member i starts ``i * spacing_m`` to the right of it, abreast."""
 
     size: Annotated[int, Field(ge=1, le=MAX_FLEET)] = 1
     spacing_m: Annotated[float, Field(ge=50, le=5_000)] = 370.0
+    leave: FleetLeave | None = None
 
 
 # ------------------------------------------------------------------------------------- scenario

@@ -124,6 +124,15 @@ class Scenario(Section):
     def _fleet(self) -> None:
         """What a fleet of more than one cannot fly yet (docs/fleet.md), refused by name."""
         n = self.fleet.size
+        leave = self.fleet.leave
+        if leave is not None and n == 1:
+            raise ValueError("fleet.leave needs a fleet (the others re-cover the users of the "
+                             "one that leaves); allowed: fleet.size >= 2")  # fmt: skip
+        if leave is not None and leave.member >= n:
+            raise ValueError(
+                f"fleet.leave.member {leave.member}: there is no such member with fleet.size "
+                f"= {n}; allowed: 0 .. {n - 1}"
+            )
         if n == 1:
             return
         what = f"fleet.size = {n}"
