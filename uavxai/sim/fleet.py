@@ -345,8 +345,9 @@ class FleetService(EngineStep):
         self._leave = scenario.fleet.leave
         self._gone: list[int] = []  # the UAVs that left early, in order
         self.departures: list[dict] = []
-        self._rates: list[tuple[float, np.ndarray, bool]] = []  # (t, rates, anyone serving)
-        self._first_served: dict[int, float] = {}  # when each UAV began to serve
+        self.tally = QosTally(len(channel.users), self.qos_bps)
+        self._began: dict[int, tuple] = {}  # the tally when each UAV began to serve
+        self._marks: list[tuple] = []  # each departure's (its UAV's start, the departure)
         self._files = service_files(out)
         if self._files:
             self._users, self._service = self._files
@@ -386,13 +387,19 @@ class FleetService(EngineStep):
             if not (mission.serving and mission.outcome is None):
                 continue
             anyone = True
-            self._first_served.setdefault(n, t)
+            if n not in self._began:
+                self._began[n] = self.tally.mark()
             planned, avoiding = self._breaks[n].planned(mission, t, pos)
             rows = self.delivery[n].sample(t, pos, users[mine], dt, planned, avoiding)
             rates[mine] = [r[4] for r in rows]
             if self._files:
                 self._service.write(service_lines(rows, n, mine))
-        self._rates.append((t, rates, anyone))  # for the QoS shares before and after a leave
+        if anyone:  # the QoS shares before and after a departure
+            self.tally.add(rates)
+            for d in self.departures:
+                mine = np.array(d["users"], dtype=np.int64)
+                if d["recovered_after_s"] is None and np.all(rates[mine] >= self.qos_bps):
+                    d["recovered_after_s"] = round(t - d["t"], 3)
         # what the recording draws (the run's Service sets the same for one UAV): every user,
         # its rate now (0: its UAV is not serving), and its UAV, where the link is drawn from
         ep.sample_metrics.update(users_xyz=users.copy(), qos_bps=self.qos_bps,
@@ -427,7 +434,9 @@ class FleetService(EngineStep):
         ]  # fmt: skip
         record = {"uav": n, "t": round(state.t, 3), "why": why,
                   "users": [int(k) for k in self.mine[n]],
-                  "association_before": before.tolist()}  # fmt: skip
+                  "association_before": before.tolist(),
+                  "recovered_after_s": None}  # fmt: skip
+        self._marks.append((self._began.get(n), self.tally.mark()))
         self.mine[n] = np.zeros(0, dtype=np.int64)  # it serves no one from now on
         if stay:
             seen = dataclasses.replace(self.channel, users=np.asarray(users, dtype=float))
@@ -470,44 +479,60 @@ class FleetService(EngineStep):
             total += bits
         summary.setdefault("mission", {})["delivered_bits"] = total
         if self._gone or self._leave is not None:
-            summary["fleet_departures"] = [self._shares(d) for d in self.departures]
+            summary["fleet_departures"] = [
+                self._shares(d, *marks) for d, marks in zip(self.departures, self._marks,
+                                                            strict=True)
+            ]  # fmt: skip
 
-    def _shares(self, record: dict) -> dict:
-        """The QoS share (user-samples at or above the QoS rate, a user not served counting
-        as below it) of the departed UAV's users and of the whole crowd: before, while the
-        departed UAV served, up to its departure; after, from the departure to the last
-        sample anyone served."""
-        t0, users = record["t"], np.array(record["users"], dtype=np.int64)
-        rows = [(t, r) for t, r, anyone in self._rates if anyone]
-        served = self._first_served.get(record["uav"], math.inf)
-        before = [r for t, r in rows if t < t0 and t >= served]
-        after = [r for t, r in rows if t >= t0]
-
-        def share(rs: list[np.ndarray], who: np.ndarray | None) -> float | None:
-            if not rs or (who is not None and len(who) == 0):
-                return None
-            a = np.array(rs) if who is None else np.array(rs)[:, who]
-            return float(np.mean(a >= self.qos_bps))
-
-        back = None  # how long after the departure all its users are first at QoS again
-        for t, r in rows:
-            if t >= t0 and len(users) and np.all(r[users] >= self.qos_bps):
-                back = round(t - t0, 3)
-                break
-        return {
-            **record,
-            "qos_share_before": share(before, users),
-            "qos_share_after": share(after, users),
-            "crowd_qos_share_before": share(before, None),
-            "crowd_qos_share_after": share(after, None),
-            "samples_before": len(before),
-            "samples_after": len(after),
-            "recovered_after_s": back,
-        }
+    def _shares(self, record: dict, began, left) -> dict:
+        """The QoS share of the departed UAV's users and of the whole crowd (:class:`QosTally`):
+        before, from when the departed UAV began to serve (``began``; None: it never did) to
+        its departure (``left``); after, from the departure to the last sample anyone
+        served."""
+        users = np.array(record["users"], dtype=np.int64)
+        end = self.tally.mark()
+        windows = {"before": (began, left), "after": (left, end)}
+        out = dict(record)
+        for name, (since, until) in windows.items():
+            share, samples = self.tally.share(since, until, users)
+            out[f"qos_share_{name}"] = share
+            out[f"crowd_qos_share_{name}"] = self.tally.share(since, until)[0]
+            out[f"samples_{name}"] = samples
+        return out
 
     def close(self) -> None:
         for f in self._files:
             f.close()
+
+
+class QosTally:
+    """User-samples at or above the QoS rate, over the samples in which any UAV serves (a user
+    no UAV serves counting as below it): running totals, so the share between two marks is a
+    difference, in memory of the crowd's size however long the mission."""
+
+    def __init__(self, k: int, qos_bps: float) -> None:
+        self.qos_bps = qos_bps
+        self.hits = np.zeros(k)  # each user's samples at QoS so far
+        self.samples = 0
+
+    def add(self, rates: np.ndarray) -> None:
+        self.hits += rates >= self.qos_bps
+        self.samples += 1
+
+    def mark(self) -> tuple[np.ndarray, int]:
+        return self.hits.copy(), self.samples
+
+    def share(self, since, until, users: np.ndarray | None = None) -> tuple[float | None, int]:
+        """(the share of ``users``' samples at QoS between two marks, or None if there were
+        none; the samples); ``since`` None: an empty window."""
+        if since is None:
+            return None, 0
+        hits, samples = until[0] - since[0], until[1] - since[1]
+        if users is not None:
+            hits = hits[users]
+        if samples == 0 or hits.size == 0:
+            return None, samples
+        return float(hits.sum() / (hits.size * samples)), samples
 
 
 def nearest_stations(at: np.ndarray, stations: np.ndarray) -> np.ndarray:
