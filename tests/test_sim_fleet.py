@@ -256,7 +256,11 @@ def test_member_0_done_first_orbits_its_home_until_the_last_is_done() -> None:
     assert held[-1, 0] - held[0, 0] > 30  # member 0 waited (56 s when written)
     home = np.array([START["x"], START["y"]])
     d = np.hypot(*(held[:, 1:] - home).T)
-    assert d.max() < 2.0 * scenario_orbit_radius(sc)  # about its home, not flown past it
+    r, goal = scenario_orbit_radius(sc), sc.avoidance.goal_radius_m
+    # done on reaching its hold orbit, not home itself, and it joins the orbit from there
+    # without swinging out (round 7, seed 20: joined from home, 150 m out, an NMAC)
+    assert goal < d[0] <= r + goal
+    assert d.max() <= r + goal
 
 
 # ------------------------------------------------------------------------------ whole run
@@ -455,6 +459,25 @@ def test_a_member_leaving_early_has_its_users_re_covered_by_the_others(leave_run
         assert fleet[n]["station"] == gone["stations_after"][str(n)]  # flown to it
     rows = list(csv.DictReader((leave_run / "service.csv").open()))
     assert not [r for r in rows if r["uav"] == "1" and float(r["t"]) >= t0]
+    # a member whose new station's orbit is farther than it goes on station from flies there
+    # in transit (its planner, the fleet's clearance), not serving, and serves from the orbit
+    from uavxai.dynamics.orbit import scenario_orbit_radius
+
+    sc = load_scenario(FLEET)
+    join = scenario_orbit_radius(sc) + sc.avoidance.goal_radius_m
+    track = {(r["id"], round(float(r["t"]), 1)): (float(r["x"]), float(r["y"]))
+             for r in csv.DictReader((leave_run / "trajectory.csv").open())}  # fmt: skip
+    moved = 0
+    for n in (0, 2):
+        new = gone["stations_after"][str(n)][:2]
+        served = sorted(float(r["t"]) for r in rows if r["uav"] == str(n) and float(r["t"]) >= t0)
+        if math.dist(track[(f"ownship-{n}", round(t0, 1))], new) > join:
+            moved += 1
+            assert served[0] > t0 + 1.0  # in transit meanwhile
+            assert math.dist(track[(f"ownship-{n}", round(served[0], 1))], new) <= join + 3.0
+        else:
+            assert served[0] == pytest.approx(t0, abs=0.2)  # serving on at once
+    assert moved  # the flight shows it (member 2: 187 m from its new station)
     for r in rows:  # who serves whom: the plan in force at the time
         uav, k, t = int(r["uav"]), int(r["user"]), float(r["t"])
         assert (gone["association_before"] if t < t0 else after)[k] == uav

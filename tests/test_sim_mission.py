@@ -189,3 +189,43 @@ def test_clearance_predicts_each_intruder_on_its_believed_constant_turn() -> Non
     abreast = clearance(t, path, [straight, twin], sigmas=0.0)
     assert abreast == (pytest.approx(1.0), "intruder 8", 0.0)
     assert clearance(t, path, [], sigmas=0.0) == (math.inf, None, 0.0)
+
+
+def test_holding_at_home_the_planner_aims_along_the_hold_orbit_not_at_home() -> None:
+    """A fleet member done and holding at home, avoiding there, steers for the point of its
+    hold orbit ahead, as on station: aimed at home itself, which it was within, every branch
+    reached the goal before the intruder's closest point, all scored alike and the tree held
+    on into a collision (issue 32, round 7, fleet.yaml seed 22: 48.6 m)."""
+    from uavxai.dynamics.state import TrafficState
+    from uavxai.sim.mission import Mission, Phase
+
+    home = (150.0, 1300.0, 120.0)
+    c = MissionConfig(STATION, home, 10.0, True, 106.0, 20.0)
+    m = Mission(c, lambda *a, **k: None)
+    m.phase = Phase.RETURNING
+    assert m.goal == home  # on its way home: home
+    m.hold_home()
+    at = np.array([[home[0] + 106.0, home[1], home[2]]])  # east of home, on its circle
+    zero = np.zeros((1, 3))
+    m.on_sample(None, TrafficState(t=0.0, ids=("ownship",), pos=at, vel=zero, att=zero,
+                                   airspeed=np.array([20.0])))  # fmt: skip
+    g = m.goal
+    assert math.hypot(g[0] - home[0], g[1] - home[1]) == pytest.approx(106.0)
+    assert g[2] == home[2]
+    # clockwise, 16 s (the default horizon) at 20 m/s along the circle from the east
+    b = math.atan2(g[0] - home[0], g[1] - home[1]) % (2 * math.pi)
+    assert b == pytest.approx(math.pi / 2 + 20.0 * 16.0 / 106.0)
+
+
+def test_a_fleets_member_is_home_on_reaching_its_hold_orbit_one_ownship_at_home() -> None:
+    from uavxai.sim.mission import Mission
+
+    home = (150.0, 1300.0, 120.0)
+    m = Mission(MissionConfig(STATION, home, 10.0, True, 106.0, 20.0), lambda *a, **k: None)
+    assert m._home_reached((150.0 + 49.0, 1300.0, 120.0), 50.0)
+    assert not m._home_reached((150.0 + 150.0, 1300.0, 120.0), 50.0)
+    m.home_orbit = True  # a fleet's: its hold orbit reached (106 + 50 m)
+    assert m._home_reached((150.0, 1300.0 - 150.0, 120.0), 50.0)
+    assert m._home_reached((150.0 + 49.0, 1300.0, 120.0), 50.0)
+    assert not m._home_reached((150.0 + 160.0, 1300.0, 120.0), 50.0)
+    assert not m._home_reached((150.0 + 150.0, 1300.0, 175.0), 50.0)  # not at its height

@@ -183,6 +183,7 @@ class Member:
         view = MemberWorld(world, world.member_rows[j - 1])
         path = DirectPath(view) if path is None else path(j, view)
         self.mission = Mission(config, path.announce)
+        self.mission.home_orbit = True  # done on reaching its hold orbit (docs/fleet.md)
         self.energy = Energy()
         self.outcome: Outcome | None = None
         self._closed, self._counters = False, None
@@ -260,6 +261,7 @@ class Fleet(EngineStep):
         # member 0 plans as the members do: their shared state, intent and clearance, and its
         # own surveillance of the intruders (the picture it had; still fed as an engine step)
         ep.picture = IntentPicture.of(self.scenario, ep.world, traffic=ep.picture)
+        ep.mission.home_orbit = True  # done on reaching its hold orbit, as the members
         for j in range(1, len(self.stations)):
             m = Member(self.scenario, ep.world, j, self.stations[j], self._planner(j),
                        self._max_steps, self._path)  # fmt: skip
@@ -454,7 +456,8 @@ class FleetService(EngineStep):
                 self.delivery[m] = fresh[i]
                 self.mine[m] = np.flatnonzero(plan.association == i)
                 e = episodes[m]
-                e.mission.move_station(e, plan.positions[i], f"UAV {n} left: its users re-covered")
+                e.mission.move_station(e, plan.positions[i], f"UAV {n} left: its users re-covered",
+                                       fly_there=True)  # fmt: skip
             record["stations_after"] = {str(m): plan.positions[i].tolist() for i, m in
                                         enumerate(stay)}  # fmt: skip
         record["association_after"] = self.association().tolist()

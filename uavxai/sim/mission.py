@@ -102,6 +102,8 @@ class Mission(EngineStep):
         self.suspended = False  # the operator flies elsewhere (uavxai.sim.operator)
         self.holding = False  # done, orbiting home for the others (a fleet's member 0)
         self._hold_conflict = False
+        # a fleet's: done on reaching its home orbit, not the home point (:meth:`hold_home`)
+        self.home_orbit = False
 
     # ------------------------------------------------------------------------- phases
     def _enter(self, phase: Phase, t: float, why: str, ep: Episode) -> None:
@@ -139,17 +141,28 @@ class Mission(EngineStep):
         horizon (the centre itself would be a goal reached in passing, which would make every
         option look as good as any other)."""
         c = self.config
+        if self.holding and self._own_xy is not None:  # avoiding about home: as on station
+            return self._orbit_ahead(c.home)
         if self.phase == Phase.RETURNING:
             return c.home
         if self.phase != Phase.AVOIDING or self._own_xy is None:
             return c.station
+        return self._orbit_ahead(c.station)
+
+    def _orbit_ahead(self, centre: tuple[float, float, float]) -> tuple[float, float, float]:
+        """The point of the orbit about ``centre`` the aircraft would reach at the end of the
+        planner's horizon: the goal while avoiding on an orbit. A fleet member holding at
+        home used to aim at home itself, a goal it was already within: every branch reached
+        it before the intruder's closest point, so all scored alike (Q 1.000) and the tree
+        held on into a collision (round 7, fleet.yaml seed 22: 48.6 m)."""
+        c = self.config
         x, y = self._own_xy
         ahead = (1.0 if c.clockwise else -1.0) * c.speed_mps * self._horizon_s / c.radius_m
-        b = math.atan2(x - c.station[0], y - c.station[1]) + ahead
+        b = math.atan2(x - centre[0], y - centre[1]) + ahead
         return (
-            c.station[0] + c.radius_m * math.sin(b),
-            c.station[1] + c.radius_m * math.cos(b),
-            c.station[2],
+            centre[0] + c.radius_m * math.sin(b),
+            centre[1] + c.radius_m * math.cos(b),
+            centre[2],
         )
 
     @property
@@ -157,6 +170,8 @@ class Mission(EngineStep):
         return self.phase in (Phase.ON_STATION, Phase.AVOIDING) and not self.suspended
 
     def on_sample(self, ep: Episode, state: TrafficState) -> None:
+        if self.holding:  # where it is on its hold orbit (the goal when avoiding there)
+            self._own_xy = (float(state.pos[0, 0]), float(state.pos[0, 1]))
         if self.suspended or self.holding:
             return
         c, p, t = self.config, state.pos[0], state.t
@@ -178,8 +193,21 @@ class Mission(EngineStep):
                     self._enter(Phase.RETURNING, t, "service time over, returning home", ep)
                 else:
                     self.outcome = Outcome.COMPLETED
-        elif math.dist(p, c.home) < ep.judge.goal_radius_m:
+        elif self._home_reached(p, ep.judge.goal_radius_m):
             self.outcome = Outcome.COMPLETED
+
+    def _home_reached(self, p: Sequence[float], goal_radius_m: float) -> bool:
+        """Home: within the goal radius of it; in a fleet (:attr:`home_orbit`) its hold orbit
+        reached, as the station's is (within the radius + the goal radius horizontally, and
+        the goal radius in height), so the hold orbit is joined from outside on the side it
+        comes from. Joined from home itself at the return's speed, the orbit law swung a
+        member out to 150 m from home, towards its neighbour's hold orbit (round 7, fleet.yaml
+        seed 20: an NMAC, 152 m / 1 m)."""
+        c = self.config
+        if not self.home_orbit:
+            return math.dist(p, c.home) < goal_radius_m
+        d = math.hypot(p[0] - c.home[0], p[1] - c.home[1])
+        return d <= c.radius_m + goal_radius_m and abs(p[2] - c.home[2]) < goal_radius_m
 
     def remaining_s(self, own: Sequence[float], speed_mps: float, goal_radius_m: float) -> float:
         """An estimate of the flight time left, from ``own`` (x, y), the legs flown at
@@ -261,8 +289,15 @@ class Mission(EngineStep):
             ep.path.altitude(self.goal[2], ep.state.t)
         self.announce(f"AUTO: mission resumed, {self.phase.value.replace('_', ' ')}", None)
 
-    def move_station(self, ep: Episode, point: Sequence[float], why: str) -> None:
-        """A re-planned service point: the orbit moves there (now, if on station)."""
+    def move_station(
+        self, ep: Episode, point: Sequence[float], why: str, fly_there: bool = False
+    ) -> None:
+        """A re-planned service point: the orbit moves there (now, if on station). With
+        ``fly_there`` (a fleet's re-cover), serving farther from the new orbit than it would
+        go on station from (its radius + the goal radius), it flies there in transit, under
+        its avoidance planner (with the fleet's clearance), and goes on station on reaching
+        the orbit: the orbit law, moved at once, flew it there judged only by the orbit's
+        check against the traffic (issue 32, round 7: up to 295 m)."""
         t = ep.state.t
         self.config = dataclasses.replace(self.config, station=tuple(float(v) for v in point))
         self.service_points.append((round(t, 3), *self.config.station))
@@ -270,7 +305,11 @@ class Mission(EngineStep):
         self.announce(f"service point moved: {why}", self.phase.value)
         if self.suspended:
             return
-        if self.phase == Phase.ON_STATION:
+        p = ep.state.pos[0]
+        far = math.hypot(p[0] - c.station[0], p[1] - c.station[1])
+        if fly_there and self.serving and far > c.radius_m + ep.judge.goal_radius_m:
+            self._enter(Phase.TRANSIT, t, f"to the new service point, {far:.0f} m away", ep)
+        elif self.phase == Phase.ON_STATION:
             speed = ep.path.cruise_speed(c.speed_mps)
             ep.path.orbit(*c.station, c.radius_m, c.clockwise, speed, t)
         elif self.phase == Phase.TRANSIT:
