@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from uavxai.avoidance import Intruder, Ownship, PlannerConfig
-from uavxai.avoidance.kernel import WALLT, _nmac_factor, _params, wall_factor
+from uavxai.avoidance.kernel import WALLT, _params, nmac_depth, wall_factor
 from uavxai.avoidance.mcts import predict_levels, search
 from uavxai.avoidance.model import COLLISION, NONE, EncounterModel, ownship_state
 from uavxai.avoidance.planners import make_planner, sep_config
@@ -20,7 +20,7 @@ from uavxai.errors import UserError
 
 CFG = sep_config(PlannerConfig())  # the default 2 km box, d_min 50 m, as mcts_sep flies it
 GOAL = np.array([1000.0, 1000.0, 120.0])
-NMAC_R = math.hypot(*CFG.nmac_m)
+NMAC_R = math.hypot(*CFG.nmac_m)  # the sphere holding the NMAC cylinder
 
 
 def _par(cfg: PlannerConfig = CFG) -> np.ndarray:
@@ -56,14 +56,16 @@ def test_without_wall_slack_the_leaf_ignores_the_walls() -> None:
     assert par[WALLT] == 0.0 and _par()[WALLT] == CFG.wall_slack_s > 0  # kernel.run skips it
 
 
-def test_nmac_intrusion_costs_in_proportion_to_its_depth() -> None:
+def test_nmac_intrusion_is_measured_in_the_nmac_cylinder_by_its_depth() -> None:
     par = _par()
-    assert _nmac_factor(math.inf, par) == _nmac_factor(NMAC_R, par) == 1.0
-    depths = [_nmac_factor(s, par) for s in (150.0, 120.0, 90.0, 60.0, 50.0, 10.0)]
-    assert depths == sorted(depths, reverse=True) and depths[0] < 1.0
-    assert depths[-2] == depths[-1] == pytest.approx(1.0 - CFG.nmac_cost)  # at d_min and in
-    free = _par(dataclasses.replace(CFG, nmac_cost=0.0))
-    assert _nmac_factor(60.0, free) == 1.0  # mcts_vertical: no cost
+    h, v = CFG.nmac_m
+    # on the rim and beyond: no intrusion; 40 m above a track is outside the cylinder however
+    # close horizontally (the sphere holding it would have counted it)
+    assert nmac_depth(h, 0.0, par) == nmac_depth(0.0, v, par) == nmac_depth(200.0, 0.0, par) == 0
+    assert nmac_depth(100.0, 40.0, par) == 0.0
+    deeper = [nmac_depth(d, 0.0, par) for d in (150.0, 120.0, 90.0, 60.0, 50.0, 10.0)]
+    assert deeper == sorted(deeper) and deeper[0] > 0.0 and deeper[-2] == deeper[-1] == 1.0
+    assert 0.0 < nmac_depth(0.0, 25.0, par) < nmac_depth(0.0, 10.0, par)
 
 
 def test_nmac_cost_must_leave_a_line_some_value() -> None:

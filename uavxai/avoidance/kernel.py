@@ -32,7 +32,8 @@ ZRE, ZIM, DPSI, VEND, PHIEND, PHICMD, RISEEND = range(7)
 BALLRE, BALLIM, BALLR, OWNSTEP = range(4)
 # Entries of ``par``.
 (DMIN, GOALR, XB0, XB1, YB0, YB1, HB0, HB1, CLIMB, DUR, TLEFT, LATE, DMAX, VERT, TDOWN, TLEVEL,
- TUP, GX, GY, GH, CULL, ASPECT, RISK, NMACW, NMACR, WALLT, TURNG, ROLLT) = range(28)  # fmt: skip
+ TUP, GX, GY, GH, CULL, ASPECT, RISK, NMACW, NMACH, NMACV, WALLT, TURNG,
+ ROLLT) = range(29)  # fmt: skip
 _TAU = 2.0 * math.pi
 _NONE, _GOAL, _COLLISION, _OUT, _TIMEOUT = 0, 1, 2, 3, 4
 
@@ -306,6 +307,7 @@ def _expand(node, tree, bz, brise, bend, bscal, child, tracks, climbs, drift, pa
     res = np.empty(3)
     risky = par[RISK] > 0
     edge_surv = np.ones(kn)  # per child, the chance its edge keeps clear of every track
+    edge_clear = np.ones(kn)  # per child, what its edge's NMAC intrusion leaves (nmac_cost)
     loss = np.empty(max(k, 1))
     if k or walls or goal:
         xy, hs = _samples(h, origin, rot, kk, heights, box[5], bz, brise, drift, par)
@@ -327,6 +329,9 @@ def _expand(node, tree, bz, brise, bend, bscal, child, tracks, climbs, drift, pa
                          res)  # fmt: skip
                 min_sep[first + a], closest[first + a] = res[0], int(res[1])
                 t_closest[first + a] = res[2]
+                if par[NMACW] > 0:  # the edge up to its event, as _closest measures it
+                    edge_clear[a] = _nmac_factor(xy, hs, txy, th, lvl, near, k, a,
+                                                 k_event[a] + 1, par)  # fmt: skip
                 if risky:
                     edge_surv[a] = _keeps_clear(sep2, frac, exact, tm, ts, lvl, near, k,
                                                 k_event[a], a, par, loss)  # fmt: skip
@@ -334,7 +339,7 @@ def _expand(node, tree, bz, brise, bend, bscal, child, tracks, climbs, drift, pa
         c = first + a
         if not k:
             min_sep[c], closest[c], t_closest[c] = np.inf, -1, 0.0
-        clear[c] = min(clear[node], _nmac_factor(min_sep[c], par))
+        clear[c] = min(clear[node], edge_clear[a])  # the line's deepest intrusion counts
         happened = k_event[a] < n
         cd = kind[a] if happened else _NONE
         if cd == _NONE and (lvl + 1) * par[DUR] >= par[TLEFT] - 1e-9:
@@ -364,16 +369,30 @@ def _expand(node, tree, bz, brise, bend, bscal, child, tracks, climbs, drift, pa
 
 
 @njit(cache=True)
-def _nmac_factor(sep, par):
-    """What an edge passing ``sep`` (its closest approach less margins) from its nearest
-    track keeps of a line's value (``nmac_cost``): 1 outside the NMAC radius, falling
-    linearly to ``1 - nmac_cost`` at the collision distance ``d_min``, where the hard
-    conflict takes over (a collision's value is never weighed by it)."""
-    w = par[NMACW]
-    if w <= 0.0 or sep >= par[NMACR]:
-        return 1.0
-    depth = min((par[NMACR] - sep) / (par[NMACR] - par[DMIN]), 1.0)
-    return 1.0 - w * depth
+def nmac_depth(hd, vd, par):
+    """How deep a point ``hd`` m horizontally and ``vd`` m vertically from a track's predicted
+    position (no margin: the track as predicted) lies in its NMAC cylinder (``nmac_m``), in
+    [0, 1]: 0 on or outside the rim, rising as the cylinder's norm ``max(hd / H, |vd| / V)``
+    falls, 1 at the collision distance's share ``d_min / H`` of it and within."""
+    norm = max(hd / par[NMACH], abs(vd) / par[NMACV])
+    if norm >= 1.0:
+        return 0.0
+    return min((1.0 - norm) / (1.0 - par[DMIN] / par[NMACH]), 1.0)
+
+
+@njit(cache=True)
+def _nmac_factor(xy, hs, txy, th, lvl, ids, k, a, last, par):
+    """What row ``a``'s edge keeps of its line's value (``nmac_cost``) for its deepest NMAC
+    intrusion up to sub-step ``last``: ``1 - nmac_cost x depth`` (:func:`nmac_depth`). The
+    conflict at d_min stays the hard one: a collision's value is never weighed by this."""
+    ha = hs[min(a, hs.shape[0] - 1)]
+    deepest = 0.0
+    for i in range(min(last + 1, xy.shape[1])):
+        for q in range(k):
+            rel = xy[a, i] - txy[lvl, i, ids[q]]
+            d = nmac_depth(abs(rel), ha[i] - th[lvl, i, ids[q]], par)
+            deepest = max(deepest, d)
+    return 1.0 - par[NMACW] * deepest
 
 
 @njit(cache=True)
@@ -573,7 +592,7 @@ def _params(
          float(model.vertical), cfg.height_target(-1, gh), cfg.height_target(0, gh),
          cfg.height_target(1, gh), float(goal[0]), float(goal[1]), gh,
          max(cfg.cull_m, nmac_r) if cfg.nmac_cost > 0 else cfg.cull_m,
-         cfg.cylinder_aspect or 0.0, float(_risky(model, tracks)), cfg.nmac_cost, nmac_r,
+         cfg.cylinder_aspect or 0.0, float(_risky(model, tracks)), cfg.nmac_cost, *cfg.nmac_m,
          cfg.wall_slack_s, G * math.tan(cfg.bank_limit_rad),
          cfg.bank_limit_deg / cfg.roll_rate_limit_deg_s],  # fmt: skip
         dtype=float,
@@ -606,7 +625,7 @@ def _empty_tree(
             np.full(cap, -1, dtype=np.int64),  # closest
             np.full(cap, np.nan),  # t_closest
             np.ones(cap),  # surv: the chance the line to the node keeps clear (risk "probability")
-            np.ones(cap),  # clear: the line's NMAC factor, its deepest intrusion's (nmac_cost)
+            np.ones(cap),  # clear: what the line's NMAC intrusions leave of its value (nmac_cost)
             np.ones(1, dtype=np.int64),  # count
             depth_limit,
         )
