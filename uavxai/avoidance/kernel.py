@@ -330,8 +330,8 @@ def _expand(node, tree, bz, brise, bend, bscal, child, tracks, climbs, drift, pa
                 min_sep[first + a], closest[first + a] = res[0], int(res[1])
                 t_closest[first + a] = res[2]
                 if par[NMACW] > 0:  # the edge up to its event, as _closest measures it
-                    edge_clear[a] = _nmac_factor(xy, hs, txy, th, lvl, near, k, a,
-                                                 k_event[a] + 1, par)  # fmt: skip
+                    edge_clear[a] = _nmac_factor(xy, hs, txy, th, tm, tmargined[lvl], lvl,
+                                                 near, k, a, k_event[a] + 1, par)  # fmt: skip
                 if risky:
                     edge_surv[a] = _keeps_clear(sep2, frac, exact, tm, ts, lvl, near, k,
                                                 k_event[a], a, par, loss)  # fmt: skip
@@ -371,7 +371,7 @@ def _expand(node, tree, bz, brise, bend, bscal, child, tracks, climbs, drift, pa
 @njit(cache=True)
 def nmac_depth(hd, vd, par):
     """How deep a point ``hd`` m horizontally and ``vd`` m vertically from a track's predicted
-    position (no margin: the track as predicted) lies in its NMAC cylinder (``nmac_m``), in
+    position lies in its NMAC cylinder (``nmac_m``), in
     [0, 1]: 0 on or outside the rim, rising as the cylinder's norm ``max(hd / H, |vd| / V)``
     falls, 1 at the collision distance's share ``d_min / H`` of it and within."""
     norm = max(hd / par[NMACH], abs(vd) / par[NMACV])
@@ -381,16 +381,19 @@ def nmac_depth(hd, vd, par):
 
 
 @njit(cache=True)
-def _nmac_factor(xy, hs, txy, th, lvl, ids, k, a, last, par):
+def _nmac_factor(xy, hs, txy, th, tm, margined, lvl, ids, k, a, last, par):
     """What row ``a``'s edge keeps of its line's value (``nmac_cost``) for its deepest NMAC
-    intrusion up to sub-step ``last``: ``1 - nmac_cost x depth`` (:func:`nmac_depth`). The
-    conflict at d_min stays the hard one: a collision's value is never weighed by this."""
+    intrusion up to sub-step ``last``: ``1 - nmac_cost x depth`` (:func:`nmac_depth`), the
+    horizontal miss less the track's margin (``tm``; the cylinder's height is not grown: the
+    vertical escape stays cheap). The conflict at d_min stays the hard one: a collision's value
+    is never weighed by this."""
     ha = hs[min(a, hs.shape[0] - 1)]
     deepest = 0.0
     for i in range(min(last + 1, xy.shape[1])):
         for q in range(k):
             rel = xy[a, i] - txy[lvl, i, ids[q]]
-            d = nmac_depth(abs(rel), ha[i] - th[lvl, i, ids[q]], par)
+            hd = abs(rel) - tm[lvl, i, ids[q]] if margined else abs(rel)
+            d = nmac_depth(max(hd, 0.0), ha[i] - th[lvl, i, ids[q]], par)
             deepest = max(deepest, d)
     return 1.0 - par[NMACW] * deepest
 

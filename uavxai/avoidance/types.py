@@ -150,10 +150,10 @@ class PlannerConfig(SchemaSettings):  # type: ignore[misc,valid-type]
     # horizontally and m * half-height / d_min_m vertically (the model's cylinder norm).
     conflict_half_height_m: float | None = None
     # Graded separation (`mcts_sep`, docs/results "Safe among many and still arriving"): a
-    # line that comes inside a track's NMAC cylinder (nmac_m; the track as predicted, without
-    # margins) keeps 1 - nmac_cost x its depth (kernel.nmac_depth: 0 at the rim, 1 at d_min_m)
-    # of its value, its deepest intrusion counting; the conflict at d_min_m (with margins)
-    # stays the hard one. 0: NMAC intrusion costs nothing (the paper).
+    # line that comes inside a track's NMAC cylinder (nmac_m; its horizontal miss less the
+    # track's margin, intruder_margin) keeps 1 - nmac_cost x its depth (kernel.nmac_depth: 0 at
+    # the rim, 1 at d_min_m) of its value, its deepest intrusion counting; the conflict at
+    # d_min_m stays the hard one. 0: NMAC intrusion costs nothing (the paper).
     nmac_cost: float = 0.0
     # Walls in the leaf value (`mcts_sep`): a leaf heading for a wall keeps the share of its
     # value that its slack (seconds before it must turn away at the bank limit to stay in the
