@@ -115,3 +115,17 @@ def test_the_nmac_cost_buys_separation_where_there_is_room() -> None:
     assert sep.planner == "mcts_sep"
     assert sep.branch_min_separation_m > plain.branch_min_separation_m
     assert sep.branch_min_separation_m >= NMAC_R > plain.branch_min_separation_m
+
+
+def test_mcts_sep_flies_an_episode_the_same_twice() -> None:
+    from uavxai.campaign import run_campaign_episode
+    from uavxai.scenario import default_scenario
+
+    sc = default_scenario("sep", intruders={"behaviour": "random_turns"},
+                          avoidance={"max_steps": 30}, ownship={"goal": [1000, 1000, 120]})
+    a = run_campaign_episode(sc, "mcts_sep", 20, 4, "kinematic")
+    b = run_campaign_episode(sc, "mcts_sep", 20, 4, "kinematic")
+    timing = ("decision_ms", "decision_ms_p50")
+    assert a["method"] == "mcts_sep" and a["steps"] > 0
+    assert {k: v for k, v in a.items() if k not in timing} == {
+        k: v for k, v in b.items() if k not in timing}  # fmt: skip
