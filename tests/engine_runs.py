@@ -25,3 +25,15 @@ def run_and_evaluate(tmp_path: Path, scenario: dict) -> tuple[dict, dict]:
     run = json.loads((tmp_path / "run" / "summary.json").read_text())
     header, row = (tmp_path / "ev" / "episodes.csv").read_text().splitlines()[:2]
     return run, dict(zip(header.split(","), row.split(","), strict=True))
+
+
+def flown_twice(scenario, method: str, n_intruders: int, seed: int) -> tuple[dict, dict]:
+    """One kinematic campaign episode of ``scenario`` flown twice by ``method``: both
+    episodes.csv rows, less the timings (which differ run to run)."""
+    from uavxai.campaign import run_campaign_episode
+
+    timing = ("decision_ms", "decision_ms_p50")
+    a, b = (run_campaign_episode(scenario, method, n_intruders, seed, "kinematic")
+            for _ in range(2))  # fmt: skip
+    return ({k: v for k, v in a.items() if k not in timing},
+            {k: v for k, v in b.items() if k not in timing})  # fmt: skip

@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 
 import pytest
+from engine_runs import flown_twice
 
 from uavxai.avoidance.planners import make_planner
 from uavxai.avoidance.route import ROUTE_HORIZON_S, leg_costs, route_goal
@@ -48,15 +49,10 @@ def test_legs_that_leave_the_area_are_ruled_out() -> None:
 
 
 def test_mcts_route_flies_an_episode_the_same_twice() -> None:
-    from uavxai.campaign import run_campaign_episode
     from uavxai.scenario import default_scenario
 
     sc = default_scenario("route", intruders={"behaviour": "random_turns"},
                           avoidance={"max_steps": 30}, ownship={"goal": [1000, 1000, 120]})
-    a = run_campaign_episode(sc, "mcts_route", 20, 4, "kinematic")
-    b = run_campaign_episode(sc, "mcts_route", 20, 4, "kinematic")
-    timing = ("decision_ms", "decision_ms_p50")
-    assert a["method"] == "mcts_route" and a["steps"] > 0
-    assert {k: v for k, v in a.items() if k not in timing} == {
-        k: v for k, v in b.items() if k not in timing}  # fmt: skip
+    a, b = flown_twice(sc, "mcts_route", 20, 4)
+    assert a["method"] == "mcts_route" and a["steps"] > 0 and a == b
     assert make_planner("mcts_route", CFG).name == "mcts_route"

@@ -15,7 +15,7 @@ time, which is printed too); the load average is printed beside them.
 
     .venv/bin/python benchmarks/performance/bench_mcts.py [--quick] [--encounters 40]
         [--episodes 20] [--baseline DIR]
-        [--intruders 20,40] [--simulations 200] [--depth 4] [--repeats 5] [--no-vertical]
+        [--intruders 20,40] [--simulations 200] [--depth 4] [--repeats 5] [--no-vertical] [--sep]
         [--risk margin|probability] [--track-error 2.9,2.4]
 
 ``--baseline DIR`` times the MCTS planners of another source tree too (a checkout of the
@@ -94,13 +94,17 @@ def time_decisions(planner, cases, repeats: int) -> tuple[np.ndarray, np.ndarray
     return cpu, wall
 
 
-def pairs(cfg: PlannerConfig, vertical: bool) -> list[tuple[Planner, Planner]]:
-    """(MCTS planner, its exhaustive reference over the same action set)."""
+def pairs(cfg: PlannerConfig, vertical: bool, sep: bool = False) -> list[tuple[Planner, Planner]]:
+    """(MCTS planner, its exhaustive reference over the same action set). ``sep``: `mcts_sep`
+    too, against the vertical set's reference, which weighs neither NMAC intrusion nor walls
+    (the agreement then says how far those terms move the choice)."""
     out = [(make_planner("mcts", cfg), make_planner("exhaustive", cfg))]
-    if vertical:
+    if vertical or sep:
         vcfg = dataclasses.replace(cfg, actions="vertical")
         reference = ExhaustivePlanner(vcfg, name="exhaustive_vertical")
         out.append((make_planner("mcts_vertical", cfg), reference))
+        if sep:
+            out.append((make_planner("mcts_sep", cfg), reference))
     return out
 
 
@@ -155,7 +159,7 @@ def setup(args, n_intruders: int):
     )
     cfg = PlannerConfig.from_scenario(scenario)
     cases = encounters(scenario, args.encounters, n_intruders, args.track_error)
-    planners = pairs(cfg, not args.no_vertical)
+    planners = pairs(cfg, not args.no_vertical, args.sep)
     for pair in planners:
         for planner in pair:  # warm caches and imports
             planner.plan(*cases[0])
@@ -247,6 +251,7 @@ def main() -> None:
     ap.add_argument("--depth", type=int, default=4)
     ap.add_argument("--repeats", type=int, default=5, help="timing repeats (best is kept)")
     ap.add_argument("--no-vertical", action="store_true", help="the paper's nine actions only")
+    ap.add_argument("--sep", action="store_true", help="mcts_sep too (issues 27, 31)")
     ap.add_argument("--risk", choices=RISK_MODELS, default="margin",
                     help="avoidance.mcts.risk (default: margin)")  # fmt: skip
     ap.add_argument("--track-error", default="0,0",

@@ -25,13 +25,15 @@ from numba import njit
 from uavxai.avoidance.model import EncounterModel, Track
 from uavxai.avoidance.risk import edge_loss
 from uavxai.avoidance.types import SearchTree
+from uavxai.units import G
 
 # Columns of the per-key table ``bend`` (per action) and ``bscal`` (per key).
 ZRE, ZIM, DPSI, VEND, PHIEND, PHICMD, RISEEND = range(7)
 BALLRE, BALLIM, BALLR, OWNSTEP = range(4)
 # Entries of ``par``.
 (DMIN, GOALR, XB0, XB1, YB0, YB1, HB0, HB1, CLIMB, DUR, TLEFT, LATE, DMAX, VERT, TDOWN, TLEVEL,
- TUP, GX, GY, GH, CULL, ASPECT, RISK) = range(23)  # fmt: skip
+ TUP, GX, GY, GH, CULL, ASPECT, RISK, NMACW, NMACH, NMACV, WALLT, TURNG,
+ ROLLT) = range(29)  # fmt: skip
 _TAU = 2.0 * math.pi
 _NONE, _GOAL, _COLLISION, _OUT, _TIMEOUT = 0, 1, 2, 3, 4
 
@@ -285,7 +287,7 @@ def _expand(node, tree, bz, brise, bend, bscal, child, tracks, climbs, drift, pa
     """TreeBuilder.expand over EncounterModel.expand: the K children of ``node``, appended
     to the tree; returns the first child's index."""
     (visits, value_sum, first_child, is_leaf, value, key, state, depth, parent, action, code,
-     min_sep, closest, t_closest, surv, count, depth_limit) = tree  # fmt: skip
+     min_sep, closest, t_closest, surv, clear, count, depth_limit) = tree  # fmt: skip
     txy, th, tm, tmargined, tstep, tc, tr, ts = tracks
     kn, n = climbs.size, bz.shape[2] - 1
     first = count[0]
@@ -305,6 +307,7 @@ def _expand(node, tree, bz, brise, bend, bscal, child, tracks, climbs, drift, pa
     res = np.empty(3)
     risky = par[RISK] > 0
     edge_surv = np.ones(kn)  # per child, the chance its edge keeps clear of every track
+    edge_clear = np.ones(kn)  # per child, what its edge's NMAC intrusion leaves (nmac_cost)
     loss = np.empty(max(k, 1))
     if k or walls or goal:
         xy, hs = _samples(h, origin, rot, kk, heights, box[5], bz, brise, drift, par)
@@ -326,6 +329,9 @@ def _expand(node, tree, bz, brise, bend, bscal, child, tracks, climbs, drift, pa
                          res)  # fmt: skip
                 min_sep[first + a], closest[first + a] = res[0], int(res[1])
                 t_closest[first + a] = res[2]
+                if par[NMACW] > 0:  # the edge up to its event, as _closest measures it
+                    edge_clear[a] = _nmac_factor(xy, hs, txy, th, tm, tmargined[lvl], lvl,
+                                                 near, k, a, k_event[a] + 1, par)  # fmt: skip
                 if risky:
                     edge_surv[a] = _keeps_clear(sep2, frac, exact, tm, ts, lvl, near, k,
                                                 k_event[a], a, par, loss)  # fmt: skip
@@ -333,6 +339,7 @@ def _expand(node, tree, bz, brise, bend, bscal, child, tracks, climbs, drift, pa
         c = first + a
         if not k:
             min_sep[c], closest[c], t_closest[c] = np.inf, -1, 0.0
+        clear[c] = min(clear[node], edge_clear[a])  # the line's deepest intrusion counts
         happened = k_event[a] < n
         cd = kind[a] if happened else _NONE
         if cd == _NONE and (lvl + 1) * par[DUR] >= par[TLEFT] - 1e-9:
@@ -342,10 +349,10 @@ def _expand(node, tree, bz, brise, bend, bscal, child, tracks, climbs, drift, pa
         is_leaf[c] = lvl + 1 == depth_limit or cd != _NONE
         if cd == _NONE:
             value[c] = np.nan
-        elif cd == _GOAL:
-            value[c] = 1.0
+        elif cd == _GOAL:  # graded separation: arriving through an NMAC is worth less
+            value[c] = clear[c]
         elif cd == _TIMEOUT:
-            value[c] = 0.1
+            value[c] = 0.1 * clear[c]
         elif cd == _COLLISION and par[LATE] > 0:
             t = lvl * par[DUR] + k_event[a] * dt
             value[c] = par[LATE] * t / (depth_limit * par[DUR])
@@ -359,6 +366,57 @@ def _expand(node, tree, bz, brise, bend, bscal, child, tracks, climbs, drift, pa
                 value[c] *= surv[c]
         key[c] = child[kk, a]
     return first
+
+
+@njit(cache=True)
+def nmac_depth(hd, vd, par):
+    """How deep a point ``hd`` m horizontally and ``vd`` m vertically from a track's predicted
+    position lies in its NMAC cylinder (``nmac_m``), in
+    [0, 1]: 0 on or outside the rim, rising as the cylinder's norm ``max(hd / H, |vd| / V)``
+    falls, 1 at the collision distance's share ``d_min / H`` of it and within."""
+    norm = max(hd / par[NMACH], abs(vd) / par[NMACV])
+    if norm >= 1.0:
+        return 0.0
+    return min((1.0 - norm) / (1.0 - par[DMIN] / par[NMACH]), 1.0)
+
+
+@njit(cache=True)
+def _nmac_factor(xy, hs, txy, th, tm, margined, lvl, ids, k, a, last, par):
+    """What row ``a``'s edge keeps of its line's value (``nmac_cost``) for its deepest NMAC
+    intrusion up to sub-step ``last``: ``1 - nmac_cost x depth`` (:func:`nmac_depth`), the
+    horizontal miss less the track's margin (``tm``; the cylinder's height is not grown: the
+    vertical escape stays cheap). The conflict at d_min stays the hard one: a collision's value
+    is never weighed by this."""
+    ha = hs[min(a, hs.shape[0] - 1)]
+    deepest = 0.0
+    for i in range(min(last + 1, xy.shape[1])):
+        for q in range(k):
+            rel = xy[a, i] - txy[lvl, i, ids[q]]
+            hd = abs(rel) - tm[lvl, i, ids[q]] if margined else abs(rel)
+            d = nmac_depth(max(hd, 0.0), ha[i] - th[lvl, i, ids[q]], par)
+            deepest = max(deepest, d)
+    return 1.0 - par[NMACW] * deepest
+
+
+@njit(cache=True)
+def wall_factor(row, par):
+    """What a leaf keeps of its value for the walls it may not be able to turn away from
+    (``wall_slack_s``): for each wall it heads towards (cosine ``c`` between its heading and
+    the wall's outward normal), a turn away at the bank limit (radius ``R``, after rolling in)
+    reaches ``R (1 - sqrt(1 - c^2)) + v t_roll c`` closer; the slack left over that, in
+    seconds of closing at ``v c``, over ``wall_slack_s``, clipped to [0, 1] (0: it can no
+    longer turn away: as good as out). Headings clockwise from north."""
+    x, y, v, psi = row[0], row[1], max(row[3], 1e-3), row[4]
+    r = v * v / par[TURNG]
+    ux, uy = math.sin(psi), math.cos(psi)
+    f = 1.0
+    for dist, c in ((x - par[XB0], -ux), (par[XB1] - x, ux), (y - par[YB0], -uy),
+                    (par[YB1] - y, uy)):  # fmt: skip
+        if c <= 0.0:
+            continue
+        need = r * (1.0 - math.sqrt(max(1.0 - c * c, 0.0))) + v * par[ROLLT] * c
+        f *= min(max((dist - need) / (v * c) / par[WALLT], 0.0), 1.0)
+    return f
 
 
 @njit(cache=True)
@@ -404,7 +462,7 @@ def run(tree, bz, brise, bend, bscal, child, tracks, climbs, drift, par, explore
     """``simulations`` MCTS simulations from the root (node 0) of ``tree`` (the algorithm:
     the docstring of uavxai.avoidance.mcts). Returns the number of nodes."""
     (visits, value_sum, first_child, is_leaf, value, key, state, depth, parent, action, code,
-     min_sep, closest, t_closest, surv, count, depth_limit) = tree  # fmt: skip
+     min_sep, closest, t_closest, surv, clear, count, depth_limit) = tree  # fmt: skip
     kn = climbs.size
     near = np.empty(tracks[5].shape[1], dtype=np.int64)
     path = np.zeros(depth_limit + 1, dtype=np.int64)
@@ -425,7 +483,9 @@ def run(tree, bz, brise, bend, bscal, child, tracks, climbs, drift, par, explore
         if v != v:  # nan: an open leaf at the depth limit, scored when first reached
             d = math.sqrt((state[node, 0] - par[GX]) ** 2 + (state[node, 1] - par[GY]) ** 2
                           + (state[node, 2] - par[GH]) ** 2)  # fmt: skip
-            v = 1.0 - d / par[DMAX]
+            v = (1.0 - d / par[DMAX]) * clear[node]
+            if par[WALLT] > 0:
+                v *= wall_factor(state[node], par)
             if par[RISK] > 0:
                 v *= surv[node]
             value[node] = v
@@ -528,12 +588,16 @@ def _params(
 ):
     cfg = model.config
     gh = float(goal[2])
+    nmac_r = math.hypot(*cfg.nmac_m)  # the sphere holding the NMAC cylinder
     return np.array(
         [cfg.d_min_m, cfg.goal_radius_m, *cfg.x_bounds, *cfg.y_bounds, *cfg.h_bounds,
          cfg.climb_rate_mps, hold_s, time_left_s, cfg.late_collision_value, cfg.d_max,
          float(model.vertical), cfg.height_target(-1, gh), cfg.height_target(0, gh),
-         cfg.height_target(1, gh), float(goal[0]), float(goal[1]), gh, cfg.cull_m,
-         cfg.cylinder_aspect or 0.0, float(_risky(model, tracks))],  # fmt: skip
+         cfg.height_target(1, gh), float(goal[0]), float(goal[1]), gh,
+         max(cfg.cull_m, nmac_r) if cfg.nmac_cost > 0 else cfg.cull_m,
+         cfg.cylinder_aspect or 0.0, float(_risky(model, tracks)), cfg.nmac_cost, *cfg.nmac_m,
+         cfg.wall_slack_s, G * math.tan(cfg.bank_limit_rad),
+         cfg.bank_limit_deg / cfg.roll_rate_limit_deg_s],  # fmt: skip
         dtype=float,
     )
 
@@ -564,15 +628,17 @@ def _empty_tree(
             np.full(cap, -1, dtype=np.int64),  # closest
             np.full(cap, np.nan),  # t_closest
             np.ones(cap),  # surv: the chance the line to the node keeps clear (risk "probability")
+            np.ones(cap),  # clear: what the line's NMAC intrusions leave of its value (nmac_cost)
             np.ones(1, dtype=np.int64),  # count
             depth_limit,
         )
     (visits, value_sum, first_child, is_leaf, value, key, state, depth, parent, action, code,
-     min_sep, closest, t_closest, surv, count, _) = tree  # fmt: skip
+     min_sep, closest, t_closest, surv, clear, count, _) = tree  # fmt: skip
     visits[0], value_sum[0], first_child[0], is_leaf[0], value[0], key[0] = 0, 0.0, -1, 0, np.nan, 0
     state[0] = np.asarray(root, dtype=float)[:8]
     depth[0], parent[0], action[0], code[0] = 0, -1, -1, 0
     min_sep[0], closest[0], t_closest[0], surv[0], count[0] = np.inf, -1, np.nan, 1.0, 1
+    clear[0] = 1.0
     return tree
 
 
@@ -580,7 +646,7 @@ def _as_search_tree(
     tree, size: int, k: int, hold_s: float, time_left_s: float, risky: bool
 ) -> SearchTree:
     (visits, value_sum, first_child, _, _, _, state, depth, parent, action, code, min_sep,
-     closest, t_closest, surv, _, _) = tree  # fmt: skip
+     closest, t_closest, surv, _, _, _) = tree  # fmt: skip
     d = depth[:size].copy()
     states = state[:size].copy()
     return SearchTree(

@@ -97,6 +97,20 @@ register("mcts_daa")(
         MCTSPlanner(_daa_config(config), name="mcts_daa"), name="mcts_daa"
     )
 )
+# Issue 27's multi-threat goal while arriving (docs/results "Safe among many and still
+# arriving"): mcts_vertical (the hard conflict at the collision distance d_min_m) whose values
+# grade NMAC intrusion as a cost instead of a wall (nmac_cost) and whose leaves know whether
+# they can still turn away from the walls (wall_slack_s). Not mcts_daa's home: that one's
+# alerting stage and 155 m wall are what make it leave the area.
+SEPARATION = {"nmac_cost": 0.5, "wall_slack_s": 4.0}
+
+
+def sep_config(config: PlannerConfig) -> PlannerConfig:
+    """``config`` as `mcts_sep` flies it: the vertical set, graded separation, walls."""
+    return dataclasses.replace(config, actions="vertical", **SEPARATION)
+
+
+register("mcts_sep")(lambda config, checkpoint: MCTSPlanner(sep_config(config), name="mcts_sep"))
 register("mvp")(lambda config, checkpoint: MVPPlanner(config))
 # mcts_vertical steering for a coarse route's waypoint (uavxai.avoidance.route): issue 31's
 # route layer, so that the tree is not lured between intruders into a dead end.

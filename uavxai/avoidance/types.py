@@ -149,6 +149,16 @@ class PlannerConfig(SchemaSettings):  # type: ignore[misc,valid-type]
     # Margins (intruder_margin) grow the cylinder keeping its aspect: a margin m adds m
     # horizontally and m * half-height / d_min_m vertically (the model's cylinder norm).
     conflict_half_height_m: float | None = None
+    # Graded separation (`mcts_sep`, docs/results "Safe among many and still arriving"): a
+    # line that comes inside a track's NMAC cylinder (nmac_m; its horizontal miss less the
+    # track's margin, intruder_margin) keeps 1 - nmac_cost x its depth (kernel.nmac_depth: 0 at
+    # the rim, 1 at d_min_m) of its value, its deepest intrusion counting; the conflict at
+    # d_min_m stays the hard one. 0: NMAC intrusion costs nothing (the paper).
+    nmac_cost: float = 0.0
+    # Walls in the leaf value (`mcts_sep`): a leaf heading for a wall keeps the share of its
+    # value that its slack (seconds before it must turn away at the bank limit to stay in the
+    # area) is of wall_slack_s (kernel.wall_factor); 0: the leaf ignores the walls (the paper).
+    wall_slack_s: float = 0.0
 
     def __post_init__(self) -> None:
         values = {name: getattr(self, name) for name in SCHEMA_PATHS}
@@ -166,7 +176,12 @@ class PlannerConfig(SchemaSettings):  # type: ignore[misc,valid-type]
                 f"PlannerConfig.intruder_model must be one of {', '.join(INTRUDER_MODELS)}, "
                 f"got {self.intruder_model!r}."
             )
-        for name in ("late_collision_value", "alert_horizon_s", "alert_hold_s"):
+        if not 0 <= self.nmac_cost < 1:
+            raise UserError(
+                f"PlannerConfig.nmac_cost must be in [0, 1) (a line inside the NMAC volume "
+                f"keeps some value: the collision stays the hard conflict), got {self.nmac_cost}."
+            )
+        for name in ("late_collision_value", "alert_horizon_s", "alert_hold_s", "wall_slack_s"):
             if not getattr(self, name) >= 0:
                 raise UserError(f"PlannerConfig.{name} must be >= 0, got {getattr(self, name)}.")
         if not 0 < self.intruder_bank_limit_deg < 90:

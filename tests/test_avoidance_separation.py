@@ -1,0 +1,127 @@
+"""Graded separation and walls in the value (`mcts_sep`, issues 27 and 31): a leaf heading into
+a wall it can no longer turn away from is worth nothing, one turning away keeps its value; a
+line inside the NMAC volume of a track is worth less, the deeper the less; a collision stays
+the hard conflict, worth less than any line that only intrudes on the NMAC volume."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+from engine_runs import flown_twice
+
+from uavxai.avoidance import Intruder, Ownship, PlannerConfig
+from uavxai.avoidance.kernel import WALLT, _params, nmac_depth, wall_factor
+from uavxai.avoidance.mcts import predict_levels, search
+from uavxai.avoidance.model import COLLISION, NONE, EncounterModel, ownship_state
+from uavxai.avoidance.planners import make_planner, sep_config
+from uavxai.errors import UserError
+
+CFG = sep_config(PlannerConfig())  # the default 2 km box, d_min 50 m, as mcts_sep flies it
+GOAL = np.array([1000.0, 1000.0, 120.0])
+NMAC_R = math.hypot(*CFG.nmac_m)  # the sphere holding the NMAC cylinder
+
+
+def _par(cfg: PlannerConfig = CFG) -> np.ndarray:
+    return _params(EncounterModel(cfg), GOAL, cfg.action_hold_s, math.inf, [])
+
+
+def _row(x: float, y: float, heading_deg: float, speed: float = 20.0) -> np.ndarray:
+    own = Ownship(x=x, y=y, h=120.0, speed=speed, heading=math.radians(heading_deg))
+    return ownship_state(own)
+
+
+def test_a_leaf_heading_into_a_wall_is_worth_less_than_one_turning_away() -> None:
+    par = _par()
+    # 60 m from the east wall (x = 2000)
+    into = wall_factor(_row(1940.0, 1000.0, 90.0), par)  # due east, straight at it
+    oblique = wall_factor(_row(1940.0, 1000.0, 45.0), par)  # north-east, closing slower
+    along = wall_factor(_row(1940.0, 1000.0, 0.0), par)  # due north, along it
+    away = wall_factor(_row(1940.0, 1000.0, 270.0), par)  # due west, away from it
+    assert into == 0.0  # a 41 m turn radius at 30 deg bank, after rolling in: too late
+    assert into < oblique < along == away == 1.0
+    # far from every wall, whatever the heading, the leaf keeps its value
+    assert all(wall_factor(_row(1000.0, 1000.0, h), par) == 1.0 for h in range(0, 360, 30))
+    # the same heading, farther from the wall: more slack, more value, up to all of it
+    f = [wall_factor(_row(2000.0 - d, 1000.0, 60.0), par) for d in (40, 80, 120, 160, 400)]
+    assert f == sorted(f) and f[0] < f[-1] == 1.0
+    # a corner counts both of its walls
+    corner = wall_factor(_row(1940.0, 1940.0, 45.0), par)
+    assert 0.0 < corner < wall_factor(_row(1940.0, 1000.0, 45.0), par)
+
+
+def test_without_wall_slack_the_leaf_ignores_the_walls() -> None:
+    par = _par(dataclasses.replace(CFG, wall_slack_s=0.0))
+    assert par[WALLT] == 0.0 and _par()[WALLT] == CFG.wall_slack_s > 0  # kernel.run skips it
+
+
+def test_nmac_intrusion_is_measured_in_the_nmac_cylinder_by_its_depth() -> None:
+    par = _par()
+    h, v = CFG.nmac_m
+    # on the rim and beyond: no intrusion; 40 m above a track is outside the cylinder however
+    # close horizontally (the sphere holding it would have counted it)
+    assert nmac_depth(h, 0.0, par) == nmac_depth(0.0, v, par) == nmac_depth(200.0, 0.0, par) == 0
+    assert nmac_depth(100.0, 40.0, par) == 0.0
+    deeper = [nmac_depth(d, 0.0, par) for d in (150.0, 120.0, 90.0, 60.0, 50.0, 10.0)]
+    assert deeper == sorted(deeper) and deeper[0] > 0.0 and deeper[-2] == deeper[-1] == 1.0
+    assert 0.0 < nmac_depth(0.0, 25.0, par) < nmac_depth(0.0, 10.0, par)
+
+
+def test_nmac_cost_must_leave_a_line_some_value() -> None:
+    with pytest.raises(UserError, match="nmac_cost"):
+        PlannerConfig(nmac_cost=1.0)
+    with pytest.raises(UserError, match="wall_slack_s"):
+        PlannerConfig(wall_slack_s=-1.0)
+
+
+def _head_on() -> tuple[Ownship, list[Intruder]]:
+    """Ownship due east at 20 m/s; an intruder 400 m ahead coming west at 20 m/s, 10 m lower:
+    flying straight collides in 10 s; turning away passes inside the NMAC volume."""
+    own = Ownship(x=500.0, y=1000.0, h=120.0, speed=20.0, heading=math.pi / 2)
+    return own, [Intruder(id=1, x=900.0, y=1000.0, h=110.0, vx=-20.0, vy=0.0)]
+
+
+def _tree(cfg: PlannerConfig, own: Ownship, intruders: list[Intruder]):
+    model = EncounterModel(cfg)
+    tracks = predict_levels(model, intruders, cfg.depth, cfg.action_hold_s)
+    return search(model, ownship_state(own), GOAL, tracks, simulations=cfg.simulations, c=cfg.c,
+                  hold_s=cfg.action_hold_s, rng=np.random.default_rng(0))  # fmt: skip
+
+
+def test_a_collision_stays_worth_less_than_any_nmac_intrusion() -> None:
+    own, intruders = _head_on()
+    tree = _tree(CFG, own, intruders)
+    seen = tree.visits > 0
+    value = np.divide(tree.value_sum, tree.visits, out=np.zeros(tree.size), where=seen)
+    hit = seen & (tree.terminal == COLLISION)
+    leaf = seen & (tree.terminal == NONE) & (tree.depth == CFG.depth)
+    assert hit.any() and leaf.any()
+    # some open leaves paid for the NMAC volume (eq 13 alone: 1 - d / d_max, far from the
+    # walls), down to 1 - nmac_cost of it, and still outrank every collision
+    eq13 = 1.0 - np.linalg.norm(tree.pos[leaf] - GOAL, axis=1) / CFG.d_max
+    paid = value[leaf] / eq13
+    assert paid.min() < 1.0 - 1e-9 and paid.min() >= 1.0 - CFG.nmac_cost - 1e-9
+    assert value[hit].max() < value[leaf].min()
+
+
+def test_the_nmac_cost_buys_separation_where_there_is_room() -> None:
+    """The intruder crosses 120 m north of the straight route: no conflict at 50 m, an NMAC
+    intrusion. mcts_vertical keeps to the route; mcts_sep's line passes farther."""
+    own = Ownship(x=500.0, y=1000.0, h=120.0, speed=20.0, heading=math.pi / 2)
+    intruders = [Intruder(id=1, x=900.0, y=1120.0, h=120.0, vx=-20.0, vy=0.0)]
+    plain = make_planner("mcts_vertical", PlannerConfig()).plan(own, intruders, tuple(GOAL))
+    sep = make_planner("mcts_sep", PlannerConfig()).plan(own, intruders, tuple(GOAL))
+    assert sep.planner == "mcts_sep"
+    assert sep.branch_min_separation_m > plain.branch_min_separation_m
+    assert sep.branch_min_separation_m >= NMAC_R > plain.branch_min_separation_m
+
+
+def test_mcts_sep_flies_an_episode_the_same_twice() -> None:
+    from uavxai.scenario import default_scenario
+
+    sc = default_scenario("sep", intruders={"behaviour": "random_turns"},
+                          avoidance={"max_steps": 30}, ownship={"goal": [1000, 1000, 120]})
+    a, b = flown_twice(sc, "mcts_sep", 20, 4)
+    assert a["method"] == "mcts_sep" and a["steps"] > 0 and a == b
