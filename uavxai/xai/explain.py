@@ -414,7 +414,7 @@ def decision_record(
 
 def decisions_file(member: int = 0) -> str:
     """The decisions file of fleet member ``member`` (docs/fleet.md): ``decisions.jsonl``
-    member 0's (one ownship's, as the SPEC has it), ``decisions-j.jsonl`` member j's, each
+    member 0's (one ownship's, as the README has it), ``decisions-j.jsonl`` member j's, each
     line as decisions.jsonl's, from the member's own view (its state as ``ownship``)."""
     return "decisions.jsonl" if member == 0 else f"decisions-{member}.jsonl"
 
