@@ -602,6 +602,23 @@ def test_a_ground_station_sees_the_fleet_each_member_its_own_system(tmp_path: Pa
 
 
 # ------------------------------------------------------------------------------ recording
+def trajectory_rows(run: Path) -> dict[str, dict[int, np.ndarray]]:
+    """Each aircraft's position in trajectory.csv by its time in ms."""
+    rows: dict[str, dict[int, np.ndarray]] = {}
+    with (run / "trajectory.csv").open() as f:
+        for r in csv.DictReader(f):
+            xyz = np.array([float(r["x"]), float(r["y"]), float(r["h"])])
+            rows.setdefault(r["id"], {})[round(float(r["t"]) * 1000)] = xyz
+    return rows
+
+
+def member_decisions(run: Path, j: int) -> list[dict]:
+    from uavxai.xai.explain import decisions_file
+
+    with (run / decisions_file(j)).open() as f:
+        return [json.loads(line) for line in f]
+
+
 def test_fleet_recording_has_every_member_where_it_flew(fleet_run: Path) -> None:
     """The run's real run.rrd read back: member 0 at world/ownship (N = 1's paths), members
     1.. at world/ownship-i, each with its trail; each pose where trajectory.csv has it; each
@@ -613,11 +630,7 @@ def test_fleet_recording_has_every_member_where_it_flew(fleet_run: Path) -> None
     chunks = chunks_by_path(fleet_run / "run.rrd")
     paths = ["/world/ownship"] + [f"/world/ownship-{i}" for i in range(1, len(fleet))]
     ms = lambda t_ns: round(t_ns / 1e6)  # noqa: E731 - rerun's ns and the CSVs' s, to the ms
-    rows: dict[str, dict[int, np.ndarray]] = {}
-    with (fleet_run / "trajectory.csv").open() as f:
-        for r in csv.DictReader(f):
-            xyz = np.array([float(r["x"]), float(r["y"]), float(r["h"])])
-            rows.setdefault(r["id"], {})[round(float(r["t"]) * 1000)] = xyz
+    rows = trajectory_rows(fleet_run)
     for entry, path in zip(fleet, paths, strict=True):
         assert f"{path}/trail" in chunks, path
         times, translation = column(chunks[path], "Transform3D:translation")
@@ -648,6 +661,80 @@ def test_fleet_recording_has_every_member_where_it_flew(fleet_run: Path) -> None
             checked += 1
     assert checked > 100 and seen == set(range(len(fleet)))  # every UAV's links drawn
     assert (fleet_run / "run.png").stat().st_size > 10_000
+
+
+def test_every_member_writes_its_own_decisions(fleet_run: Path) -> None:
+    """decisions.jsonl member 0's, decisions-j.jsonl member j's: one line per decision of that
+    member (summary.fleet's count), numbered from 0, each from the member's own view (its state
+    as `ownship` where trajectory.csv has that member; the others, members and intruders, in
+    `truth`), with its words, and its tree when its planner flew it."""
+    fleet = json.loads((fleet_run / "summary.json").read_text())["fleet"]
+    rows = trajectory_rows(fleet_run)
+    for j, entry in enumerate(fleet):
+        records = member_decisions(fleet_run, j)
+        assert [r["step"] for r in records] == list(range(entry["decisions"]))
+        me, matched = rows[entry["id"]], 0
+        for r in records:
+            own = r["state"]["ownship"]
+            at = me.get(round(r["t"] * 1000))
+            if at is not None:
+                assert np.abs(np.array([own["x"], own["y"], own["h"]]) - at).max() < 1e-2
+                matched += 1
+            truth = {a["id"] for a in r["truth"]}
+            assert entry["id"] not in truth
+            assert {u["id"] for u in fleet} - {entry["id"]} <= truth
+            assert r["explanation"]
+        assert matched > len(records) // 2
+        # its planner's trees, not only the orbit law's decisions (which have none)
+        assert sum(1 for r in records if r["children"]) > 10
+
+
+def test_explain_reads_a_members_decisions_and_names_the_members_there_are(
+    fleet_run: Path, capsys
+) -> None:
+    """`uavxai explain RUN --member J`: member J's decision in words, from decisions-J.jsonl;
+    a member the run has not: exit 2 naming the members it has."""
+    n = len(json.loads((fleet_run / "summary.json").read_text())["fleet"])
+    last = member_decisions(fleet_run, n - 1)[-1]
+    capsys.readouterr()
+    assert main(["explain", str(fleet_run), "--member", str(n - 1), "--decision", "-1"]) == 0
+    text = capsys.readouterr().out
+    assert f"at t = {last['t']:.1f} s" in text and last["explanation"] in text
+    assert main(["explain", str(fleet_run), "--member", str(n)]) == 2
+    err = capsys.readouterr().err
+    assert f"decisions-{n}.jsonl" in err and f"members are 0 to {n - 1}" in err
+
+
+def test_each_members_plan_and_words_are_in_the_recording(fleet_run: Path) -> None:
+    """The real run.rrd read back: each member's plan at world/ownship-j/plan, one per decision
+    (empty while the orbit law flies it), starting where the member was at that decision
+    (decisions-j.jsonl), in world coordinates; its explanations at xai/ownship-j/explanation,
+    decisions-j.jsonl's words."""
+    from test_recording_recorder import chunks_by_path, column
+
+    fleet = json.loads((fleet_run / "summary.json").read_text())["fleet"]
+    chunks = chunks_by_path(fleet_run / "run.rrd")
+    for j, entry in enumerate(fleet[1:], start=1):
+        records = {round(r["t"] * 1000): r for r in member_decisions(fleet_run, j)}
+        plan = f"/world/{entry['id']}/plan"
+        times, strips = column(chunks[plan], "LineStrips3D:strips")
+        assert sorted(round(t / 1e6) for t in times) == sorted(records)
+        drawn = 0
+        for t, s in zip(times, strips, strict=True):
+            if s:
+                own = records[round(t / 1e6)]["state"]["ownship"]
+                start = np.asarray(s[0][0]) - [own["x"], own["y"], own["h"]]
+                assert np.abs(start).max() < 1e-2, (plan, t)
+                drawn += 1
+        assert drawn > 10, plan  # the planner flew it for part of the flight at least
+        _, frame = column(chunks[plan], "CoordinateFrame:frame")  # static: not temporal
+        statics = [c for c in chunks[plan] if c.is_static]
+        assert any("CoordinateFrame:frame" in c.to_record_batch().schema.names for c in statics)
+        assert not frame
+        times, texts = column(chunks[f"/xai/{entry['id']}/explanation"], "TextLog:text")
+        words = {round(t / 1e6): text[0] for t, text in zip(times, texts, strict=True)}
+        for ms, r in records.items():
+            assert words[ms] == f"{entry['id']} #{r['step']}: {r['explanation']}"
 
 
 def test_members_have_adsb_addresses_of_their_own_and_always_carry_it() -> None:

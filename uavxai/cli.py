@@ -348,6 +348,13 @@ def _add_explain(sub: argparse._SubParsersAction) -> None:
         metavar="N",
         help="decision index (default: all, briefly); negative counts from the end",
     )
+    x.add_argument(
+        "--member",
+        type=int,
+        default=0,
+        metavar="J",
+        help="a fleet's member J (its decisions-J.jsonl; default 0: decisions.jsonl)",
+    )
 
 
 def _add_validate(sub: argparse._SubParsersAction) -> None:
@@ -799,7 +806,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 def cmd_explain(args: argparse.Namespace) -> int:
     from uavxai.xai.explain import explain_command
 
-    print(explain_command(args.run_dir, args.decision))
+    print(explain_command(args.run_dir, args.decision, args.member))
     sys.stdout.flush()  # a closed pipe (`| head`) shows here, inside main's handler
     return EXIT_OK
 

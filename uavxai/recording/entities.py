@@ -65,6 +65,17 @@ def member_path(member_id: str) -> str:
     return f"{WORLD}/{member_id}"
 
 
+def member_plan_path(member_id: str) -> str:
+    """``world/ownship-i/plan``: member i's chosen plan (member 0's is ``world/plan``)."""
+    return f"{member_path(member_id)}/plan"
+
+
+def member_explanation_path(member_id: str) -> str:
+    """``xai/ownship-i/explanation``: member i's explanations (member 0's are
+    ``xai/explanation``, the ones the default blueprint shows)."""
+    return f"xai/{member_id}/explanation"
+
+
 def trail_path(aircraft_path: str) -> str:
     return f"{aircraft_path}/trail"
 

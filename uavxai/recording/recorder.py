@@ -197,6 +197,10 @@ class RunRecorder:
         for n, path in enumerate(paths[1:], start=1):
             if n in members:
                 self._log_own_styles(path)  # a fleet's member, as the ownship
+                plan = ent.member_plan_path(ids[n])
+                # below the member's transform like its trail, and drawn in world coordinates
+                log(plan, rr.CoordinateFrame(f"tf#/{ent.WORLD}"), static=True)
+                log(plan, _line_style(PLAN_COLOR, rr.Radius.ui_points(2.0)), static=True)
             else:
                 log(path, mesh, static=True)
 
@@ -307,6 +311,26 @@ class RunRecorder:
         stream.log(ent.EXPLANATION, rr.TextLog(f"#{k}: {decision.explanation}", level="INFO"))
         if decision.counterfactual:
             stream.log(ent.EXPLANATION, rr.TextLog(decision.counterfactual, level="DEBUG"))
+
+    def log_member_decision(
+        self, member_id: str, k: int, t: float, decision: Decision, intruder_ids: list[str]
+    ) -> None:
+        """Fleet member ``member_id``'s decision ``k`` at ``t`` (docs/fleet.md): its chosen
+        plan at ``world/ownship-i/plan``, labelled as member 0's, and its explanation at
+        ``xai/ownship-i/explanation``. The members decide at member 0's decisions, so ``k`` is
+        member 0's decision number too; the timelines are set for these two only, member 0's
+        :meth:`log_decision` sets them again."""
+        if not self.enabled:
+            return
+        stream = self._stream
+        stream.set_time(ent.SIM_TIME, duration=t)
+        stream.set_time(ent.DECISION, sequence=k)
+        plan = np.asarray(decision.plan, dtype=np.float64).reshape(-1, 3)
+        label = _plan_label(decision, intruder_ids)
+        strips = [plan] if len(plan) > 1 else []
+        stream.log(ent.member_plan_path(member_id), rr.LineStrips3D(strips, labels=label))
+        text = f"{member_id} #{k}: {decision.explanation}"
+        stream.log(ent.member_explanation_path(member_id), rr.TextLog(text, level="INFO"))
 
     def log_sample(self, state: TrafficState, decision_ms: float = math.nan) -> None:
         """One sample of a run in one call: the traffic (:meth:`log_traffic`) and the metrics

@@ -24,7 +24,7 @@ from uavxai.dynamics.state import TrafficState
 from uavxai.geometry import turn_rate_of_bank
 from uavxai.scenario import Scenario
 from uavxai.sim.command import DirectPath
-from uavxai.sim.episode import EngineStep, Episode
+from uavxai.sim.episode import EngineStep, Episode, Observer
 from uavxai.sim.mission import Mission, MissionConfig
 from uavxai.sim.steps import Energy, OrbitBreak, service_files
 from uavxai.surveillance.tracker import truth_beliefs
@@ -165,6 +165,8 @@ def fleet_keep_m(scenario: Scenario) -> float:
 # Member j's command path over its view of the world (``uavxai.sim.run.member_paths``: MAVLink
 # system ``bridge.system_id + j``); None: the direct path onto its row
 MemberPath = Callable[[int, MemberWorld], object] | None
+# What watches member j's episode (its decisions.jsonl, its part of the recording), made for it
+MemberObserver = Callable[[int], Observer]
 
 
 class Member:
@@ -172,7 +174,7 @@ class Member:
 
     def __init__(
         self, scenario: Scenario, world, j: int, station, planner, max_steps: int,
-        path: MemberPath = None,
+        path: MemberPath = None, observers: Sequence[MemberObserver] = (),
     ) -> None:  # fmt: skip
         from uavxai.sim.build import start_episode
 
@@ -192,6 +194,7 @@ class Member:
             picture=IntentPicture.of(scenario, world),
             mission=self.mission,
             engine_steps=[self.mission, self.energy],
+            observers=[make(j) for make in observers],
         )  # fmt: skip
 
     @property
@@ -213,10 +216,12 @@ class Member:
         return outcome
 
     def close(self) -> dict[str, int] | None:
-        """Close the member's command path (its bridge and link) once; its link's counters
-        (None: the direct path)."""
+        """Close the member's command path (its bridge and link) and its observers (their
+        files) once; its link's counters (None: the direct path)."""
         if not self._closed:
             self._closed, self._counters = True, self.ep.path.close()
+            for o in self.ep.observers:
+                o.close()
         return self._counters
 
     def entry(self, fleet_outcome: str) -> dict:
@@ -248,12 +253,14 @@ class Fleet(EngineStep):
         planner: Callable[[int], object],
         max_steps: int,
         path: MemberPath = None,
+        observers: Sequence[MemberObserver] = (),
     ) -> None:
         self.scenario = scenario
         self.stations = np.asarray(stations, dtype=float)
         self._planner = planner  # member j -> its planner, seeded
         self._max_steps = max_steps
         self._path = path
+        self._observers = observers  # each member's, made for it when it starts
         self.members: list[Member] = []
         self._waiting = False
 
@@ -264,7 +271,7 @@ class Fleet(EngineStep):
         ep.mission.home_orbit = True  # done on reaching its hold orbit, as the members
         for j in range(1, len(self.stations)):
             m = Member(self.scenario, ep.world, j, self.stations[j], self._planner(j),
-                       self._max_steps, self._path)  # fmt: skip
+                       self._max_steps, self._path, self._observers)  # fmt: skip
             self.members.append(m)  # before it begins: closed whatever happens
             m.ep.begin()
 

@@ -219,6 +219,23 @@ class Rerun(Observer):
     def close(self) -> None:
         self.recorder.close()
 
+    def member(self, j: int) -> Observer:
+        """Fleet member ``j``'s observer of this recording (:class:`MemberRerun`)."""
+        return MemberRerun(self.recorder)
+
+
+class MemberRerun(Observer):
+    """A fleet member's decisions in the run's recording (member 0's :class:`Rerun` draws the
+    traffic, every member included, and closes the recorder): its plan and explanation."""
+
+    def __init__(self, recorder) -> None:
+        self.recorder = recorder
+
+    def on_decision(self, ep: Episode, event: DecisionEvent) -> None:
+        ids = ep.state.ids  # the member's view: its own row first
+        self.recorder.log_member_decision(ids[0], event.step, event.t, event.decision,
+                                          list(ids[1:]))  # fmt: skip
+
 
 class SummaryJSON(Observer):
     """``summary.json``: the episode's summary plus ``extra`` (what the run knows beside the

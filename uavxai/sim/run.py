@@ -36,6 +36,7 @@ from uavxai.sim.observers import (
 from uavxai.sim.quicklook import PLOT, QuickLook
 from uavxai.sim.spec import EpisodeSpec, episode_spec
 from uavxai.sim.steps import Energy, Service
+from uavxai.xai.explain import decisions_file
 
 console = Console(stderr=True, soft_wrap=True)
 
@@ -159,14 +160,17 @@ def run_episode(
     planner = Companion(sc.avoidance.planner, config, checkpoint, scenario=sc)
     channel = Channel.from_scenario(sc, users=service.users)
     url = mavlink if mavlink is not None else sc.bridge.mavlink
-    steps, observers = run_parts(
-        spec, channel, service.power_w, out, placement, member_paths(sc, url)
-    )
     record = sc.log.rerun if record is None else record
+    rerun = None
     if record or spawn or rerun_file is not None:
         # --spawn records to the file too: a viewer problem never loses the run's recording
         link = (channel, service.power_w)  # the recorder's metrics/sum_rate_bps
-        observers.append(_rerun(sc, service, rerun_file or out / "run.rrd", spawn, link))
+        rerun = _rerun(sc, service, rerun_file or out / "run.rrd", spawn, link)
+    steps, observers = run_parts(
+        spec, channel, service.power_w, out, placement, member_paths(sc, url), rerun
+    )
+    if rerun is not None:
+        observers.append(rerun)
     if realtime:
         observers.append(Pacing(realtime))
     if progress is not None:
@@ -192,12 +196,20 @@ def run_episode(
 
 
 def run_parts(
-    spec: EpisodeSpec, channel, power_w: np.ndarray, out: Path, placement=None, paths=None
+    spec: EpisodeSpec,
+    channel,
+    power_w: np.ndarray,
+    out: Path,
+    placement=None,
+    paths=None,
+    rerun: Rerun | None = None,
 ) -> tuple[list[EngineStep], list[Observer]]:
     """What a run adds to its episode: its engine steps, in their order after the picture,
     the operators and the mission (the battery: home at its reserve, the end when empty; then,
     with a mission, the service: users walk, it re-plans and moves the station), and the
-    observers of its files in ``out`` (any order: they only observe)."""
+    observers of its files in ``out`` (any order: they only observe). A fleet's members each
+    write their own ``decisions-j.jsonl`` and their decisions into ``rerun``, the run's
+    recording (the caller observes the run with it)."""
     from uavxai.sim.observers import TrajectoryCSV
 
     sc = spec.scenario
@@ -206,7 +218,10 @@ def run_parts(
     if placement is not None:  # a fleet (docs/fleet.md): its members, then its service
         from uavxai.sim.fleet import Fleet, FleetService
 
-        fleet = Fleet(sc, placement.positions, _member_planner(sc), spec.max_steps, paths)
+        watch = [lambda j: DecisionsJSONL(out / decisions_file(j))]
+        if rerun is not None:
+            watch.append(rerun.member)
+        fleet = Fleet(sc, placement.positions, _member_planner(sc), spec.max_steps, paths, watch)
         steps += [fleet, FleetService(sc, channel, placement, fleet, out)]
     elif spec.mission is not None:
         steps.append(Service(sc, channel, power_w, out, replan=_replanner(sc), energy=energy))
@@ -214,7 +229,7 @@ def run_parts(
         Throughput(channel, power_w),
         Trust(),
         TrajectoryCSV(out / "trajectory.csv"),
-        DecisionsJSONL(out / "decisions.jsonl"),
+        DecisionsJSONL(out / decisions_file()),
         QuickLook(out / PLOT, channel, power_w, energy, sc.avoidance.d_min_m),
     ]
     return steps, observers

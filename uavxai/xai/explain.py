@@ -412,12 +412,30 @@ def decision_record(
     return {"t": float(t), "state": state, **decision.to_json()}
 
 
-def read_decisions(run_dir: Path) -> list[dict[str, Any]]:
-    """The records of RUN_DIR/decisions.jsonl; UserError naming the problem otherwise."""
+def decisions_file(member: int = 0) -> str:
+    """The decisions file of fleet member ``member`` (docs/fleet.md): ``decisions.jsonl``
+    member 0's (one ownship's, as the README has it), ``decisions-j.jsonl`` member j's, each
+    line as decisions.jsonl's, from the member's own view (its state as ``ownship``)."""
+    return "decisions.jsonl" if member == 0 else f"decisions-{member}.jsonl"
+
+
+def read_decisions(run_dir: Path, member: int = 0) -> list[dict[str, Any]]:
+    """The records of RUN_DIR/decisions.jsonl (a fleet's member ``member``:
+    decisions-j.jsonl); UserError naming the problem otherwise."""
     run_dir = Path(run_dir)
     if not run_dir.is_dir():
         raise UserError(f"{run_dir}: no such run folder (give the --out folder of `uavxai run`).")
-    path = run_dir / "decisions.jsonl"
+    if member < 0:
+        raise UserError(f"--member {member}: a fleet's members are numbered from 0.")
+    path = run_dir / decisions_file(member)
+    if not path.is_file() and member > 0:
+        members = 1
+        while (run_dir / decisions_file(members)).is_file():
+            members += 1
+        raise UserError(
+            f"--member {member}: {run_dir} has no {path.name}; its members are 0 to "
+            f"{members - 1} (a fleet's member j writes decisions-j.jsonl)."
+        )
     if not path.is_file():
         raise UserError(f"{path}: not found; is {run_dir} the output folder of `uavxai run`?")
     records = []
@@ -440,14 +458,15 @@ def read_decisions(run_dir: Path) -> list[dict[str, Any]]:
     return records
 
 
-def explain_command(run_dir: Path, decision: int | None = None) -> str:
-    """The text `uavxai explain RUN_DIR [--decision N]` prints.
+def explain_command(run_dir: Path, decision: int | None = None, member: int = 0) -> str:
+    """The text `uavxai explain RUN_DIR [--decision N] [--member J]` prints.
 
     ``decision`` indexes the decisions from 0 (negative: from the end); None gives an overview.
+    ``member``: a fleet member's decisions (0: the run's ownship, decisions.jsonl).
     """
-    records = read_decisions(Path(run_dir))
+    records = read_decisions(Path(run_dir), member)
     if not records:
-        return f"{Path(run_dir) / 'decisions.jsonl'}: no decisions were recorded."
+        return f"{Path(run_dir) / decisions_file(member)}: no decisions were recorded."
     if decision is None:
         return render_overview(records)
     n = len(records)
