@@ -705,6 +705,18 @@ def test_explain_reads_a_members_decisions_and_names_the_members_there_are(
     assert f"decisions-{n}.jsonl" in err and f"members are 0 to {n - 1}" in err
 
 
+def test_the_console_names_the_members_decision_files(fleet_run: Path, capfd) -> None:
+    from uavxai.sim.run import report
+
+    summary = json.loads((fleet_run / "summary.json").read_text())
+    n = len(summary["fleet"])
+    capfd.readouterr()
+    report(summary, fleet_run, None, spawn=False)
+    text = " ".join(capfd.readouterr().err.split())  # the run's console is stderr
+    assert f"decisions-1 .. {n - 1}.jsonl" in text
+    assert all((fleet_run / f"decisions-{j}.jsonl").exists() for j in range(1, n))
+
+
 def test_each_members_plan_and_words_are_in_the_recording(fleet_run: Path) -> None:
     """The real run.rrd read back: each member's plan at world/ownship-j/plan, one per decision
     (empty while the orbit law flies it), starting where the member was at that decision

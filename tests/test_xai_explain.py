@@ -287,3 +287,12 @@ def test_steering_away_needs_holding_to_conflict():
     assert not is_avoidance(hold_clear, 8, 50.0)  # another option conflicted, holding did not
     hold_meets = [_meeting_child(4, 30, 0.05, 6.0, 5.0), _child(8, 40, 0.9)]
     assert is_avoidance(hold_meets, 8, 50.0)
+
+
+def test_a_fleet_member_is_named_as_one_not_as_an_intruder():
+    from uavxai.xai.explain import _name
+
+    # a member's picture holds the other members as "ownship-j" (docs/fleet.md)
+    assert _name("ownship-0") == "fleet member 0"
+    assert _name("intruder-7") == "intruder 7"
+    assert _name(3) == "intruder 3"

@@ -389,7 +389,11 @@ def report(summary: dict, out: Path, rerun_file: Path | None, spawn: bool) -> No
                 console.print(_departure_line(d))
         elif e.get("mission", {}).get("delivered_bits") is not None:
             console.print(_mission_line(e["mission"]))
-    console.print(f"outputs in {out}/ (summary.json, trajectory.csv, decisions.jsonl, {PLOT})")
+    n = len(eps[0].get("fleet") or [])  # a fleet's other members write their own (docs/fleet.md)
+    more = {0: "", 1: "", 2: ", decisions-1.jsonl"}.get(n, f", decisions-1 .. {n - 1}.jsonl")
+    console.print(
+        f"outputs in {out}/ (summary.json, trajectory.csv, decisions.jsonl{more}, {PLOT})"
+    )
     rrd = rerun_file or out / "run.rrd"  # written with or without --spawn
     if len(eps) > 1 and rerun_file is None:
         rrd = out / "episode-000" / "run.rrd"

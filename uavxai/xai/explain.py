@@ -367,6 +367,8 @@ def _short(action: int) -> str:
 
 def _name(intruder_id: Any) -> str:
     text = str(intruder_id)
+    if text.startswith("ownship-"):  # a fleet member in another member's picture
+        return f"fleet member {text.removeprefix('ownship-')}"
     if text.startswith("intruder-"):
         text = text.removeprefix("intruder-")
     return f"intruder {text}"
