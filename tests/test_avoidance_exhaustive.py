@@ -117,3 +117,16 @@ def test_exhaustive_does_not_orbit_the_goal():
     r = run_episode("exhaustive", default_scenario("demo"), 110, 5)
     assert r.outcome == "goal"
     assert r.steps < 100
+
+
+def test_the_reference_values_lines_without_the_compiled_search_s_terms():
+    """mcts_sep's NMAC cost and walls live in the compiled search only: the exhaustive
+    reference's config says it values lines without them (and without the chance)."""
+    import dataclasses
+
+    from uavxai.avoidance.planners import sep_config
+
+    sep = sep_config(PlannerConfig())
+    assert sep.nmac_cost > 0 and sep.wall_slack_s > 0
+    ref = ExhaustivePlanner(dataclasses.replace(sep, risk="probability")).config
+    assert (ref.nmac_cost, ref.wall_slack_s, ref.risk) == (0.0, 0.0, "margin")

@@ -125,3 +125,17 @@ def test_mcts_sep_flies_an_episode_the_same_twice() -> None:
                           avoidance={"max_steps": 30}, ownship={"goal": [1000, 1000, 120]})
     a, b = flown_twice(sc, "mcts_sep", 20, 4)
     assert a["method"] == "mcts_sep" and a["steps"] > 0 and a == b
+
+
+def test_settings_that_would_break_the_grading_are_refused() -> None:
+    # the depth is graded from the NMAC rim down to d_min_m: d_min_m at or beyond the rim
+    # would divide by zero in the kernel or switch the cost off silently
+    with pytest.raises(UserError, match="d_min_m"):
+        PlannerConfig(nmac_cost=0.5, d_min_m=152.4)
+    with pytest.raises(UserError, match="d_min_m"):
+        PlannerConfig(nmac_cost=0.5, d_min_m=200.0)
+    PlannerConfig(nmac_cost=0.0, d_min_m=200.0)  # no cost: nothing graded, allowed
+    # a late collision may tie with the deepest time-out, never outrank it
+    with pytest.raises(UserError, match="late_collision_value"):
+        PlannerConfig(nmac_cost=0.6, late_collision_value=0.05)
+    PlannerConfig(nmac_cost=0.5, late_collision_value=0.05)  # mcts_sep's own: a tie

@@ -79,7 +79,11 @@ class ExhaustivePlanner(TreePlanner):
     def __init__(self, config: PlannerConfig | None = None, *, name: str = "exhaustive") -> None:
         # Risk as a probability weighs the values MCTS backs up (avoidance.mcts.risk); the
         # exhaustive reference keeps the k-sigma wall, whatever the scenario asks of MCTS.
-        config = dataclasses.replace(config or PlannerConfig(), risk="margin")
+        # Likewise mcts_sep's NMAC cost and walls live in the compiled search only: the
+        # reference values lines without them, and its config says so.
+        config = dataclasses.replace(
+            config or PlannerConfig(), risk="margin", nmac_cost=0.0, wall_slack_s=0.0
+        )
         super().__init__(config, name=name)
 
     def search(

@@ -189,10 +189,23 @@ class PlannerConfig(SchemaSettings):  # type: ignore[misc,valid-type]
                 "PlannerConfig.intruder_bank_limit_deg must be in (0, 90), "
                 f"got {self.intruder_bank_limit_deg}."
             )
-        if self.late_collision_value >= 0.1:
+        # A time-out through the NMAC volume keeps 0.1 x (1 - nmac_cost) of its value, and a
+        # collision at the horizon's end is worth late_collision_value: it may at most tie
+        # with that deepest time-out (mcts_sep: 0.05 and 0.05), never outrank it.
+        floor = 0.1 * (1.0 - self.nmac_cost)
+        if self.late_collision_value >= 0.1 or self.late_collision_value > floor:
             raise UserError(
-                "PlannerConfig.late_collision_value must be below the time-out's value 0.1, "
-                f"got {self.late_collision_value}."
+                "PlannerConfig.late_collision_value must be below the time-out's value 0.1 and "
+                f"at most its least value through the NMAC volume, 0.1 x (1 - nmac_cost) = "
+                f"{floor:g}; got {self.late_collision_value}."
+            )
+        if self.nmac_cost > 0 and not self.d_min_m < self.nmac_m[0]:
+            # the NMAC depth is graded from the cylinder's rim to d_min_m (kernel.nmac_depth)
+            raise UserError(
+                f"PlannerConfig.nmac_cost > 0 grades the NMAC volume down to the collision "
+                f"distance, so d_min_m ({self.d_min_m} m) must be below the NMAC horizontal "
+                f"distance ({self.nmac_m[0]} m); lower avoidance.d_min_m or use another planner "
+                "than mcts_sep."
             )
         lo, hi = self.climb_speed_band_mps
         if not lo < hi:

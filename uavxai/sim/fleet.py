@@ -407,7 +407,9 @@ class FleetService(EngineStep):
             self.tally.add(rates)
             for d in self.departures:
                 mine = np.array(d["users"], dtype=np.int64)
-                if d["recovered_after_s"] is None and np.all(rates[mine] >= self.qos_bps):
+                # a member that served nobody leaves no one to re-cover: it stays None
+                if (d["recovered_after_s"] is None and mine.size
+                        and np.all(rates[mine] >= self.qos_bps)):  # fmt: skip
                     d["recovered_after_s"] = round(t - d["t"], 3)
         # what the recording draws (the run's Service sets the same for one UAV): every user,
         # its rate now (0: its UAV is not serving), and its UAV, where the link is drawn from
