@@ -283,6 +283,23 @@ def _samples(h, origin, rot, kk, heights, level, bz, brise, drift, par):
 
 
 @njit(cache=True)
+def _end_value(cd, clear_c, t, depth_limit, par):
+    """The value of a child whose line ends (nan while it is open): the goal, what its NMAC
+    intrusion leaves of it (graded separation: arriving through an NMAC is worth less); a
+    time-out a tenth of that; a collision at ``t`` s ``late_collision_value`` times the
+    horizon's share gone; leaving the area 0."""
+    if cd == _NONE:
+        return np.nan
+    if cd == _GOAL:
+        return clear_c
+    if cd == _TIMEOUT:
+        return 0.1 * clear_c
+    if cd == _COLLISION and par[LATE] > 0:
+        return par[LATE] * t / (depth_limit * par[DUR])
+    return 0.0
+
+
+@njit(cache=True)
 def _expand(node, tree, bz, brise, bend, bscal, child, tracks, climbs, drift, par, near):
     """TreeBuilder.expand over EncounterModel.expand: the K children of ``node``, appended
     to the tree; returns the first child's index."""
@@ -347,17 +364,7 @@ def _expand(node, tree, bz, brise, bend, bscal, child, tracks, climbs, drift, pa
         code[c] = cd
         visits[c], value_sum[c], first_child[c] = 0, 0.0, -1
         is_leaf[c] = lvl + 1 == depth_limit or cd != _NONE
-        if cd == _NONE:
-            value[c] = np.nan
-        elif cd == _GOAL:  # graded separation: arriving through an NMAC is worth less
-            value[c] = clear[c]
-        elif cd == _TIMEOUT:
-            value[c] = 0.1 * clear[c]
-        elif cd == _COLLISION and par[LATE] > 0:
-            t = lvl * par[DUR] + k_event[a] * dt
-            value[c] = par[LATE] * t / (depth_limit * par[DUR])
-        else:
-            value[c] = 0.0
+        value[c] = _end_value(cd, clear[c], lvl * par[DUR] + k_event[a] * dt, depth_limit, par)
         if risky:  # the line so far keeps clear with this chance: its value's weight
             surv[c] = surv[node] * edge_surv[a]
             if cd == _COLLISION:  # a hard collision keeps its (late) value, weighed by
