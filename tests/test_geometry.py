@@ -45,7 +45,11 @@ def test_wrap_angle_of_an_array_is_the_float_one_element_by_element():
     # the same direction: a whole number of turns apart
     turns = (a - out) / (2 * math.pi)
     np.testing.assert_allclose(turns, np.round(turns), atol=1e-9)
-    np.testing.assert_array_equal(out, [[wrap_angle(float(x)) for x in row] for row in a])
+    # numpy's sin and cos on arrays are its own SIMD kernels (AVX-512 on the CI machine of
+    # 2026-11-28), not the C library's that math uses: each is within 1 ulp of the true
+    # value, and the two paths met to the bit on the earlier machine but differ in the last
+    # bit on 5 of these 100 angles here. The claim that holds everywhere is 1 ulp.
+    np.testing.assert_array_max_ulp(out, [[wrap_angle(float(x)) for x in row] for row in a], 1)
 
 
 def test_closest_point_of_approach_of_straight_lines():
