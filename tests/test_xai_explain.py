@@ -296,3 +296,29 @@ def test_a_fleet_member_is_named_as_one_not_as_an_intruder():
     assert _name("ownship-0") == "fleet member 0"
     assert _name("intruder-7") == "intruder 7"
     assert _name(3) == "intruder 3"
+
+
+def test_explain_counts_the_members_by_the_runs_summary_not_by_files_left_in_the_folder(
+    tmp_path,
+):
+    """A decisions-j.jsonl another run left in the folder is not read as this run's member:
+    the members are those of summary.json's ``fleet``; without a summary, the files count."""
+    import json
+
+    import pytest
+
+    from uavxai.errors import UserError
+    from uavxai.xai.explain import read_decisions
+
+    record = json.dumps({"t": 1.0, "action": 4, "children": [], "explanation": "hold"})
+    for name in ("decisions.jsonl", "decisions-1.jsonl", "decisions-2.jsonl"):
+        (tmp_path / name).write_text(record + "\n")
+    assert len(read_decisions(tmp_path, 2)) == 1  # no summary: three files, three members
+    (tmp_path / "summary.json").write_text(json.dumps({"fleet": [{"id": 0}, {"id": 1}]}))
+    assert len(read_decisions(tmp_path, 1)) == 1
+    with pytest.raises(UserError, match="members are 0 to 1"):
+        read_decisions(tmp_path, 2)
+    (tmp_path / "summary.json").write_text(json.dumps({"outcome": "goal"}))  # one ownship
+    with pytest.raises(UserError, match="members are 0 to 0"):
+        read_decisions(tmp_path, 1)
+    assert len(read_decisions(tmp_path, 0)) == 1

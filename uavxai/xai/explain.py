@@ -421,6 +421,20 @@ def decisions_file(member: int = 0) -> str:
     return "decisions.jsonl" if member == 0 else f"decisions-{member}.jsonl"
 
 
+def _members(run_dir: Path) -> int:
+    """How many members the run in RUN_DIR flew: its summary.json's ``fleet`` entries (1
+    without a fleet), so a file another run left in the folder is not taken for a member; by
+    the decisions files there are when the summary is missing or unreadable (a run cut short)."""
+    try:
+        summary = json.loads((run_dir / "summary.json").read_text(encoding="utf-8"))
+        return max(1, len(summary.get("fleet") or []))
+    except (OSError, ValueError, AttributeError, TypeError):
+        members = 1
+        while (run_dir / decisions_file(members)).is_file():
+            members += 1
+        return members
+
+
 def read_decisions(run_dir: Path, member: int = 0) -> list[dict[str, Any]]:
     """The records of RUN_DIR/decisions.jsonl (a fleet's member ``member``:
     decisions-j.jsonl); UserError naming the problem otherwise."""
@@ -430,13 +444,11 @@ def read_decisions(run_dir: Path, member: int = 0) -> list[dict[str, Any]]:
     if member < 0:
         raise UserError(f"--member {member}: a fleet's members are numbered from 0.")
     path = run_dir / decisions_file(member)
-    if not path.is_file() and member > 0:
-        members = 1
-        while (run_dir / decisions_file(members)).is_file():
-            members += 1
+    members = _members(run_dir)
+    if member > 0 and (member >= members or not path.is_file()):
         raise UserError(
-            f"--member {member}: {run_dir} has no {path.name}; its members are 0 to "
-            f"{members - 1} (a fleet's member j writes decisions-j.jsonl)."
+            f"--member {member}: {run_dir} has no {path.name} of this run; its members are 0 "
+            f"to {members - 1} (a fleet's member j writes decisions-j.jsonl)."
         )
     if not path.is_file():
         raise UserError(f"{path}: not found; is {run_dir} the output folder of `uavxai run`?")
