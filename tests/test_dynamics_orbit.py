@@ -203,3 +203,27 @@ def test_aircraft_400m_away_captures_the_circle(heading_deg: float) -> None:
     assert capture_s < 45.0  # measured 21 s across, 32 s flying away
     assert f.distance().min() > 0.9 * r  # no overshoot into the circle
     assert np.abs(err[f.t > capture_s + 20]).max() < 0.01
+
+
+@pytest.mark.parametrize(("start", "heading_deg"), [((-250.0, 0.0), 270.0), ((0.0, 221.0), 0.0)])
+def test_fly_predicts_the_laws_way_onto_the_circle_as_jsbsim_flies_it(start, heading_deg) -> None:
+    """``OrbitGuidance.fly``, the orbit check's prediction of the law's way onto the circle
+    (issue 32: fleet-mission.yaml seed 1's member 2 was handed back 221 m out heading away),
+    against the uav_fw in JSBSim flown by the same law for 16 s (the planner's horizon) from
+    off the circle heading away: within 5 % of the 320 m flown (measured 11 m), where flying
+    straight on is 400 m off."""
+    from uavxai.avoidance.types import PlannerConfig
+
+    cfg = PlannerConfig.from_scenario(default_scenario("orbit-test"))
+    g = OrbitGuidance((0.0, 0.0), 106.0, bank_limit_rad=BANK_LIMIT)
+    f = fly_orbit(g, start, heading_deg, 20.0, 16.0 + 1e-6)
+    psi = math.radians(heading_deg)
+    roll = math.radians(cfg.roll_rate_limit_deg_s)
+    way = g.fly(start, (20.0 * math.sin(psi), 20.0 * math.cos(psi)), 0.0, roll, 16.0, 0.1)
+    assert way.shape == (161, 2)
+    assert way[0] == pytest.approx(start)
+    flown = f.t <= 16.0 + 1e-9
+    predicted = way[np.round(f.t[flown] / 0.1).astype(int)]
+    assert np.hypot(*(f.xy[flown] - predicted).T).max() < 0.05 * 20.0 * 16.0
+    # it turned back towards the circle: the law's way, not the straight line on
+    assert np.hypot(*way[-1]) < np.hypot(*start)

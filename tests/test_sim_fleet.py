@@ -420,14 +420,16 @@ def test_nearest_stations_moves_the_fleet_least() -> None:
 
 @pytest.fixture(scope="module")
 def leave_run(tmp_path_factory) -> Path:
-    """fleet.yaml's fleet without intruders, 40 s on station, member 1 leaving at 45 s (all
-    three on station from about 30 s)."""
+    """fleet.yaml's fleet without intruders, 40 s on station, member 1 leaving at 45 s.
+    Seed 6 (seed 3 until issue 32's round 9: the orbit check's way onto the orbit changed
+    where the members were at 45 s, and none was then farther from its new station than it
+    goes on station from, so the flight no longer showed the move in transit)."""
     import yaml
 
     out = tmp_path_factory.mktemp("leave")
     scenario = out / "leave.yaml"
     scenario.write_text(yaml.safe_dump({
-        "name": "leave", "seed": 3, "world": WORLD, "ownship": {"start": START},
+        "name": "leave", "seed": 6, "world": WORLD, "ownship": {"start": START},
         "fleet": {"size": 3, "leave": {"member": 1, "at_s": 45}},
         "comms": {"access": "ofdma", "users": {"count": 9,
                                                "mobility": {"model": "random_waypoint"}}},
@@ -477,7 +479,7 @@ def test_a_member_leaving_early_has_its_users_re_covered_by_the_others(leave_run
             assert math.dist(track[(f"ownship-{n}", round(served[0], 1))], new) <= join + 3.0
         else:
             assert served[0] == pytest.approx(t0, abs=0.2)  # serving on at once
-    assert moved  # the flight shows it (member 2: 187 m from its new station)
+    assert moved  # the flight shows it (member 0: 346 m from its new station)
     for r in rows:  # who serves whom: the plan in force at the time
         uav, k, t = int(r["uav"]), int(r["user"]), float(r["t"])
         assert (gone["association_before"] if t < t0 else after)[k] == uav

@@ -228,4 +228,96 @@ def test_a_fleets_member_is_home_on_reaching_its_hold_orbit_one_ownship_at_home(
     assert m._home_reached((150.0, 1300.0 - 150.0, 120.0), 50.0)
     assert m._home_reached((150.0 + 49.0, 1300.0, 120.0), 50.0)
     assert not m._home_reached((150.0 + 160.0, 1300.0, 120.0), 50.0)
-    assert not m._home_reached((150.0 + 150.0, 1300.0, 175.0), 50.0)  # not at its height
+    # at any height (on_orbit): the loiter law climbs or sinks to the orbit's as it circles
+    assert m._home_reached((150.0 + 150.0, 1300.0, 175.0), 50.0)
+
+
+def test_on_the_orbit_is_one_test_horizontal_at_any_height() -> None:
+    """The station reached, home's hold orbit reached and a moved station near enough to be
+    flown by the orbit law are one test (issue 32): within the radius + the goal radius of
+    the centre horizontally, whatever the height."""
+    from uavxai.sim.mission import on_orbit
+
+    centre = (1000.0, 1000.0, 120.0)
+    assert on_orbit((1000.0 + 156.0, 1000.0, 120.0), centre, 106.0, 50.0)
+    assert on_orbit((1000.0, 1000.0 - 156.0, 400.0), centre, 106.0, 50.0)  # 280 m above
+    assert on_orbit((1000.0, 1000.0, 60.0), centre, 106.0, 50.0)  # over the centre
+    assert not on_orbit((1000.0 + 110.4, 1000.0 + 110.4, 120.0), centre, 106.0, 50.0)  # 156.1 m
+
+
+class _Path:
+    """The command path as the orbit step uses it: the orbits sent, nothing flown."""
+
+    def __init__(self) -> None:
+        self.orbits: list[tuple] = []
+
+    def orbit(self, *args) -> None:
+        self.orbits.append(args)
+
+    def cruise_speed(self, speed: float) -> float:
+        return speed
+
+    def announce(self, *args) -> None:
+        pass
+
+    def altitude(self, *args) -> None:
+        pass
+
+    def plan_label(self) -> str:
+        return "on station"
+
+
+def _stepping(cfg: PlannerConfig):
+    """An episode as Mission.decide reads it: its planner's settings, d_min, the time, the
+    command path and the world's last bank command."""
+    from types import SimpleNamespace
+
+    path = _Path()
+    return SimpleNamespace(
+        seat=SimpleNamespace(config=cfg),
+        judge=SimpleNamespace(d_min_m=cfg.d_min_m, goal_radius_m=cfg.goal_radius_m),
+        state=SimpleNamespace(t=60.0),
+        path=path,
+        plan_label=path.plan_label,
+        world=SimpleNamespace(ownship_command=lambda: {"bank_cmd_rad": 0.0}),
+    )
+
+
+@pytest.mark.parametrize("blocked", [True, False])
+def test_the_orbit_law_gets_the_aircraft_back_only_when_its_way_onto_the_orbit_is_clear(
+    blocked: bool,
+) -> None:
+    """fleet-mission.yaml seed 1 (issue 32): member 2, 221 m from its station's centre
+    heading away after avoiding, was handed back to the orbit law because the circle from
+    its bearing was clear; the law flew it out to 320 m, onto intruder 14. Here the circle
+    is clear of an intruder standing on the law's way back (its turn about, 5 s ahead) and
+    the mission keeps the planner flying; with the intruder far off, it hands back."""
+    from uavxai.avoidance.types import Intruder, Ownship
+    from uavxai.dynamics.orbit import OrbitGuidance
+    from uavxai.sim.mission import Mission, Orbit, Phase, orbit_clearance, way_clearance
+
+    sc = default_scenario("mission-rejoin", intruders={"count": 0}, seed=1)
+    cfg = PlannerConfig.from_scenario(sc)
+    c = MissionConfig(STATION, (150.0, 1300.0, 120.0), 300.0, True, 106.0, 20.0)
+    own = Ownship(STATION[0], STATION[1] + 221.0, 120.0, 20.0, 0.0)  # north, heading north
+    law = OrbitGuidance(STATION[:2], 106.0, True, math.radians(cfg.bank_limit_deg))
+    roll = math.radians(cfg.roll_rate_limit_deg_s)
+    on_way = law.fly((own.x, own.y), (0.0, 20.0), 0.0, roll, 5.0, 0.1)[-1]
+    at = on_way if blocked else (2500.0, 2500.0)
+    intruders = [Intruder("intruder-14", float(at[0]), float(at[1]), 120.0, 0.0, 0.0)]
+    horizon = cfg.depth * cfg.action_hold_s
+    circle = orbit_clearance(c, own, intruders, horizon)
+    way = way_clearance(Orbit(STATION, 106.0, True, 20.0), own, intruders, horizon, cfg)
+    assert circle[0] > 3 * cfg.d_min_m  # the circle alone would hand it back
+    if blocked:
+        assert way[0] < cfg.d_min_m and way[1] == "intruder 14"
+    m = Mission(c, lambda *a, **k: None)
+    m.phase = Phase.AVOIDING
+    ep = _stepping(cfg)
+    decision = m.decide(ep, own, intruders)
+    if blocked:
+        assert decision is None and m.phase is Phase.AVOIDING and not ep.path.orbits
+    else:
+        assert decision is not None and decision.planner == "orbit"
+        assert m.phase is Phase.ON_STATION and ep.path.orbits
+        assert decision.branch_min_separation_m > 3 * cfg.d_min_m

@@ -149,12 +149,11 @@ class PlannerConfig(SchemaSettings):  # type: ignore[misc,valid-type]
     # Margins (intruder_margin) grow the cylinder keeping its aspect: a margin m adds m
     # horizontally and m * half-height / d_min_m vertically (the model's cylinder norm).
     conflict_half_height_m: float | None = None
-    # Graded separation (`mcts_sep`, docs/results "Safe among many and still arriving"): a
-    # line that comes inside a track's NMAC cylinder (nmac_m; its horizontal miss less the
-    # track's margin, intruder_margin) keeps 1 - nmac_cost x its depth (kernel.nmac_depth: 0 at
-    # the rim, 1 at d_min_m) of its value, its deepest intrusion counting; the conflict at
-    # d_min_m stays the hard one. 0: NMAC intrusion costs nothing (the paper).
-    nmac_cost: float = 0.0
+    # Graded separation, nmac_cost, is a schema setting (`avoidance.mcts.nmac_cost`, issue
+    # 32's fleet mission; `mcts_sep` sets it to 0.5): a line that comes inside a track's NMAC
+    # cylinder (nmac_m; its horizontal miss less the track's margin, intruder_margin) keeps
+    # 1 - nmac_cost x its depth (kernel.nmac_depth: 0 at the rim, 1 at d_min_m) of its value,
+    # its deepest intrusion counting; the conflict at d_min_m stays the hard one.
     # Walls in the leaf value (`mcts_sep`): a leaf heading for a wall keeps the share of its
     # value that its slack (seconds before it must turn away at the bank limit to stay in the
     # area) is of wall_slack_s (kernel.wall_factor); 0: the leaf ignores the walls (the paper).

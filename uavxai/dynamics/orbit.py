@@ -28,8 +28,10 @@ import math
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
+import numpy as np
+
 from uavxai.errors import UserError
-from uavxai.geometry import bank_of_turn_rate, wrap_angle
+from uavxai.geometry import bank_of_turn_rate, turn_rate_of_bank, wrap_angle
 from uavxai.units import G
 
 if TYPE_CHECKING:
@@ -170,3 +172,36 @@ class OrbitGuidance:
         turn_rate = chi_d_dot + wrap_angle(chi_d - chi) / self.tau
         bank = bank_of_turn_rate(turn_rate, vg)
         return min(max(bank, -lim), lim)
+
+    def fly(
+        self,
+        pos_xy: Sequence[float],
+        vel_xy: Sequence[float],
+        bank_rad: float,
+        roll_rate_rad_s: float,
+        duration_s: float,
+        step_s: float,
+    ) -> np.ndarray:
+        """Where the law takes an aircraft now at ``pos_xy`` with ground velocity ``vel_xy``
+        and bank ``bank_rad``: (n + 1, 2) positions every ``step_s`` (the outer loop's period)
+        over ``duration_s``, from now. Kinematic: the bank follows each command at the roll
+        rate limit, the ground course turns at the coordinated rate of that bank at the ground
+        speed, which stays as it is. It is the orbit law's own way onto the circle (from far
+        out heading away it turns a circle of its own first; issue 32, fleet-mission.yaml
+        seed 1), which the circle itself does not say."""
+        x, y = float(pos_xy[0]), float(pos_xy[1])
+        vx, vy = float(vel_xy[0]), float(vel_xy[1])
+        speed = max(math.hypot(vx, vy), _MIN_GROUND_SPEED_MPS)
+        course, phi = math.atan2(vx, vy), float(bank_rad)
+        n = max(int(round(duration_s / step_s)), 0)
+        out = np.empty((n + 1, 2))
+        out[0] = x, y
+        roll = roll_rate_rad_s * step_s
+        for k in range(1, n + 1):
+            cmd = self.bank_command((x, y), (vx, vy), speed)
+            phi += min(max(cmd - phi, -roll), roll)
+            course += turn_rate_of_bank(phi, speed) * step_s
+            vx, vy = speed * math.sin(course), speed * math.cos(course)
+            x, y = x + vx * step_s, y + vy * step_s
+            out[k] = x, y
+        return out

@@ -4,13 +4,15 @@ Phases (announced to ground stations as STATUSTEXT, shown as the flight mode):
 
 - ``transit``: the avoidance planner flies to the service point among traffic;
 - ``on_station``: the autopilot loiters about the service point (MAV_CMD_DO_ORBIT, re-sent
-  every decision) for ``mission.service_s``; every decision the orbit ahead is checked
-  against every intruder the planner believes in, over the planner's horizon;
-- ``avoiding``: when the orbit ahead comes within ``2 d_min`` of an intruder, the avoidance
+  every decision) for ``mission.service_s``; every decision the orbit ahead, and the orbit
+  law's own way onto it from where the aircraft is, are checked against every intruder the
+  planner believes in, over the planner's horizon;
+- ``avoiding``: when either comes within ``2 d_min`` of an intruder, the avoidance
   planner takes over (its commands take the aircraft off the orbit), steering for the orbit
-  point it would have reached at the end of the horizon; once the orbit ahead is clear it
-  rejoins (a new DO_ORBIT). Time avoiding counts as time on station: the users are still in
-  reach, the service lost to the manoeuvre is measured by the delivery observer;
+  point it would have reached at the end of the horizon; once the orbit ahead and the way
+  onto it are clear it rejoins (a new DO_ORBIT). Time avoiding counts as time on station:
+  the users are still in reach, the service lost to the manoeuvre is measured by the delivery
+  observer;
 - ``returning``: after the service time, or when the battery reaches its reserve, the planner
   flies home; the mission is ``completed`` there (or at the end of the service time without
   ``return_home``).
@@ -29,8 +31,9 @@ from enum import StrEnum
 
 import numpy as np
 
-from uavxai.avoidance.types import Decision, Intruder, Ownship
-from uavxai.dynamics.orbit import scenario_orbit_radius
+from uavxai.avoidance.types import Decision, Intruder, Ownship, PlannerConfig
+from uavxai.dynamics.loiter import GUIDANCE_PERIOD_S
+from uavxai.dynamics.orbit import OrbitGuidance, scenario_orbit_radius
 from uavxai.dynamics.state import TrafficState
 from uavxai.geometry import turn_positions
 from uavxai.scenario import Scenario
@@ -178,8 +181,7 @@ class Mission(EngineStep):
         self._own_xy = (float(p[0]), float(p[1]))
         self._horizon_s = ep.seat.config.depth * ep.seat.config.action_hold_s
         if self.phase == Phase.TRANSIT:
-            d = math.hypot(p[0] - c.station[0], p[1] - c.station[1])
-            if d <= c.radius_m + ep.judge.goal_radius_m:
+            if on_orbit(p, c.station, c.radius_m, ep.judge.goal_radius_m):
                 why = f"orbiting {c.radius_m:.0f} m radius at {c.station[2]:.0f} m height"
                 self._enter(Phase.ON_STATION, t, why, ep)
                 speed = ep.path.cruise_speed(c.speed_mps)
@@ -198,16 +200,14 @@ class Mission(EngineStep):
 
     def _home_reached(self, p: Sequence[float], goal_radius_m: float) -> bool:
         """Home: within the goal radius of it; in a fleet (:attr:`home_orbit`) its hold orbit
-        reached, as the station's is (within the radius + the goal radius horizontally, and
-        the goal radius in height), so the hold orbit is joined from outside on the side it
-        comes from. Joined from home itself at the return's speed, the orbit law swung a
-        member out to 150 m from home, towards its neighbour's hold orbit (round 7, fleet.yaml
-        seed 20: an NMAC, 152 m / 1 m)."""
+        reached (:func:`on_orbit`, as the station's), so the hold orbit is joined from outside
+        on the side it comes from. Joined from home itself at the return's speed, the orbit
+        law swung a member out to 150 m from home, towards its neighbour's hold orbit (round
+        7, fleet.yaml seed 20: an NMAC, 152 m / 1 m)."""
         c = self.config
         if not self.home_orbit:
             return math.dist(p, c.home) < goal_radius_m
-        d = math.hypot(p[0] - c.home[0], p[1] - c.home[1])
-        return d <= c.radius_m + goal_radius_m and abs(p[2] - c.home[2]) < goal_radius_m
+        return on_orbit(p, c.home, c.radius_m, goal_radius_m)
 
     def remaining_s(self, own: Sequence[float], speed_mps: float, goal_radius_m: float) -> float:
         """An estimate of the flight time left, from ``own`` (x, y), the legs flown at
@@ -307,7 +307,8 @@ class Mission(EngineStep):
             return
         p = ep.state.pos[0]
         far = math.hypot(p[0] - c.station[0], p[1] - c.station[1])
-        if fly_there and self.serving and far > c.radius_m + ep.judge.goal_radius_m:
+        if fly_there and self.serving and not on_orbit(p, c.station, c.radius_m,
+                                                       ep.judge.goal_radius_m):
             self._enter(Phase.TRANSIT, t, f"to the new service point, {far:.0f} m away", ep)
         elif self.phase == Phase.ON_STATION:
             speed = ep.path.cruise_speed(c.speed_mps)
@@ -324,6 +325,22 @@ class Mission(EngineStep):
             "avoiding_s": round(self.avoidance_s, 3),
             "orbit_radius_m": self.config.radius_m,
         }
+
+
+def on_orbit(
+    p: Sequence[float], centre: Sequence[float], radius_m: float, goal_radius_m: float
+) -> bool:
+    """Whether an aircraft at ``p`` (x, y, h) is on the orbit of ``radius_m`` about
+    ``centre`` for the mission, which then hands it to the orbit law (a station reached, a
+    fleet member's hold orbit at home reached) or keeps it there (a moved station this near
+    is flown by the orbit law): within the radius + the goal radius of the centre
+    horizontally, **at any height**. The loiter law climbs or sinks to the orbit's height as
+    it circles (the altitude hold), and the orbit check predicts that climb on the way onto
+    the orbit (:func:`way_clearance`); a height rule kept a member off its home's height
+    flying under its planner for a goal inside the orbit, where every branch reaches it at
+    once (docs/fleet.md, round 9). The one test of the three (the station's, home's, a moved
+    station's), which had different height rules before."""
+    return math.hypot(p[0] - centre[0], p[1] - centre[1]) <= radius_m + goal_radius_m
 
 
 def orbit_clearance(
@@ -348,11 +365,39 @@ def straight_clearance(
     velocity, for ``horizon_s``, against each intruder's track as believed (no error taken
     off): the next decision period's prediction of an orbit decision."""
     t = np.arange(0.0, horizon_s + 1e-9, 0.5)
-    vx, vy = own.ground_velocity or (
-        own.speed * math.sin(own.heading), own.speed * math.cos(own.heading)
-    )
+    vx, vy = _ground_velocity(own)
     path = np.column_stack([own.x + vx * t, own.y + vy * t, np.full(len(t), own.h)])
     return clearance(t, path, intruders, sigmas=0.0)
+
+
+def _ground_velocity(own: Ownship) -> tuple[float, float]:
+    """The ownship's ground velocity (east, north), or its air velocity if none is known."""
+    return own.ground_velocity or (
+        own.speed * math.sin(own.heading), own.speed * math.cos(own.heading)
+    )
+
+
+def way_clearance(
+    orbit: Orbit, own: Ownship, intruders: Sequence[Intruder], horizon_s: float,
+    config: PlannerConfig,
+) -> tuple[float, str | None, float]:
+    """:func:`clearance` of the way the orbit law would fly the ownship if handed it now, for
+    ``horizon_s``: from where it is, onto the orbit and along it (``OrbitGuidance.fly`` at the
+    loiter law's rate, within ``config``'s bank and roll rate limits; the height towards the
+    orbit's at the climb rate), against each intruder's track less twice its position error,
+    as the circle's check. The circle from the ownship's bearing (:func:`orbit_clearance`) is
+    the way only once it is on the orbit: fleet-mission.yaml seed 1's member 2, handed back
+    221 m from its station's centre with the circle clear, was flown by the law out to 320 m
+    and into intruder 14 (48.6 m; docs/fleet.md)."""
+    law = OrbitGuidance(orbit.centre[:2], orbit.radius_m, orbit.clockwise,
+                        math.radians(config.bank_limit_deg))  # fmt: skip
+    bank = own.bank if own.phi is None else own.phi
+    roll = math.radians(config.roll_rate_limit_deg_s)
+    xy = law.fly((own.x, own.y), _ground_velocity(own), bank, roll, horizon_s, GUIDANCE_PERIOD_S)
+    t = GUIDANCE_PERIOD_S * np.arange(len(xy))
+    climb = config.climb_rate_mps * t
+    h = own.h + np.clip(orbit.centre[2] - own.h, -climb, climb)
+    return clearance(t, np.column_stack([xy, h]), intruders, sigmas=2.0)
 
 
 def clearance(
@@ -401,16 +446,20 @@ def orbit_step(
     horizon = ep.seat.config.depth * ep.seat.config.action_hold_s
     c = MissionConfig(orbit.centre, orbit.centre, 0.0, False, orbit.radius_m, orbit.speed_mps,
                       orbit.clockwise)  # fmt: skip
-    sep, who, when = orbit_clearance(c, own, intruders, horizon)
+    circle = orbit_clearance(c, own, intruders, horizon)
+    way = way_clearance(orbit, own, intruders, horizon, ep.seat.config)
+    # the nearer of the two is the orbit's prediction (the circle's on a tie)
+    sep, who, when = way if way[0] < circle[0] else circle
+    what = "the way onto the orbit" if way[0] < circle[0] else "the orbit"
     d_min = ep.judge.d_min_m
     limit = (CONFLICT_FACTOR + (1.0 if avoiding else 0.0)) * d_min
     if sep < limit:
-        return OrbitStep(None, f"{who} would pass the orbit at {sep:.0f} m in {when:.0f} s")
+        return OrbitStep(None, f"{who} would pass {what} at {sep:.0f} m in {when:.0f} s")
     x, y, h = orbit.centre
     ep.path.orbit(x, y, h, orbit.radius_m, orbit.clockwise, orbit.speed_mps, ep.state.t)
     period = ep.seat.config.decision_period_s  # the record's field is over one period
     next_period = straight_clearance(own, intruders, period)[0]
-    said = orbit_words(orbit, own, (sep, who, when), CONFLICT_FACTOR * d_min)
+    said = orbit_words(orbit, own, (sep, who, when), CONFLICT_FACTOR * d_min, what)
     decision = Decision(
         bank_cmd_rad=float(ep.world.ownship_command()["bank_cmd_rad"]),
         accel_mps2=0.0,
@@ -427,7 +476,8 @@ def orbit_step(
 
 
 def orbit_words(
-    orbit: Orbit, own: Ownship, clearance: tuple[float, str | None, float], limit_m: float
+    orbit: Orbit, own: Ownship, clearance: tuple[float, str | None, float], limit_m: float,
+    what: str = "the orbit",
 ) -> str:
     """What an orbit decision says: on the circle or still joining it (how far from the
     centre), and the orbit's prediction worded as the conditional it is: intruders holding
@@ -446,7 +496,7 @@ def orbit_words(
     if who is None:
         return where
     return (
-        f"{where}; {who} predicted to pass the orbit ahead at {sep:.0f} m in {when:.0f} s if "
+        f"{where}; {who} predicted to pass {what} ahead at {sep:.0f} m in {when:.0f} s if "
         f"it holds its present turn (2-sigma track error taken off; the orbit is left below "
         f"{limit_m:.0f} m)"
     )

@@ -125,6 +125,12 @@ class MCTSConfig(Section):
     # a chance only. The time the ownship is committed to its first action (action_hold_s)
     # is the natural choice: what a track may do before the tree can answer it is fenced off.
     risk_wall_s: Annotated[float, Field(gt=0, le=60)] | None = None
+    # Graded separation (docs/results "Safe among many and still arriving"): a line of the
+    # MCTS planners' compiled search that comes inside a track's NMAC cylinder (its horizontal
+    # miss less the track's margin) keeps 1 - nmac_cost x its depth of its value (0 at the
+    # rim, 1 at d_min_m; uavxai.avoidance.kernel.nmac_depth); the conflict at d_min_m stays
+    # the hard one. 0: NMAC intrusion costs nothing (the paper). `mcts_sep` flies 0.5.
+    nmac_cost: Annotated[float, Field(ge=0, lt=1)] = 0.0
 
 
 class NMAC(Section):
