@@ -251,3 +251,24 @@ def test_an_intruder_lost_with_persistent_traffic_is_replaced_and_the_flight_goe
         assert math.hypot(x - s.pos[0, 0], y - s.pos[0, 1]) >= 999.0  # clear of the ownship
         w.advance(5.0)
         assert w.failure() is None and w.state().t == pytest.approx(s.t + 5.0)
+
+
+def test_random_intruders_start_clear_of_every_fleet_members_start() -> None:
+    """fleet-mission.yaml seed 43 (issue 32, round 9) placed intruders 119-122 m from members 1
+    and 2, which only member 0's start was kept clear of: every member's start is kept clear
+    now; one ownship draws the same traffic as a fleet's member 0 alone would."""
+    from uavxai.paths import scenarios_dir
+    from uavxai.scenario import load_scenario
+
+    sc = load_scenario(scenarios_dir() / "fleet-mission.yaml").model_copy(update={"seed": 43})
+    starts = sc.member_starts()
+    assert len(starts) == 3
+    gap = sc.intruders.min_start_distance_m
+    specs = draw_intruders(sc, np.random.default_rng(43))
+    assert len(specs) == sc.intruders.n
+    for p in specs:
+        assert min(math.hypot(p.x - s.x, p.y - s.y) for s in starts) >= gap
+    alone = sc.model_copy(update={"fleet": sc.fleet.model_copy(update={"size": 1, "leave": None})})
+    solo = draw_intruders(alone, np.random.default_rng(43))
+    assert any(min(math.hypot(p.x - s.x, p.y - s.y) for s in starts[1:]) < gap for p in solo)
+    assert all(math.hypot(p.x - starts[0].x, p.y - starts[0].y) >= gap for p in solo)
