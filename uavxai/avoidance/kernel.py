@@ -365,6 +365,12 @@ def _expand(node, tree, bz, brise, bend, bscal, child, tracks, climbs, drift, pa
         visits[c], value_sum[c], first_child[c] = 0, 0.0, -1
         is_leaf[c] = lvl + 1 == depth_limit or cd != _NONE
         value[c] = _end_value(cd, clear[c], lvl * par[DUR] + k_event[a] * dt, depth_limit, par)
+        if cd == _COLLISION and par[WALLT] > 0:
+            # A late collision is a meeting re-planning may still turn into a miss, if the
+            # ownship is still in the area to re-plan: weigh it by the walls at its edge's end
+            # as an open leaf is (issue 31: when a swollen margin makes every line collide,
+            # late meetings that ignore the walls lead out of the area).
+            value[c] *= wall_factor(state[c], par)
         if risky:  # the line so far keeps clear with this chance: its value's weight
             surv[c] = surv[node] * edge_surv[a]
             if cd == _COLLISION:  # a hard collision keeps its (late) value, weighed by
@@ -407,8 +413,8 @@ def _nmac_factor(xy, hs, txy, th, tm, margined, lvl, ids, k, a, last, par):
 
 @njit(cache=True)
 def wall_factor(row, par):
-    """What a leaf keeps of its value for the walls it may not be able to turn away from
-    (``wall_slack_s``): for each wall it heads towards (cosine ``c`` between its heading and
+    """What a leaf (or a late collision, by its edge's end) keeps of its value for the walls
+    it may not be able to turn away from (``wall_slack_s``): for each wall it heads towards (cosine ``c`` between its heading and
     the wall's outward normal), a turn away at the bank limit (radius ``R``, after rolling in)
     reaches ``R (1 - sqrt(1 - c^2)) + v t_roll c`` closer; the slack left over that, in
     seconds of closing at ``v c``, over ``wall_slack_s``, clipped to [0, 1] (0: it can no

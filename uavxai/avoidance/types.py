@@ -157,7 +157,9 @@ class PlannerConfig(SchemaSettings):  # type: ignore[misc,valid-type]
     nmac_cost: float = 0.0
     # Walls in the leaf value (`mcts_sep`): a leaf heading for a wall keeps the share of its
     # value that its slack (seconds before it must turn away at the bank limit to stay in the
-    # area) is of wall_slack_s (kernel.wall_factor); 0: the leaf ignores the walls (the paper).
+    # area) is of wall_slack_s (kernel.wall_factor), and so does a line's late collision, by
+    # its edge's end (issue 31: a meeting re-planning may still turn into a miss is worth
+    # something only if the ownship is still in the area); 0: the walls are ignored (the paper).
     wall_slack_s: float = 0.0
 
     def __post_init__(self) -> None:
