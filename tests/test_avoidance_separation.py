@@ -177,3 +177,21 @@ def test_mcts_sep_chased_towards_a_wall_keeps_a_line_that_can_stay_in_the_area(y
     while (child := tree.best_child(node)) is not None:  # the line the search preferred
         node = child
     assert node > 0 and wall_factor(tree.state[node], _par()) > 0.0  # it can still turn away
+
+
+def test_only_a_planner_that_weighs_the_walls_marks_lines_trapped() -> None:
+    own, intruders = _chased_to_the_wall(150.0)
+    par = _par()
+    for name in ("mcts_vertical", "mcts_sep"):
+        decision = make_planner(name, PlannerConfig()).plan(own, intruders, tuple(GOAL))
+        tree = decision.tree
+        for c in decision.children:
+            node = next(int(n) for n in tree.children_of(0) if tree.action[n] == c.action)
+            while (child := tree.best_child(node)) is not None:
+                node = child
+            doomed = tree.terminal[node] in (NONE, COLLISION) and wall_factor(
+                tree.state[node], par) == 0.0  # fmt: skip
+            assert c.trapped == (doomed and name == "mcts_sep")
+        if name == "mcts_sep":
+            assert any(c.trapped for c in decision.children)
+            assert not next(c for c in decision.children if c.action == decision.action).trapped

@@ -353,6 +353,10 @@ class ChildStats:
     # with each intruder, (id, chance) the likeliest first, and with any (None: not weighed)
     losses: tuple[tuple[int | str, float], ...] = ()
     risk: float | None = None
+    # the line ends (open, or meeting an intruder) where the ownship can no longer turn away
+    # from a wall (kernel.wall_factor 0): as good as leaving the area. Planners with
+    # wall_slack_s only (`mcts_sep`); always False for the others.
+    trapped: bool = False
 
     @property
     def flies(self) -> int:
