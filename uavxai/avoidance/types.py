@@ -546,6 +546,8 @@ class Decision:
                     # with risk as a probability only: the line's chance of losing separation
                     **({} if c.risk is None else {
                         "risk": c.risk, "losses": [[who, p] for who, p in c.losses]}),
+                    # mcts_sep only: the line ends unable to turn away from a wall
+                    **({"trapped": True} if c.trapped else {}),
                 }
                 for c in self.children
             ],
