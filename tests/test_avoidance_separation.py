@@ -192,6 +192,8 @@ def test_only_a_planner_that_weighs_the_walls_marks_lines_trapped() -> None:
             doomed = tree.terminal[node] in (NONE, COLLISION) and wall_factor(
                 tree.state[node], par) == 0.0  # fmt: skip
             assert c.trapped == (doomed and name == "mcts_sep")
+        record = decision.to_json()["children"]  # decisions.jsonl names the trapped lines only
+        assert [r.get("trapped", False) for r in record] == [c.trapped for c in decision.children]
         if name == "mcts_sep":
             assert any(c.trapped for c in decision.children)
             assert not next(c for c in decision.children if c.action == decision.action).trapped
