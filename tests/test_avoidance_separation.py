@@ -139,3 +139,61 @@ def test_settings_that_would_break_the_grading_are_refused() -> None:
     with pytest.raises(UserError, match="late_collision_value"):
         PlannerConfig(nmac_cost=0.6, late_collision_value=0.05)
     PlannerConfig(nmac_cost=0.5, late_collision_value=0.05)  # mcts_sep's own: a tie
+
+
+def _chased_to_the_wall(y: float) -> tuple[Ownship, list[Intruder]]:
+    """Ownship due south ``y`` m from the south wall; an intruder 150 m behind it, coming
+    south at 30 m/s: with its margins every straight line meets it, late (issue 31's dev seed
+    5027: the late meetings led mcts_sep out of the area)."""
+    own = Ownship(x=1000.0, y=y, h=120.0, speed=20.0, heading=math.pi)
+    return own, [Intruder(id=1, x=1000.0, y=y + 150.0, h=120.0, vx=0.0, vy=-30.0)]
+
+
+def test_a_late_collision_heading_out_of_the_area_is_worth_what_leaving_is() -> None:
+    own, intruders = _chased_to_the_wall(200.0)
+    par = _par()
+    for cfg in (CFG, dataclasses.replace(CFG, wall_slack_s=0.0)):
+        tree = _tree(cfg, own, intruders)
+        hit = np.flatnonzero((tree.visits > 0) & (tree.terminal == COLLISION))
+        value = tree.value_sum[hit] / tree.visits[hit]
+        walls = np.array([wall_factor(tree.state[i], par) for i in hit])
+        doomed, free = walls == 0.0, walls == 1.0
+        assert doomed.any() and free.any()
+        # a collision stays the hard conflict: never above the late collision's value
+        assert value.max() <= cfg.late_collision_value
+        if cfg.wall_slack_s > 0:  # mcts_sep: past the point of no return, worth nothing
+            assert value[doomed].max() == 0.0 and value[free].min() > 0.0
+            assert np.all(value <= cfg.late_collision_value * walls + 1e-12)
+        else:  # the term off (every planner but mcts_sep): late meetings ignore the walls
+            assert value[doomed].max() > 0.0
+
+
+@pytest.mark.parametrize("y", [150.0, 200.0])
+def test_mcts_sep_chased_towards_a_wall_keeps_a_line_that_can_stay_in_the_area(y: float) -> None:
+    own, intruders = _chased_to_the_wall(y)
+    decision = make_planner("mcts_sep", PlannerConfig()).plan(own, intruders, tuple(GOAL))
+    assert decision.plan[:, 1].min() > 0.0  # the planned line stays north of the wall
+    tree, node = decision.tree, 0
+    while (child := tree.best_child(node)) is not None:  # the line the search preferred
+        node = child
+    assert node > 0 and wall_factor(tree.state[node], _par()) > 0.0  # it can still turn away
+
+
+def test_only_a_planner_that_weighs_the_walls_marks_lines_trapped() -> None:
+    own, intruders = _chased_to_the_wall(150.0)
+    par = _par()
+    for name in ("mcts_vertical", "mcts_sep"):
+        decision = make_planner(name, PlannerConfig()).plan(own, intruders, tuple(GOAL))
+        tree = decision.tree
+        for c in decision.children:
+            node = next(int(n) for n in tree.children_of(0) if tree.action[n] == c.action)
+            while (child := tree.best_child(node)) is not None:
+                node = child
+            doomed = tree.terminal[node] in (NONE, COLLISION) and wall_factor(
+                tree.state[node], par) == 0.0  # fmt: skip
+            assert c.trapped == (doomed and name == "mcts_sep")
+        record = decision.to_json()["children"]  # decisions.jsonl names the trapped lines only
+        assert [r.get("trapped", False) for r in record] == [c.trapped for c in decision.children]
+        if name == "mcts_sep":
+            assert any(c.trapped for c in decision.children)
+            assert not next(c for c in decision.children if c.action == decision.action).trapped

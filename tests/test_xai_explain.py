@@ -271,6 +271,25 @@ def test_a_cornered_planner_stays_in_the_area_and_says_so():
     assert cornered_choice([inside, replace(later_out, outcome="collision"), also_in]).action == 4
 
 
+def test_a_cornered_planner_that_weighs_the_walls_keeps_clear_of_a_trapped_line():
+    """mcts_sep (issue 31): a line that ends where it can no longer turn away from a wall
+    (``trapped``) counts as leaving, so the rule takes the latest meeting among the others."""
+    from dataclasses import replace
+
+    from uavxai.avoidance.lines import cornered_choice, leaves
+    from uavxai.avoidance.types import Decision
+
+    inside = _meeting_child(0, 50, 0.03, 6.0, 30.0)
+    later_trapped = replace(_meeting_child(4, 10, 0.04, 9.0, 10.0), trapped=True)
+    assert leaves(later_trapped) and not leaves(inside)
+    assert cornered_choice([inside, later_trapped]).action == 0
+    assert cornered_choice([inside, replace(later_trapped, trapped=False)]).action == 4
+    d = Decision(0.0, 0.0, 0, [inside, later_trapped], planner="mcts_sep", cornered=True)
+    assert ("so it took the one that stays in the flight area (an option that meets later can "
+            "no longer stay in it)") in d.explanation  # fmt: skip
+    assert d.counterfactual.endswith("and can no longer turn away from the area's edge")
+
+
 def test_a_route_line_that_leaves_the_area_is_not_kept():
     from dataclasses import replace
 

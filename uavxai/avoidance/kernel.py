@@ -365,6 +365,12 @@ def _expand(node, tree, bz, brise, bend, bscal, child, tracks, climbs, drift, pa
         visits[c], value_sum[c], first_child[c] = 0, 0.0, -1
         is_leaf[c] = lvl + 1 == depth_limit or cd != _NONE
         value[c] = _end_value(cd, clear[c], lvl * par[DUR] + k_event[a] * dt, depth_limit, par)
+        if cd == _COLLISION and par[WALLT] > 0:
+            # A late collision is a meeting re-planning may still turn into a miss, if the
+            # ownship is still in the area to re-plan: weigh it by the walls at its edge's end
+            # as an open leaf is (issue 31: when a swollen margin makes every line collide,
+            # late meetings that ignore the walls lead out of the area).
+            value[c] *= wall_factor(state[c], par)
         if risky:  # the line so far keeps clear with this chance: its value's weight
             surv[c] = surv[node] * edge_surv[a]
             if cd == _COLLISION:  # a hard collision keeps its (late) value, weighed by
@@ -407,12 +413,13 @@ def _nmac_factor(xy, hs, txy, th, tm, margined, lvl, ids, k, a, last, par):
 
 @njit(cache=True)
 def wall_factor(row, par):
-    """What a leaf keeps of its value for the walls it may not be able to turn away from
-    (``wall_slack_s``): for each wall it heads towards (cosine ``c`` between its heading and
-    the wall's outward normal), a turn away at the bank limit (radius ``R``, after rolling in)
-    reaches ``R (1 - sqrt(1 - c^2)) + v t_roll c`` closer; the slack left over that, in
-    seconds of closing at ``v c``, over ``wall_slack_s``, clipped to [0, 1] (0: it can no
-    longer turn away: as good as out). Headings clockwise from north."""
+    """What a leaf (or a late collision, by its edge's end) keeps of its value for the walls
+    it may not be able to turn away from (``wall_slack_s``): for each wall it heads towards
+    (cosine ``c`` between its heading and the wall's outward normal), a turn away at the
+    bank limit (radius ``R``, after rolling in) reaches ``R (1 - sqrt(1 - c^2)) + v t_roll c``
+    closer; the slack left over that, in seconds of closing at ``v c``, over
+    ``wall_slack_s``, clipped to [0, 1] (0: it can no longer turn away: as good as out).
+    Headings clockwise from north."""
     x, y, v, psi = row[0], row[1], max(row[3], 1e-3), row[4]
     r = v * v / par[TURNG]
     ux, uy = math.sin(psi), math.cos(psi)
@@ -424,6 +431,15 @@ def wall_factor(row, par):
         need = r * (1.0 - math.sqrt(max(1.0 - c * c, 0.0))) + v * par[ROLLT] * c
         f *= min(max((dist - need) / (v * c) / par[WALLT], 0.0), 1.0)
     return f
+
+
+def wall_share(model: EncounterModel, row: np.ndarray) -> float:
+    """:func:`wall_factor` of a model state row outside a search (1 without ``wall_slack_s``):
+    0 where the ownship can no longer turn away from a wall."""
+    if model.config.wall_slack_s <= 0:
+        return 1.0
+    par = _params(model, np.zeros(3), model.config.action_hold_s, math.inf, [])
+    return float(wall_factor(np.asarray(row, dtype=float), par))
 
 
 @njit(cache=True)

@@ -341,14 +341,21 @@ def conflicts(c: ChildStats) -> bool:
     return c.outcome == "collision" or c.meets is not None
 
 
+def leaves(c: ChildStats) -> bool:
+    """Does the option's line leave the flight area, or end where it can no longer stay in it
+    (``trapped``: planners that weigh the walls, `mcts_sep`)?"""
+    return c.outcome == Outcome.OUT_OF_BOUNDS or c.trapped
+
+
 def cornered_key(c: ChildStats) -> tuple:
     """How a cornered planner ranks options: a line that stays in the area before one that
-    leaves it (leaving is a failure for certain, a predicted meeting may still be turned into
-    a miss by re-planning), then the latest meeting, then the largest predicted miss, then the
-    search's preference (simulations, Q), then action order."""
+    leaves it or ends unable to turn away from a wall (``trapped``; leaving is a failure for
+    certain, a predicted meeting may still be turned into a miss by re-planning), then the
+    latest meeting, then the largest predicted miss, then the search's preference
+    (simulations, Q), then action order."""
     m = c.meets
     return (
-        c.outcome != Outcome.OUT_OF_BOUNDS,
+        not leaves(c),
         -math.inf if m is None else round(m.time_s, 6),
         -math.inf if m is None else m.miss_m,
         c.visits,

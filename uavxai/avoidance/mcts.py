@@ -34,7 +34,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from uavxai.avoidance.kernel import search  # the MCTS loop, compiled
+from uavxai.avoidance.kernel import search, wall_share  # the MCTS loop, compiled
 from uavxai.avoidance.lines import cornered_choice, measured_children
 from uavxai.avoidance.model import (
     COLLISION,
@@ -390,6 +390,8 @@ def _child_stats(
     """What the tree says of one root action (``q``: the tree's); the separations along its
     line are left unknown here: :func:`measured_children` measures them exactly."""
     cfg = model.config
+    end = line[-1]
+    code = int(tree.terminal[end])
     return ChildStats(
         action=action,
         bank_cmd_rad=float(bank_command(own.bank, action, cfg)),
@@ -399,8 +401,9 @@ def _child_stats(
         q=float(q[line[0]]),
         predicted_min_separation_m=math.inf,
         closest_intruder=None,
-        outcome=OUTCOME_NAMES[int(tree.terminal[line[-1]])],
+        outcome=OUTCOME_NAMES[code],
         collision_share=None if collision_share is None else float(collision_share),
+        trapped=code in (NONE, COLLISION) and wall_share(model, tree.state[end]) == 0.0,
     )
 
 

@@ -99,9 +99,9 @@ register("mcts_daa")(
 )
 # Issue 27's multi-threat goal while arriving (docs/results "Safe among many and still
 # arriving"): mcts_vertical (the hard conflict at the collision distance d_min_m) whose values
-# grade NMAC intrusion as a cost instead of a wall (nmac_cost) and whose leaves know whether
-# they can still turn away from the walls (wall_slack_s). Not mcts_daa's home: that one's
-# alerting stage and 155 m wall are what make it leave the area.
+# grade NMAC intrusion as a cost instead of a wall (nmac_cost) and whose leaves and late
+# collisions know whether they can still turn away from the walls (wall_slack_s). Not
+# mcts_daa's home: that one's alerting stage and 155 m wall are what make it leave the area.
 SEPARATION = {"nmac_cost": 0.5, "wall_slack_s": 4.0}
 
 

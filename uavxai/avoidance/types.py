@@ -156,7 +156,9 @@ class PlannerConfig(SchemaSettings):  # type: ignore[misc,valid-type]
     # its deepest intrusion counting; the conflict at d_min_m stays the hard one.
     # Walls in the leaf value (`mcts_sep`): a leaf heading for a wall keeps the share of its
     # value that its slack (seconds before it must turn away at the bank limit to stay in the
-    # area) is of wall_slack_s (kernel.wall_factor); 0: the leaf ignores the walls (the paper).
+    # area) is of wall_slack_s (kernel.wall_factor), and so does a line's late collision, by
+    # its edge's end (issue 31: a meeting re-planning may still turn into a miss is worth
+    # something only if the ownship is still in the area); 0: the walls are ignored (the paper).
     wall_slack_s: float = 0.0
 
     def __post_init__(self) -> None:
@@ -350,6 +352,10 @@ class ChildStats:
     # with each intruder, (id, chance) the likeliest first, and with any (None: not weighed)
     losses: tuple[tuple[int | str, float], ...] = ()
     risk: float | None = None
+    # the line ends (open, or meeting an intruder) where the ownship can no longer turn away
+    # from a wall (kernel.wall_factor 0): as good as leaving the area. Planners with
+    # wall_slack_s only (`mcts_sep`); always False for the others.
+    trapped: bool = False
 
     @property
     def flies(self) -> int:
@@ -539,6 +545,8 @@ class Decision:
                     # with risk as a probability only: the line's chance of losing separation
                     **({} if c.risk is None else {
                         "risk": c.risk, "losses": [[who, p] for who, p in c.losses]}),
+                    # mcts_sep only: the line ends unable to turn away from a wall
+                    **({"trapped": True} if c.trapped else {}),
                 }
                 for c in self.children
             ],

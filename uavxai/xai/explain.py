@@ -15,10 +15,10 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
-from uavxai.avoidance.lines import conflicts, cornered_key
+from uavxai.avoidance.lines import conflicts, cornered_key, leaves
 from uavxai.avoidance.types import ChildStats, Decision, Intruder, Ownship, set_narrator
 from uavxai.errors import UserError
-from uavxai.vocabulary import ACTIONS, HOLD, Outcome
+from uavxai.vocabulary import ACTIONS, HOLD
 
 
 # ----------------------------------------------------------------------------- one decision
@@ -196,8 +196,11 @@ def _cornered(chosen: ChildStats, decision: Decision) -> str:
     """Every option conflicts: which rule picked this one, against the best other."""
     head = "every option meets an intruder, so it took the one that "
     m = chosen.meets
-    if not _leaves(chosen) and any(_leaves(c) and _later(c, m) for c in decision.children):
-        head += "stays in the flight area (an option that meets later leaves it) and "
+    later = [c for c in decision.children if leaves(c) and _later(c, m)]
+    if not leaves(chosen) and later:
+        out = any(not c.trapped for c in later)
+        head += (f"stays in the flight area (an option that meets later "
+                 f"{'leaves it' if out else 'can no longer stay in it'}) and ")  # fmt: skip
     runner = runner_up(decision.children, chosen, cornered=True)
     if runner is None or m is None or runner.meets is None:
         return head + "meets its intruder latest"
@@ -214,17 +217,15 @@ def _cornered(chosen: ChildStats, decision: Decision) -> str:
     return head + f"meets its intruder latest and passes it widest, tied: {tie}"
 
 
-def _leaves(c: ChildStats) -> bool:
-    return c.outcome == Outcome.OUT_OF_BOUNDS
-
-
 def _later(c: ChildStats, m) -> bool:
     """Does ``c``'s line meet its intruder later than meeting ``m`` (or not at all)?"""
     return c.meets is None or m is None or c.meets.time_s > m.time_s
 
 
 def _cornered_loser(runner: ChildStats, chosen: ChildStats, decision: Decision) -> str:
-    if _leaves(runner) and not _leaves(chosen):
+    if leaves(runner) and not leaves(chosen):
+        if runner.trapped:
+            return f"it {_meets(runner)} and can no longer turn away from the area's edge"
         return f"it {_meets(runner)} and leaves the flight area"
     m, r = chosen.meets, runner.meets
     if m is None or r is None:
