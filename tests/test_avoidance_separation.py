@@ -137,8 +137,13 @@ def test_settings_that_would_break_the_grading_are_refused() -> None:
     PlannerConfig(nmac_cost=0.0, d_min_m=200.0)  # no cost: nothing graded, allowed
     # a late collision may tie with the deepest time-out, never outrank it
     with pytest.raises(UserError, match="late_collision_value"):
-        PlannerConfig(nmac_cost=0.6, late_collision_value=0.05)
+        PlannerConfig(nmac_cost=0.5, late_collision_value=0.06)
+    with pytest.raises(UserError, match="late_collision_value"):
+        PlannerConfig(nmac_cost=0.3, late_collision_value=0.075)
     PlannerConfig(nmac_cost=0.5, late_collision_value=0.05)  # mcts_sep's own: a tie
+    # above 0.5 no late_collision_value the user can reach ties: the key's own bound says so
+    with pytest.raises(UserError, match="nmac_cost"):
+        PlannerConfig(nmac_cost=0.6, late_collision_value=0.05)
 
 
 def _chased_to_the_wall(y: float) -> tuple[Ownship, list[Intruder]]:

@@ -138,3 +138,18 @@ def test_values_are_kept_as_the_schema_keeps_them():
     assert cfg.x_bounds == (0.0, 900.0) and isinstance(cfg.x_bounds[1], float)
     assert (cfg.d_min_m, cfg.speed_mps) == (60.0, (14.0, 28.0))
     assert hash(cfg) == hash(dataclasses.replace(cfg))  # frozen, hashable as before
+
+
+def test_nmac_cost_is_refused_where_no_planner_could_fly_it_and_mcts_daa_ignores_it():
+    """avoidance.mcts.nmac_cost above 0.5 would let a late collision outrank a time-out through
+    the NMAC volume, which PlannerConfig refuses by a field the user cannot set: the schema
+    refuses it by the key's name instead. `mcts_daa`'s conflict volume holds the NMAC cylinder,
+    so the key does not apply to it (before, any value refused the planner)."""
+    from uavxai.avoidance.planners import make_planner
+
+    with pytest.raises(UserError, match=r"avoidance\.mcts\.nmac_cost' = 0\.7: Input should be"):
+        default_scenario(avoidance={"mcts": {"nmac_cost": 0.7}})
+    cfg = PlannerConfig.from_scenario(default_scenario(avoidance={"mcts": {"nmac_cost": 0.5}}))
+    assert cfg.nmac_cost == 0.5
+    daa = make_planner("mcts_daa", cfg)
+    assert daa.config.nmac_cost == 0.0 and daa.config.d_min_m > cfg.nmac_m[0]

@@ -80,6 +80,9 @@ register("mcts_vertical")(
 # max(30.48, d_min_m) up and down, not the 155 m a sphere fences off above and below.
 def _daa_config(config: PlannerConfig) -> PlannerConfig:
     h, v = config.nmac_m
+    # Its conflict volume holds the NMAC cylinder, so there is no NMAC volume left to grade:
+    # avoidance.mcts.nmac_cost does not apply (with it the d_min check refused the planner).
+    config = dataclasses.replace(config, nmac_cost=0.0)
     if config.conflict_volume == "cylinder":
         return dataclasses.replace(
             config,

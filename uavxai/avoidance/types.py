@@ -205,8 +205,8 @@ class PlannerConfig(SchemaSettings):  # type: ignore[misc,valid-type]
             raise UserError(
                 f"PlannerConfig.nmac_cost > 0 grades the NMAC volume down to the collision "
                 f"distance, so d_min_m ({self.d_min_m} m) must be below the NMAC horizontal "
-                f"distance ({self.nmac_m[0]} m); lower avoidance.d_min_m or use another planner "
-                "than mcts_sep."
+                f"distance ({self.nmac_m[0]} m); lower avoidance.d_min_m, or set "
+                "avoidance.mcts.nmac_cost: 0 and use another planner than mcts_sep."
             )
         lo, hi = self.climb_speed_band_mps
         if not lo < hi:

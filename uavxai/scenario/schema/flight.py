@@ -129,8 +129,10 @@ class MCTSConfig(Section):
     # MCTS planners' compiled search that comes inside a track's NMAC cylinder (its horizontal
     # miss less the track's margin) keeps 1 - nmac_cost x its depth of its value (0 at the
     # rim, 1 at d_min_m; uavxai.avoidance.kernel.nmac_depth); the conflict at d_min_m stays
-    # the hard one. 0: NMAC intrusion costs nothing (the paper). `mcts_sep` flies 0.5.
-    nmac_cost: Annotated[float, Field(ge=0, lt=1)] = 0.0
+    # the hard one. 0: NMAC intrusion costs nothing (the paper). `mcts_sep` flies 0.5. At
+    # most 0.5: a collision at the horizon's end (worth 0.05) may at most tie with the deepest
+    # time-out through the NMAC volume (0.1 x (1 - nmac_cost); PlannerConfig's check).
+    nmac_cost: Annotated[float, Field(ge=0, le=0.5)] = 0.0
 
 
 class NMAC(Section):
