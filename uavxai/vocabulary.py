@@ -114,13 +114,13 @@ def action_name(a: int) -> str:
 # import that they cover exactly these names, so a name is written once.
 AVOIDANCE_PLANNERS = (
     "mcts", "mcts_fast", "exhaustive", "mcts_vertical", "mcts_daa", "mcts_route", "mcts_sep",
-    "mvp", "dqn", "safe_dqn", "none",
+    "mcts_sep_daa", "mvp", "dqn", "safe_dqn", "none",
 )  # fmt: skip
 # The planners that fly the vertical action set: the tree searches (mcts_vertical always
 # does) and `none`, which flies straight to the goal whatever the set. mvp resolves in the
 # horizontal plane and dqn / safe_dqn were trained on the paper's nine: they refuse it.
 VERTICAL_PLANNERS = ("mcts", "mcts_fast", "exhaustive", "mcts_vertical", "mcts_daa", "mcts_route",
-                     "mcts_sep", "none")  # fmt: skip
+                     "mcts_sep", "mcts_sep_daa", "none")  # fmt: skip
 # Avoidance planners other packages install: an entry point in this group names a factory
 # ``(config: PlannerConfig, checkpoint) -> Planner`` (README, "Your own planner"). Their
 # names are read from the packages' metadata, without importing them, so that the schema can

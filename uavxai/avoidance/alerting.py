@@ -135,7 +135,7 @@ class AlertingPlanner:
         keep = route if self._route_clear_s >= cfg.alert_hold_s else None
         decision = self.inner.plan(own, intruders, goal, step=step, keep=keep)
         line = next((c for c in decision.children if c.action == route), None)
-        clear = line is not None and line.meets is None
+        clear = line is not None and line.clear
         self._route_clear_s = self._route_clear_s + cfg.decision_period_s if clear else 0.0
         decision.planner = self.name
         return decision

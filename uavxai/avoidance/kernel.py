@@ -563,7 +563,7 @@ def search(
                model.drift(hold_s, n), _params(model, goal, hold_s, time_left_s, tracks), explore,
                inv_sqrt, draws, simulations)  # fmt: skip
     return _as_search_tree(tree, int(size), model.actions.size, hold_s, time_left_s,
-                           _risky(model, tracks))  # fmt: skip
+                           _risky(model, tracks), model.config.nmac_cost)  # fmt: skip
 
 
 @functools.lru_cache(maxsize=8)
@@ -666,10 +666,10 @@ def _empty_tree(
 
 
 def _as_search_tree(
-    tree, size: int, k: int, hold_s: float, time_left_s: float, risky: bool
+    tree, size: int, k: int, hold_s: float, time_left_s: float, risky: bool, nmac_cost: float
 ) -> SearchTree:
     (visits, value_sum, first_child, _, _, _, state, depth, parent, action, code, min_sep,
-     closest, t_closest, surv, _, _, _) = tree  # fmt: skip
+     closest, t_closest, surv, clear, _, _) = tree  # fmt: skip
     d = depth[:size].copy()
     states = state[:size].copy()
     return SearchTree(
@@ -688,4 +688,6 @@ def _as_search_tree(
         branching=k,
         time_left_s=time_left_s,
         risk=1.0 - surv[:size] if risky else None,
+        # clear = 1 - nmac_cost x depth (_nmac_factor): the depth it was graded by
+        nmac_depth=(1.0 - clear[:size]) / nmac_cost if nmac_cost > 0 else None,
     )

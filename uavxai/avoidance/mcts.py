@@ -311,14 +311,15 @@ def _final_action(
     """The action taken, and whether the cornered rule or the route rule (rather than the
     search) chose it: every option conflicts, the rule words can state
     (:func:`cornered_choice`); else the route's when its line has no conflict
-    (``route_action`` given); else the search's ``action``."""
+    (``route_action`` given; :attr:`ChildStats.clear`: no meeting, and no NMAC intrusion where
+    the search grades one); else the search's ``action``."""
     cornered = cornered_choice(children)
     if cornered is not None:
         return cornered.action, True, False
     if route_action is not None:
         kept = next((c for c in children if c.action == route_action), None)
         # a route line that leaves the area is no route to keep (the episode ends there)
-        if kept is not None and kept.meets is None and kept.outcome != Outcome.OUT_OF_BOUNDS:
+        if kept is not None and kept.clear and kept.outcome != Outcome.OUT_OF_BOUNDS:
             return route_action, False, route_action != action
     return action, False, False
 
@@ -404,6 +405,7 @@ def _child_stats(
         outcome=OUTCOME_NAMES[code],
         collision_share=None if collision_share is None else float(collision_share),
         trapped=code in (NONE, COLLISION) and wall_share(model, tree.state[end]) == 0.0,
+        nmac_depth=0.0 if tree.nmac_depth is None else float(tree.nmac_depth[end]),
     )
 
 

@@ -114,6 +114,14 @@ def sep_config(config: PlannerConfig) -> PlannerConfig:
 
 
 register("mcts_sep")(lambda config, checkpoint: MCTSPlanner(sep_config(config), name="mcts_sep"))
+# Issue 27's two tables with one planner: mcts_sep's tree (its values, its 50 m hard conflict)
+# behind mcts_daa's alerting stage, so that it flies the route (as `none`) until traffic
+# threatens well clear and leaves the route only when the route's own line conflicts.
+register("mcts_sep_daa")(
+    lambda config, checkpoint: AlertingPlanner(
+        MCTSPlanner(sep_config(config), name="mcts_sep_daa"), name="mcts_sep_daa"
+    )
+)
 register("mvp")(lambda config, checkpoint: MVPPlanner(config))
 # mcts_vertical steering for a coarse route's waypoint (uavxai.avoidance.route): issue 31's
 # route layer, so that the tree is not lured between intruders into a dead end.

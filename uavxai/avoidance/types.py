@@ -356,11 +356,21 @@ class ChildStats:
     # from a wall (kernel.wall_factor 0): as good as leaving the area. Planners with
     # wall_slack_s only (`mcts_sep`); always False for the others.
     trapped: bool = False
+    # with graded separation (`nmac_cost`): the line's deepest NMAC intrusion as the search
+    # graded it (kernel.nmac_depth: 0 none, 1 at d_min_m); 0 for the planners that grade none
+    nmac_depth: float = 0.0
 
     @property
     def flies(self) -> int:
         """The action this one really flies (itself unless clamped into another)."""
         return self.action if self.effect is None else self.effect
+
+    @property
+    def clear(self) -> bool:
+        """No conflict on the line as the search sees one: no meeting, and (graded
+        separation) no NMAC intrusion. The line a detect-and-avoid route keeps
+        (`alerting.py`)."""
+        return self.meets is None and self.nmac_depth == 0.0
 
 
 @dataclass
@@ -389,6 +399,10 @@ class SearchTree:
     # (M,) with risk as a probability (PlannerConfig.risk): the chance that the line from the
     # root to the node loses separation with some track, which weighted its value; None: off
     risk: np.ndarray | None = None
+    # (M,) with graded separation (PlannerConfig.nmac_cost > 0): the deepest NMAC intrusion
+    # on the line from the root to the node, as the search graded it (kernel.nmac_depth: 0
+    # none, 1 at d_min_m); None: not graded
+    nmac_depth: np.ndarray | None = None
 
     @property
     def q(self) -> np.ndarray:
