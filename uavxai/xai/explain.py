@@ -546,10 +546,15 @@ def render_record(record: dict[str, Any], index: int, total: int) -> str:
                 f"{_num(sep) + ' m' if sep is not None else 'clear':>10}",
                 f"  {who if who is not None else '-':<12}",
                 f"{_num(when, '.1f') + ' s' if when is not None else '-':>7}",
-                f"  {c.get('outcome') or 'open'}",
+                f"  {c.get('outcome') or 'open'}{_TRAPPED if c.get('trapped') else ''}",
             ]
             lines.append(f"  {mark} " + "".join(cells))
     return "\n".join(lines)
+
+
+# decisions.jsonl's `trapped` (planners that weigh the walls): the line stays in the area to its
+# end but can no longer turn away from an edge there, so the cornered rule counts it as leaving.
+_TRAPPED = ", cannot turn from the edge"
 
 
 def render_overview(records: Sequence[dict[str, Any]]) -> str:
