@@ -36,6 +36,7 @@ NON_DEFAULT: dict[str, Any] = {
     "avoidance.mcts.c": 1.5,
     "avoidance.mcts.action_hold_s": 3.0,
     "avoidance.mcts.reach_horizon_s": 2.0,
+    "avoidance.mcts.intruder_bank_limit_deg": 45.0,
     "avoidance.mcts.own_error_10s_m": 5.0,
     "avoidance.mcts.uncertainty_horizon_s": 8.0,
     "avoidance.mcts.uncertainty_k": 3.0,

@@ -172,15 +172,25 @@ def intruder_arrays(intruders: Sequence[Intruder]) -> tuple[np.ndarray, np.ndarr
     return a[:, :3], a[:, 3:]
 
 
+def intruder_bank_limits(intruders: Sequence[Intruder], config: PlannerConfig) -> np.ndarray:
+    """(N,) the bank limit (rad) each intruder may turn at: its own (issue 31: its
+    aircraft's, by the ADS-B emitter category its track carries), or the planner's
+    ``intruder_bank_limit_deg`` where it has none."""
+    default = config.intruder_bank_limit_deg
+    deg = [default if i.bank_limit_deg is None else i.bank_limit_deg for i in intruders]
+    return np.radians(np.array(deg, dtype=float))
+
+
 def intruder_turn_rates(intruders: Sequence[Intruder], config: PlannerConfig) -> np.ndarray | None:
-    """(N,) turn rates the planner predicts with: the intruders' estimates (within what the
-    intruder bank limit allows), or None (straight) for the constant-velocity model."""
+    """(N,) turn rates the planner predicts with: the intruders' estimates (within what
+    each one's bank limit allows, :func:`intruder_bank_limits`), or None (straight) for the
+    constant-velocity model."""
     if config.intruder_model == "cv" or not intruders:
         return None
     rate = np.array([i.turn_rate for i in intruders], dtype=float)
     speed = np.maximum(np.hypot([i.vx for i in intruders], [i.vy for i in intruders]), 1.0)
     # a noisy estimate must not predict a turn tighter than a coordinated turn can be
-    limit = turn_rate_of_bank(math.radians(config.intruder_bank_limit_deg), speed)
+    limit = turn_rate_of_bank(intruder_bank_limits(intruders, config), speed)
     return np.clip(rate, -limit, limit)
 
 
@@ -194,7 +204,8 @@ def predict_levels(
     pos, vel = intruder_arrays(intruders)
     turn = intruder_turn_rates(intruders, cfg)
     margin = with_keep(intruder_margin(
-        cfg, vel, np.zeros(len(intruders)) if turn is None else turn, *_track_errors(intruders)
+        cfg, vel, np.zeros(len(intruders)) if turn is None else turn, *_track_errors(intruders),
+        bank_limit_rad=intruder_bank_limits(intruders, cfg),
     ), intruders)  # fmt: skip
     sigma = None
     if cfg.risk == "probability":  # the track error as a chance, not a wall (avoidance.risk)

@@ -66,6 +66,10 @@ class Intruder:
     # separation to keep beyond d_min from it, m: a fleet member's cooperative clearance
     # (uavxai.sim.fleet.IntentPicture, docs/fleet.md); 0 for traffic
     keep_m: float = 0.0
+    # the bank limit it may turn at, deg: its own performance (issue 31; the tracker gives it
+    # by the ADS-B emitter category, uavxai.surveillance.emitters); None: the planner's
+    # PlannerConfig.intruder_bank_limit_deg (the scenario's avoidance.mcts one)
+    bank_limit_deg: float | None = None
 
 
 INTRUDER_MODELS = ("cv", "ct", "reachable")
@@ -117,9 +121,9 @@ class PlannerConfig(SchemaSettings):  # type: ignore[misc,valid-type]
     # How the planner predicts intruders (see uavxai.avoidance.model.intruder_margin):
     # "cv" constant velocity (the paper), "ct" a constant turn at the estimated turn rate,
     # "reachable" that turn, with the separation needed grown by how far the intruder could
-    # stray from it within reach_horizon_s by banking anywhere within intruder_bank_limit_deg.
+    # stray from it within reach_horizon_s by banking anywhere within its bank limit (its own,
+    # Intruder.bank_limit_deg, or the schema's intruder_bank_limit_deg).
     intruder_model: str = "reachable"
-    intruder_bank_limit_deg: float = 30.0
     # Value of a line that collides at the end of the search horizon (linear from 0 at once):
     # when every line meets someone, the search still prefers the one that meets them later,
     # which re-planning can still turn into a miss. 0: every collision is worth 0 (the paper).
@@ -185,11 +189,6 @@ class PlannerConfig(SchemaSettings):  # type: ignore[misc,valid-type]
         for name in ("late_collision_value", "alert_horizon_s", "alert_hold_s", "wall_slack_s"):
             if not getattr(self, name) >= 0:
                 raise UserError(f"PlannerConfig.{name} must be >= 0, got {getattr(self, name)}.")
-        if not 0 < self.intruder_bank_limit_deg < 90:
-            raise UserError(
-                "PlannerConfig.intruder_bank_limit_deg must be in (0, 90), "
-                f"got {self.intruder_bank_limit_deg}."
-            )
         # A time-out through the NMAC volume keeps 0.1 x (1 - nmac_cost) of its value, and a
         # collision at the horizon's end is worth late_collision_value: it may at most tie
         # with that deepest time-out (mcts_sep: 0.05 and 0.05), never outrank it.

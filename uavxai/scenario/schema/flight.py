@@ -102,6 +102,10 @@ class MCTSConfig(Section):
     # turbulence it meets the collision goal, at a cost in goal rate among 40 intruders
     # (docs/results/README.md).
     reach_horizon_s: Annotated[float, Field(ge=0, le=60)] = 4.0
+    # The bank limit that cover assumes of an intruder whose own it does not know (issue 31):
+    # a track with no ADS-B emitter category (the onboard sensor's) or one the table
+    # aircraft/emitter_categories.yaml leaves out. The others turn within their own.
+    intruder_bank_limit_deg: Annotated[float, Field(gt=0, lt=90)] = 30.0
     # How far the ownship strays from the tree planners' model 10 s ahead (1 sigma per axis,
     # growing as t^1.5), added to the intruders' track uncertainty (uavxai.avoidance.model.
     # intruder_margin); 0: the model's path is taken as flown. docs/scenario.md has the values
