@@ -303,10 +303,10 @@ def manoeuvre_spread(
     """(T, N) how far from its constant-turn prediction an aircraft can be at times ``t``
     if it changes its bank now to anything within ``bank_limit_rad`` (one for all, or (N,)
     each its own: a coordinated turn at its speed, turn rates within +-g tan(limit) / V): the
-    larger of the two extreme turns'
-    distances from the nominal one, kept non-decreasing in time. The set of positions
-    reachable by then lies within this distance of the nominal position. ``t`` (..., T):
-    several runs of times at once, (..., T, N), each kept non-decreasing on its own."""
+    larger of the two extreme turns' distances from the nominal one, kept non-decreasing in
+    time. The set of positions reachable by then lies within this distance of the nominal
+    position. ``t`` (..., T): several runs of times at once, (..., T, N), each kept
+    non-decreasing on its own."""
     speed = np.maximum(np.hypot(vel[:, 0], vel[:, 1]), 1.0)
     w_max = turn_rate_of_bank(bank_limit_rad, speed)
     w = clip(np.asarray(turn_rate, dtype=float), -w_max, w_max)
