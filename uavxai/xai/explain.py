@@ -408,6 +408,9 @@ def decision_record(
                 "sigma_m": i.sigma_m,
                 "sigma_v": i.sigma_v,
                 "age_s": i.age_s,
+                # the bank limit its turn cover assumed (its aircraft's, issue 31); None: the
+                # planner's avoidance.mcts.intruder_bank_limit_deg
+                "bank_limit_deg": i.bank_limit_deg,
             }
             for i in intruders
         ],
