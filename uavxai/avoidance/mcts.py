@@ -5,7 +5,7 @@ encounter model as an argument and returns the whole tree as data (:class:`Searc
 that explanation, drawing and testing read the same arrays the search decided from.
 :class:`MCTSPlanner` wraps it in the planner API (README, "Using the planner in another
 simulator"): it predicts the intruders once per decision, searches, takes the most visited root
-action and explains it.
+action (with ``backup: best``, the one with the best Q) and explains it.
 
 One simulation walks from the root down to the search depth (or to a terminal state): at
 every node it takes the child with the best UCT score ``Q + 2C sqrt(2 ln n / n_j)``, children
@@ -17,7 +17,16 @@ first time is expanded: its children (one per action of the set: the paper's 9, 
 climb and descend) are computed at once, vectorised, and kept (child
 states are deterministic, so every later simulation reuses them). The value at the end of
 the walk is 1 for the goal, 0 for a collision or leaving the map, 0.1 for a time-out and
-``1 - d(o, g) / d_max`` otherwise (eqs 13/14); it is backed up along the walk. Beyond the
+``1 - d(o, g) / d_max`` otherwise (eqs 13/14); it is backed up along the walk: a node's ``Q``
+is the mean of its walks' values (the paper), or with ``PlannerConfig.backup`` "best" the best
+value a walk through it scored (the model is deterministic: a node is worth its best line, as
+in the exhaustive search, :mod:`uavxai.avoidance.exhaustive`); then the root action taken is
+the one with the best ``Q`` (ties: more visits, then action order), and as in the exhaustive
+search a goal one tree level later costs a little (:func:`uavxai.avoidance.kernel.goal_delay`).
+Issue 31 measured why: a mean values an action by its random continuations, most of which
+collide among traffic or fly off slower, so the search prefers slowing down and arrives in
+1.7x the exhaustive search's steps (docs/results, "MCTS episodes as short as exhaustive
+search's"). Beyond the
 paper, a collision predicted ``t`` seconds ahead is worth ``late_collision_value * t /
 horizon`` (below 0.1): when every line meets someone (likely among manoeuvring traffic with
 its protected zones grown, see :mod:`uavxai.avoidance.model`) the search still prefers the
@@ -71,7 +80,8 @@ _VALUE_OF = np.array(TERMINAL_VALUE)
 
 
 def chosen_action(tree: SearchTree) -> int:
-    """The root action with the most visits (ties: higher Q, then lower index)."""
+    """The root action the search ranks first (:meth:`SearchTree.best_child`): the most
+    visited (ties: higher Q, then lower index), or with the best-value backup the best Q."""
     child = tree.best_child(0)
     if child is None:
         raise ValueError("the search visited no root action (simulations must be >= 1)")
@@ -270,7 +280,7 @@ def decision_from_tree(
     children, horizons = measured_children(
         children, lines, tree, samples, t_events, tracks, ids, own, cfg
     )
-    action, cornered, route_kept = _final_action(children, action, route_action)
+    action, cornered, route_kept = _final_action(children, action, route_action, tree.by_value)
 
     chosen_line = lines[action]
     plan = [np.array([[own.x, own.y, own.h]])]
@@ -311,19 +321,21 @@ def decision_from_tree(
         cornered=cornered,
         route_kept=route_kept,
         planner=name,
+        by_value=tree.by_value,
         d_min_m=cfg.d_min_m,
     )
     return decision
 
 
 def _final_action(
-    children: Sequence[ChildStats], action: int, route_action: int | None
+    children: Sequence[ChildStats], action: int, route_action: int | None, by_value: bool = False
 ) -> tuple[int, bool, bool]:
     """The action taken, and whether the cornered rule or the route rule (rather than the
     search) chose it: every option conflicts, the rule words can state
     (:func:`cornered_choice`); else the route's when its line has no conflict
-    (``route_action`` given); else the search's ``action``."""
-    cornered = cornered_choice(children)
+    (``route_action`` given); else the search's ``action``. ``by_value``: the search ranks
+    by Q first (:func:`uavxai.avoidance.lines.search_key`)."""
+    cornered = cornered_choice(children, by_value)
     if cornered is not None:
         return cornered.action, True, False
     if route_action is not None:

@@ -388,6 +388,11 @@ class SearchTree:
     # (M,) with risk as a probability (PlannerConfig.risk): the chance that the line from the
     # root to the node loses separation with some track, which weighted its value; None: off
     risk: np.ndarray | None = None
+    # How a node's children are ranked (best_child): False, by visits then Q (MCTS's mean
+    # backup: the most visited is the most trusted); True, by Q then visits (the best-value
+    # backup, `avoidance.mcts.backup: best`, where Q is the best line found below a child).
+    # The exhaustive search visits each node once, so either ranks its children by Q.
+    by_value: bool = False
 
     @property
     def q(self) -> np.ndarray:
@@ -406,19 +411,25 @@ class SearchTree:
         return np.flatnonzero(self.parent == node)
 
     def best_child(self, node: int) -> int | None:
-        """The most visited child of ``node`` (ties: higher Q, then lower action), or None."""
+        """The most visited child of ``node`` (ties: higher Q, then lower action), or with
+        ``by_value`` the one with the highest Q (ties: more visits, then lower action); None
+        when no child was visited."""
         kids = self.children_of(node)
         best, chosen = None, None
         # a few children: plain Python numbers cost less than array calls (and divide alike)
         for kid, n, total, action in zip(kids.tolist(), self.visits[kids].tolist(),
                                          self.value_sum[kids].tolist(),
                                          self.action[kids].tolist(), strict=True):  # fmt: skip
-            if n > 0 and (best is None or (-n, -(total / n), action) < best):
-                best, chosen = (-n, -(total / n), action), kid
+            if n == 0:
+                continue
+            rank = (-(total / n), -n, action) if self.by_value else (-n, -(total / n), action)
+            if best is None or rank < best:
+                best, chosen = rank, kid
         return chosen
 
     def best_line(self, node: int) -> list[int]:
-        """``node`` and the most visited path below it: what the search expects to follow."""
+        """``node`` and the path of best children below it (:meth:`best_child`): what the
+        search expects to follow."""
         line = [node]
         while (nxt := self.best_child(line[-1])) is not None:
             line.append(nxt)
@@ -449,6 +460,7 @@ class SearchTree:
             t_closest=None if self.t_closest is None else self.t_closest[old],
             state=None if self.state is None else self.state[old],
             time_left_s=self.time_left_s,
+            by_value=self.by_value,
         )
 
 
@@ -482,6 +494,8 @@ class Decision:
     # preferred (`mcts_daa`: a detect-and-avoid system leaves its route only to avoid)
     route_kept: bool = False
     planner: str = ""  # which planner decided (mcts, exhaustive, none, ...)
+    # the search ranked its options by Q first (the best-value backup, SearchTree.by_value)
+    by_value: bool = False
     d_min_m: float = 50.0  # the collision distance the planner worked with
     # (explanation, counterfactual) in words. Planners return evidence and leave this None;
     # the words are made on first use by the narrator uavxai.xai registers (set_narrator).
