@@ -41,6 +41,7 @@ NON_DEFAULT: dict[str, Any] = {
     "avoidance.mcts.uncertainty_horizon_s": 8.0,
     "avoidance.mcts.uncertainty_k": 3.0,
     "avoidance.mcts.nmac_cost": 0.3,
+    "avoidance.mcts.backup": "best",
     "avoidance.nmac.horizontal_m": 100.0,
     "avoidance.nmac.vertical_m": 20.0,
     "avoidance.well_clear.horizontal_m": 500.0,

@@ -306,7 +306,7 @@ def decision_from_tree(
     )
     visits_root = int(tree.visits[0])
     chosen = next(ch for ch in children if ch.action == action)
-    decision = Decision(
+    return Decision(
         bank_cmd_rad=float(bank_command(own.bank, action, cfg)),
         accel_mps2=float(accel_command(action, cfg)),
         alt_target_m=height_command(model, action, own, goal),
@@ -324,7 +324,6 @@ def decision_from_tree(
         by_value=tree.by_value,
         d_min_m=cfg.d_min_m,
     )
-    return decision
 
 
 def _final_action(
