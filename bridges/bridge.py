@@ -152,7 +152,8 @@ class MavlinkBridge:
     (see `_link_source`); everyone else is heard but neither obeyed nor answered, and only
     ground stations (or peers that sign with the key) receive telemetry on udpin. `tlog` is a
     new file that receives every frame decoded and every frame sent, in MAVProxy's .tlog
-    format.
+    format. `traffic_emitter` is the ADS-B emitter category (MAVLink's ADSB_EMITTER_TYPE) of
+    the intruders' aircraft, which their ADSB_VEHICLE carries.
     """
 
     def __init__(
@@ -175,6 +176,7 @@ class MavlinkBridge:
         signing_state: str | Path | None = None,
         ground_stations: Sequence[tuple[int, str]] = (),
         tlog: str | Path | None = None,
+        traffic_emitter: int = mavlink.ADSB_EMITTER_TYPE_UAV,
     ) -> None:
         if not 1 <= system_id <= 255:
             raise ValueError(f"MAVLink system id must be 1..255, got {system_id}")
@@ -204,6 +206,7 @@ class MavlinkBridge:
         # Publish every intruder's exact state as ADSB_VEHICLE (no surveillance model); off
         # when a surveillance model's reports are relayed instead.
         self.truth_adsb = True
+        self.traffic_emitter = traffic_emitter  # their ADSB_VEHICLE's emitter_type
         self.phase = "transit"  # the mission phase, announced in STATUSTEXT
         self.mode = "AUTO"  # the flight mode ground stations see (uavxai.sim.operator)
         self._operator_commands: list[OperatorCommand] = []
@@ -408,7 +411,7 @@ class MavlinkBridge:
             self._send(telemetry.attitude(state, self._body_rates(state)))
             self._send(telemetry.vfr_hud(state, self.frame, self.power))
         if self.truth_adsb and gates["adsb"].due(t):
-            for msg in telemetry.adsb_vehicles(state, self.frame):
+            for msg in telemetry.adsb_vehicles(state, self.frame, self.traffic_emitter):
                 self._send(msg)
 
     def announce(self, text: str, severity: int = mavlink.MAV_SEVERITY_NOTICE) -> None:

@@ -205,9 +205,12 @@ def autopilot_version() -> mavlink.MAVLink_autopilot_version_message:
     )
 
 
-def adsb_vehicles(state: TrafficState, frame: LocalFrame) -> list:
-    """One ADSB_VEHICLE per intruder (rows 1..N); a fleet's other members (``ownship-i``)
-    are systems of their own on the link, not traffic."""
+def adsb_vehicles(
+    state: TrafficState, frame: LocalFrame, emitter_type: int = mavlink.ADSB_EMITTER_TYPE_UAV
+) -> list:
+    """One ADSB_VEHICLE per intruder (rows 1..N), of the intruders' ``emitter_type`` (their
+    aircraft's category, uavxai.surveillance.emitters); a fleet's other members
+    (``ownship-i``) are systems of their own on the link, not traffic."""
     if state.n < 2:
         return []
     pos, vel = state.pos[1:], state.vel[1:]
@@ -232,7 +235,7 @@ def adsb_vehicles(state: TrafficState, frame: LocalFrame) -> list:
                 min(round(float(speed[k]) * 100.0), 0xFFFF),
                 _int16(vel[k, 2] * 100.0),
                 callsign(number).encode("ascii"),
-                mavlink.ADSB_EMITTER_TYPE_UAV,
+                emitter_type,
                 0,
                 ADSB_FLAGS,
                 0,

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from uavxai.avoidance import Intruder, MCTSPlanner, Ownship, PlannerConfig
-from uavxai.avoidance.mcts import predict_levels
+from uavxai.avoidance.mcts import intruder_turn_rates, predict_levels
 from uavxai.avoidance.model import (
     COLLISION,
     NONE,
@@ -106,6 +106,68 @@ def test_margin_adds_uncertainty_and_manoeuvres():
     spread3 = manoeuvre_spread(vel, np.zeros(2), np.array([3.0]), math.radians(30.0))[0]
     np.testing.assert_allclose(r[2], spread3)  # capped at the reach horizon
     assert np.all(r[1] > 0) and np.all(r[1] < r[2])
+
+
+def test_a_45_deg_aircraft_gets_a_wider_turn_cover_than_a_30_deg_one():
+    """Issue 31: each intruder is covered within its own bank limit, all at once; at the same
+    speed a 45 deg aircraft can stray further than a 30 deg one, and a per-intruder limit
+    equal to the config's gives the config's cover to the bit."""
+    vel = np.array([[0.0, 20.0, 0.0], [0.0, 20.0, 0.0], [15.0, 0.0, 0.0]])
+    t = np.array([0.0, 1.0, 2.0, 4.0, 8.0])
+    limits = np.radians([30.0, 45.0, 45.0])
+    spread = manoeuvre_spread(vel, np.zeros(3), t, limits)
+    for j, lim in enumerate(limits):  # each column is that intruder's own scalar cover
+        alone = manoeuvre_spread(vel[j : j + 1], np.zeros(1), t, lim)[:, 0]
+        np.testing.assert_array_equal(spread[:, j], alone)
+    assert spread[0, 0] == spread[0, 1] == 0.0
+    assert np.all(spread[1:, 1] > spread[1:, 0])
+    assert np.all(spread[1:4, 1] > 1.5 * spread[1:4, 0])  # tan 45 / tan 30 = 1.73 early on
+    cfg = PlannerConfig()
+    own = intruder_margin(cfg, vel, np.zeros(3), bank_limit_rad=limits)(t)
+    assert np.all(own[1:, 1] > own[1:, 0])
+    # None is the config's 30 deg for every one, and equal limits give identical numbers
+    default = intruder_margin(cfg, vel, np.zeros(3))(t)
+    same = intruder_margin(cfg, vel, np.zeros(3), bank_limit_rad=np.radians([30.0] * 3))(t)
+    np.testing.assert_array_equal(default, same)
+    np.testing.assert_array_equal(default[:, 0], own[:, 0])
+
+
+def test_the_planner_covers_each_track_within_its_own_bank_limit():
+    """Two intruders head-on, one each side of the ownship's straight line, passing abeam at
+    the end of the line (4 s: the reach horizon, where the cover is widest) at an offset
+    between the 30 deg and 45 deg covers: the line clears a 30 deg aircraft and conflicts with
+    a 45 deg one on either side; the estimated turn is clipped at each one's own limit too."""
+    cfg = PlannerConfig()
+    model = EncounterModel(cfg)
+    own = Ownship(1000.0, 600.0, 120.0, 20.0, 0.0)  # north at 20 m/s
+    at = np.array([4.0])
+    cover = {deg: intruder_margin(cfg, np.array([[0.0, -20.0, 0.0]]), np.zeros(1),
+                                  bank_limit_rad=np.radians([deg]))(at)[0, 0]
+             for deg in (30.0, 45.0)}  # fmt: skip
+    assert cover[45.0] > cover[30.0] + 10.0
+    offset = cfg.d_min_m + 0.5 * (cover[30.0] + cover[45.0])
+    goal = np.array([1000.0, 5000.0, 120.0])
+
+    def line(left: float | None, right: float | None):
+        intruders = [Intruder("left", 1000.0 - offset, 760.0, 120.0, 0.0, -20.0,
+                              bank_limit_deg=left),
+                     Intruder("right", 1000.0 + offset, 760.0, 120.0, 0.0, -20.0,
+                              bank_limit_deg=right)]  # fmt: skip
+        (track,) = predict_levels(model, intruders, 1, 4.0)
+        return model.fly(ownship_state(own)[None], np.array([HOLD]), goal, 4.0, track,
+                         cull=False, exact=True)  # fmt: skip
+
+    clear = line(30.0, None)  # None: the config's 30 deg
+    assert clear.event[0] == NONE
+    assert clear.min_sep[0] == pytest.approx(offset - cover[30.0], abs=0.5)
+    for left, right, side in ((30.0, 45.0, 1), (45.0, 30.0, 0), (None, 45.0, 1)):
+        seg = line(left, right)
+        assert seg.event[0] == COLLISION and seg.closest[0] == side
+    # a noisy turn estimate is held to what each one's bank can do at its speed
+    fast = [Intruder(k, 0.0, 0.0, 100.0, 0.0, 20.0, turn_rate=1.0, bank_limit_deg=deg)
+            for k, deg in enumerate((30.0, 45.0, None))]  # fmt: skip
+    rates = intruder_turn_rates(fast, cfg)
+    np.testing.assert_allclose(rates, G * np.tan(np.radians([30.0, 45.0, 30.0])) / 20.0)
 
 
 def test_an_uncertainty_horizon_stops_the_velocity_error_growing_there():
@@ -360,9 +422,9 @@ def test_the_scenario_sets_the_ownship_models_own_error():
         ("intruder_model", "psychic", "intruder_model must be one of cv, ct, reachable"),
         # the schema's settings, checked by the schema (avoidance.mcts)
         ("uncertainty_k", -1.0, r"PlannerConfig\.uncertainty_k' = -1\.0: .* or equal to 0"),
-        ("intruder_bank_limit_deg", 95.0, "intruder_bank_limit_deg must be in"),
         ("late_collision_value", 0.2, "below the time-out"),
         ("own_error_10s_m", -5.0, r"PlannerConfig\.own_error_10s_m' = -5\.0: .* or equal to 0"),
+        ("intruder_bank_limit_deg", 95.0, r"intruder_bank_limit_deg' = 95\.0: .* less than 90"),
     ],
 )
 def test_bad_prediction_settings_are_user_errors(field, value, message):

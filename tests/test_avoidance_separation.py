@@ -18,6 +18,7 @@ from uavxai.avoidance.mcts import predict_levels, search
 from uavxai.avoidance.model import COLLISION, NONE, EncounterModel, ownship_state
 from uavxai.avoidance.planners import make_planner, sep_config
 from uavxai.errors import UserError
+from uavxai.xai.explain import render_record
 
 CFG = sep_config(PlannerConfig())  # the default 2 km box, d_min 50 m, as mcts_sep flies it
 GOAL = np.array([1000.0, 1000.0, 120.0])
@@ -190,6 +191,7 @@ def test_only_a_planner_that_weighs_the_walls_marks_lines_trapped() -> None:
     for name in ("mcts_vertical", "mcts_sep"):
         decision = make_planner(name, PlannerConfig()).plan(own, intruders, tuple(GOAL))
         tree = decision.tree
+        doomed_lines = 0
         for c in decision.children:
             node = next(int(n) for n in tree.children_of(0) if tree.action[n] == c.action)
             while (child := tree.best_child(node)) is not None:
@@ -197,8 +199,17 @@ def test_only_a_planner_that_weighs_the_walls_marks_lines_trapped() -> None:
             doomed = tree.terminal[node] in (NONE, COLLISION) and wall_factor(
                 tree.state[node], par) == 0.0  # fmt: skip
             assert c.trapped == (doomed and name == "mcts_sep")
+            doomed_lines += doomed
+        # mcts_vertical had doomed lines too and marked none of them: the mark is the walls'
+        # planner's, not a property of the geometry every planner would report.
+        assert doomed_lines > 0, f"{name}: no line ends unable to turn away; nothing is shown"
         record = decision.to_json()["children"]  # decisions.jsonl names the trapped lines only
         assert [r.get("trapped", False) for r in record] == [c.trapped for c in decision.children]
+        # `uavxai explain`'s table of root actions says which lines are trapped, and only those
+        table = render_record(decision.to_json(), 0, 1).split("root actions:")[1].splitlines()[2:]
+        assert [row.endswith("cannot turn from the edge") for row in table] == [
+            c.trapped for c in decision.children
+        ]
         if name == "mcts_sep":
             assert any(c.trapped for c in decision.children)
             assert not next(c for c in decision.children if c.action == decision.action).trapped

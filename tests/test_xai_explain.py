@@ -134,6 +134,22 @@ def _child(action: int, visits: int, q: float):
     return ChildStats(action, 0.0, 0.0, visits, q, 300.0, None, None, "")
 
 
+def test_the_best_value_backup_is_explained_by_its_q_not_its_simulations():
+    """With `avoidance.mcts.backup: best` the search ranks by Q first (Decision.by_value):
+    the runner-up is the next best Q, not the most simulated, and a tie as printed is
+    decided by the Q beyond 3 decimals, never by "more simulations"."""
+    from uavxai.avoidance.types import Decision
+    from uavxai.xai.explain import runner_up
+
+    chosen, busy, better = _child(0, 10, 0.9), _child(4, 40, 0.5), _child(2, 5, 0.8)
+    assert runner_up([chosen, busy, better], chosen).action == 4  # the mean's: most simulated
+    assert runner_up([chosen, busy, better], chosen, by_value=True).action == 2
+    tied = [_child(0, 10, 0.80001), _child(4, 30, 0.80000)]
+    d = Decision(0.0, 1.0, 0, tied, planner="mcts_sep", by_value=True)
+    assert "a higher Q beyond 3 decimals decided" in d.explanation
+    assert "simulations (10 against 30)" not in d.explanation
+
+
 def test_a_visit_tie_is_not_called_more_simulations():
     from uavxai.avoidance.types import Decision
 

@@ -95,6 +95,10 @@ CONFLICT_VOLUMES = ("sphere", "cylinder")
 # How a tree planner counts a track's uncertainty (`avoidance.mcts.risk`): "margin", k sigmas
 # of it as a wall; "probability", the chance of losing separation, in the line's value.
 RISK_MODELS = ("margin", "probability")
+# What an MCTS node's Q is (`avoidance.mcts.backup`): "mean", the mean value of the walks
+# through it, the most visited root action taken (the paper); "best", the best value a walk
+# through it scored, the root action with the best Q taken (as the exhaustive search does).
+BACKUPS = ("mean", "best")
 N_ACTIONS = ACTION_SETS["paper"]  # the paper's nine: the learned planners' output size
 HOLD = 4  # hold the bank command, hold speed: the reference every other option is compared to
 CLIMB, DESCEND = (next(a.index for a in ACTIONS if a.climb == c) for c in (+1, -1))

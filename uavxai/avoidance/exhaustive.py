@@ -6,9 +6,10 @@ It builds the same tree MCTS samples, but whole: all ``9^depth`` sequences, each
 walk (1 goal, 0 collision or out of bounds, 0.1 time-out, ``1 - d/d_max`` at the depth
 limit). Since the model is deterministic, the value of a node is the best value below it, and
 the action taken is the root action with the best value; among lines that all reach the goal,
-the one that reaches it sooner is preferred (see ``GOAL_DELAY``). In its :class:`SearchTree` every
-node is visited once and ``Q`` is that best value, so the explanation code reads it like an
-MCTS tree. Cost grows as ``9^depth``; that is the point of the comparison.
+the one that reaches it sooner is preferred (:func:`uavxai.avoidance.kernel.goal_delay`). In
+its :class:`SearchTree` every node is visited once and ``Q`` is that best value, so the
+explanation code reads it like an MCTS tree (as MCTS's with ``backup: best``). Cost grows
+as ``9^depth``; that is the point of the comparison.
 """
 
 from __future__ import annotations
@@ -19,11 +20,10 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from uavxai.avoidance.kernel import goal_delay
 from uavxai.avoidance.mcts import TreeBuilder, TreePlanner
 from uavxai.avoidance.model import GOAL, EncounterModel, Track
 from uavxai.avoidance.types import PlannerConfig, SearchTree
-
-GOAL_DELAY = 1e-4  # value of reaching the goal one tree level later (a tie-break)
 
 
 def exhaustive_search(
@@ -52,13 +52,8 @@ def exhaustive_search(
     tree = builder.finish()
     unscored = np.isnan(value) & (tree.depth == len(tracks))
     value[unscored] = model.leaf_value(tree.pos[unscored], goal)
-    # Sooner is better: every sequence that reaches the goal within the horizon scores 1, so
-    # without a tie-break the planner may always choose a line that reaches it at the horizon,
-    # and re-planning then puts the goal off forever (it orbited the goal in 0.5-2.5 % of
-    # campaign episodes). A goal one level later costs ``delay``, kept below the gap between
-    # the goal and any other leaf (1 - d/d_max with d >= goal radius), so only ties change.
-    cfg = model.config
-    delay = min(GOAL_DELAY, 0.5 * cfg.goal_radius_m / cfg.d_max / max(len(tracks), 1))
+    # sooner is better (goal_delay: MCTS with backup "best" takes the same off its walks)
+    delay = goal_delay(model.config, len(tracks))
     reached = tree.terminal == GOAL
     value[reached] -= delay * (tree.depth[reached] - 1)
     assert tree.first_child is not None

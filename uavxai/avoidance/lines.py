@@ -347,25 +347,30 @@ def leaves(c: ChildStats) -> bool:
     return c.outcome == Outcome.OUT_OF_BOUNDS or c.trapped
 
 
-def cornered_key(c: ChildStats) -> tuple:
+def search_key(c: ChildStats, by_value: bool = False) -> tuple:
+    """How the tree search ranks root options (:meth:`SearchTree.best_child`): more
+    simulations, then the higher Q, then action order; with ``by_value`` (the best-value
+    backup, where Q is the best line found below) the higher Q first, then simulations."""
+    return (c.q, c.visits, -c.action) if by_value else (c.visits, c.q, -c.action)
+
+
+def cornered_key(c: ChildStats, by_value: bool = False) -> tuple:
     """How a cornered planner ranks options: a line that stays in the area before one that
     leaves it or ends unable to turn away from a wall (``trapped``; leaving is a failure for
     certain, a predicted meeting may still be turned into a miss by re-planning), then the
     latest meeting, then the largest predicted miss, then the search's preference
-    (simulations, Q), then action order."""
+    (:func:`search_key`)."""
     m = c.meets
     return (
         not leaves(c),
         -math.inf if m is None else round(m.time_s, 6),
         -math.inf if m is None else m.miss_m,
-        c.visits,
-        c.q,
-        -c.action,
+        *search_key(c, by_value),
     )
 
 
-def cornered_choice(children: Sequence[ChildStats]) -> ChildStats | None:
+def cornered_choice(children: Sequence[ChildStats], by_value: bool = False) -> ChildStats | None:
     """When every option's line conflicts, the one to take (:func:`cornered_key`), else None."""
     if not children or not all(conflicts(c) for c in children):
         return None
-    return max(children, key=cornered_key)
+    return max(children, key=lambda c: cornered_key(c, by_value))

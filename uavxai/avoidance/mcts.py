@@ -5,7 +5,7 @@ encounter model as an argument and returns the whole tree as data (:class:`Searc
 that explanation, drawing and testing read the same arrays the search decided from.
 :class:`MCTSPlanner` wraps it in the planner API (README, "Using the planner in another
 simulator"): it predicts the intruders once per decision, searches, takes the most visited root
-action and explains it.
+action (with ``backup: best``, the one with the best Q) and explains it.
 
 One simulation walks from the root down to the search depth (or to a terminal state): at
 every node it takes the child with the best UCT score ``Q + 2C sqrt(2 ln n / n_j)``, children
@@ -17,7 +17,16 @@ first time is expanded: its children (one per action of the set: the paper's 9, 
 climb and descend) are computed at once, vectorised, and kept (child
 states are deterministic, so every later simulation reuses them). The value at the end of
 the walk is 1 for the goal, 0 for a collision or leaving the map, 0.1 for a time-out and
-``1 - d(o, g) / d_max`` otherwise (eqs 13/14); it is backed up along the walk. Beyond the
+``1 - d(o, g) / d_max`` otherwise (eqs 13/14); it is backed up along the walk: a node's ``Q``
+is the mean of its walks' values (the paper), or with ``PlannerConfig.backup`` "best" the best
+value a walk through it scored (the model is deterministic: a node is worth its best line, as
+in the exhaustive search, :mod:`uavxai.avoidance.exhaustive`); then the root action taken is
+the one with the best ``Q`` (ties: more visits, then action order), and as in the exhaustive
+search a goal one tree level later costs a little (:func:`uavxai.avoidance.kernel.goal_delay`).
+Issue 31 measured why: a mean values an action by its random continuations, most of which
+collide among traffic or fly off slower, so the search prefers slowing down and arrives in
+1.7x the exhaustive search's steps (docs/results, "MCTS episodes as short as exhaustive
+search's"). Beyond the
 paper, a collision predicted ``t`` seconds ahead is worth ``late_collision_value * t /
 horizon`` (below 0.1): when every line meets someone (likely among manoeuvring traffic with
 its protected zones grown, see :mod:`uavxai.avoidance.model`) the search still prefers the
@@ -71,7 +80,8 @@ _VALUE_OF = np.array(TERMINAL_VALUE)
 
 
 def chosen_action(tree: SearchTree) -> int:
-    """The root action with the most visits (ties: higher Q, then lower index)."""
+    """The root action the search ranks first (:meth:`SearchTree.best_child`): the most
+    visited (ties: higher Q, then lower index), or with the best-value backup the best Q."""
     child = tree.best_child(0)
     if child is None:
         raise ValueError("the search visited no root action (simulations must be >= 1)")
@@ -172,15 +182,25 @@ def intruder_arrays(intruders: Sequence[Intruder]) -> tuple[np.ndarray, np.ndarr
     return a[:, :3], a[:, 3:]
 
 
+def intruder_bank_limits(intruders: Sequence[Intruder], config: PlannerConfig) -> np.ndarray:
+    """(N,) the bank limit (rad) each intruder may turn at: its own (issue 31: its
+    aircraft's, by the ADS-B emitter category its track carries), or the planner's
+    ``intruder_bank_limit_deg`` where it has none."""
+    default = config.intruder_bank_limit_deg
+    deg = [default if i.bank_limit_deg is None else i.bank_limit_deg for i in intruders]
+    return np.radians(np.array(deg, dtype=float))
+
+
 def intruder_turn_rates(intruders: Sequence[Intruder], config: PlannerConfig) -> np.ndarray | None:
-    """(N,) turn rates the planner predicts with: the intruders' estimates (within what the
-    intruder bank limit allows), or None (straight) for the constant-velocity model."""
+    """(N,) turn rates the planner predicts with: the intruders' estimates (within what
+    each one's bank limit allows, :func:`intruder_bank_limits`), or None (straight) for the
+    constant-velocity model."""
     if config.intruder_model == "cv" or not intruders:
         return None
     rate = np.array([i.turn_rate for i in intruders], dtype=float)
     speed = np.maximum(np.hypot([i.vx for i in intruders], [i.vy for i in intruders]), 1.0)
     # a noisy estimate must not predict a turn tighter than a coordinated turn can be
-    limit = turn_rate_of_bank(math.radians(config.intruder_bank_limit_deg), speed)
+    limit = turn_rate_of_bank(intruder_bank_limits(intruders, config), speed)
     return np.clip(rate, -limit, limit)
 
 
@@ -194,7 +214,8 @@ def predict_levels(
     pos, vel = intruder_arrays(intruders)
     turn = intruder_turn_rates(intruders, cfg)
     margin = with_keep(intruder_margin(
-        cfg, vel, np.zeros(len(intruders)) if turn is None else turn, *_track_errors(intruders)
+        cfg, vel, np.zeros(len(intruders)) if turn is None else turn, *_track_errors(intruders),
+        bank_limit_rad=intruder_bank_limits(intruders, cfg),
     ), intruders)  # fmt: skip
     sigma = None
     if cfg.risk == "probability":  # the track error as a chance, not a wall (avoidance.risk)
@@ -259,7 +280,7 @@ def decision_from_tree(
     children, horizons = measured_children(
         children, lines, tree, samples, t_events, tracks, ids, own, cfg
     )
-    action, cornered, route_kept = _final_action(children, action, route_action)
+    action, cornered, route_kept = _final_action(children, action, route_action, tree.by_value)
 
     chosen_line = lines[action]
     plan = [np.array([[own.x, own.y, own.h]])]
@@ -285,7 +306,7 @@ def decision_from_tree(
     )
     visits_root = int(tree.visits[0])
     chosen = next(ch for ch in children if ch.action == action)
-    decision = Decision(
+    return Decision(
         bank_cmd_rad=float(bank_command(own.bank, action, cfg)),
         accel_mps2=float(accel_command(action, cfg)),
         alt_target_m=height_command(model, action, own, goal),
@@ -300,20 +321,21 @@ def decision_from_tree(
         cornered=cornered,
         route_kept=route_kept,
         planner=name,
+        by_value=tree.by_value,
         d_min_m=cfg.d_min_m,
     )
-    return decision
 
 
 def _final_action(
-    children: Sequence[ChildStats], action: int, route_action: int | None
+    children: Sequence[ChildStats], action: int, route_action: int | None, by_value: bool = False
 ) -> tuple[int, bool, bool]:
     """The action taken, and whether the cornered rule or the route rule (rather than the
     search) chose it: every option conflicts, the rule words can state
     (:func:`cornered_choice`); else the route's when its line has no conflict
     (``route_action`` given; :attr:`ChildStats.clear`: no meeting, and no NMAC intrusion where
-    the search grades one); else the search's ``action``."""
-    cornered = cornered_choice(children)
+    the search grades one); else the search's ``action``. ``by_value``: the search ranks
+    by Q first (:func:`uavxai.avoidance.lines.search_key`)."""
+    cornered = cornered_choice(children, by_value)
     if cornered is not None:
         return cornered.action, True, False
     if route_action is not None:

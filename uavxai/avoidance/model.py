@@ -298,14 +298,15 @@ _NO_INTRUDERS.flags.writeable = False
 
 
 def manoeuvre_spread(
-    vel: np.ndarray, turn_rate: np.ndarray, t: np.ndarray, bank_limit_rad: float
+    vel: np.ndarray, turn_rate: np.ndarray, t: np.ndarray, bank_limit_rad: float | np.ndarray
 ) -> np.ndarray:
     """(T, N) how far from its constant-turn prediction an aircraft can be at times ``t``
-    if it changes its bank now to anything within ``bank_limit_rad`` (a coordinated turn at
-    its speed: turn rates within +-g tan(limit) / V): the larger of the two extreme turns'
-    distances from the nominal one, kept non-decreasing in time. The set of positions
-    reachable by then lies within this distance of the nominal position. ``t`` (..., T):
-    several runs of times at once, (..., T, N), each kept non-decreasing on its own."""
+    if it changes its bank now to anything within ``bank_limit_rad`` (one for all, or (N,)
+    each its own: a coordinated turn at its speed, turn rates within +-g tan(limit) / V): the
+    larger of the two extreme turns' distances from the nominal one, kept non-decreasing in
+    time. The set of positions reachable by then lies within this distance of the nominal
+    position. ``t`` (..., T): several runs of times at once, (..., T, N), each kept
+    non-decreasing on its own."""
     speed = np.maximum(np.hypot(vel[:, 0], vel[:, 1]), 1.0)
     w_max = turn_rate_of_bank(bank_limit_rad, speed)
     w = clip(np.asarray(turn_rate, dtype=float), -w_max, w_max)
@@ -324,9 +325,11 @@ def intruder_margin(
     turn_rate: np.ndarray,
     sigma_m: np.ndarray | None = None,
     sigma_v: np.ndarray | None = None,
+    bank_limit_rad: np.ndarray | None = None,
 ) -> Callable[[np.ndarray], np.ndarray] | None:
     """The separation needed beyond ``d_min`` from each intruder, as a function of the time
-    ``t`` (T,) from now, (T, N); None when there is none.
+    ``t`` (T,) from now, (T, N); None when there is none. ``bank_limit_rad`` (N,): each
+    intruder's own bank limit (issue 31); None: ``intruder_bank_limit_deg`` for every one.
 
     Two parts add up: the uncertainty (with ``risk="probability"`` only over the first
     ``risk_wall_s`` seconds, none beyond them nor when that is None), ``uncertainty_k`` sigmas of
@@ -349,7 +352,9 @@ def intruder_margin(
     uncertain = k > 0 and sigma is not None
     if not n or not (reach or uncertain):
         return None
-    limit = math.radians(config.intruder_bank_limit_deg)
+    limit: float | np.ndarray = math.radians(config.intruder_bank_limit_deg)
+    if bank_limit_rad is not None:
+        limit = bank_limit_rad
     horizon = config.reach_horizon_s
     air = np.asarray(vel, dtype=float) - np.array([*config.wind_mps, 0.0])
 

@@ -66,6 +66,10 @@ class Intruder:
     # separation to keep beyond d_min from it, m: a fleet member's cooperative clearance
     # (uavxai.sim.fleet.IntentPicture, docs/fleet.md); 0 for traffic
     keep_m: float = 0.0
+    # the bank limit it may turn at, deg: its own performance (issue 31; the tracker gives it
+    # by the ADS-B emitter category, uavxai.surveillance.emitters); None: the planner's
+    # PlannerConfig.intruder_bank_limit_deg (the scenario's avoidance.mcts one)
+    bank_limit_deg: float | None = None
 
 
 INTRUDER_MODELS = ("cv", "ct", "reachable")
@@ -117,9 +121,9 @@ class PlannerConfig(SchemaSettings):  # type: ignore[misc,valid-type]
     # How the planner predicts intruders (see uavxai.avoidance.model.intruder_margin):
     # "cv" constant velocity (the paper), "ct" a constant turn at the estimated turn rate,
     # "reachable" that turn, with the separation needed grown by how far the intruder could
-    # stray from it within reach_horizon_s by banking anywhere within intruder_bank_limit_deg.
+    # stray from it within reach_horizon_s by banking anywhere within its bank limit (its own,
+    # Intruder.bank_limit_deg, or the schema's intruder_bank_limit_deg).
     intruder_model: str = "reachable"
-    intruder_bank_limit_deg: float = 30.0
     # Value of a line that collides at the end of the search horizon (linear from 0 at once):
     # when every line meets someone, the search still prefers the one that meets them later,
     # which re-planning can still turn into a miss. 0: every collision is worth 0 (the paper).
@@ -185,11 +189,6 @@ class PlannerConfig(SchemaSettings):  # type: ignore[misc,valid-type]
         for name in ("late_collision_value", "alert_horizon_s", "alert_hold_s", "wall_slack_s"):
             if not getattr(self, name) >= 0:
                 raise UserError(f"PlannerConfig.{name} must be >= 0, got {getattr(self, name)}.")
-        if not 0 < self.intruder_bank_limit_deg < 90:
-            raise UserError(
-                "PlannerConfig.intruder_bank_limit_deg must be in (0, 90), "
-                f"got {self.intruder_bank_limit_deg}."
-            )
         # A time-out through the NMAC volume keeps 0.1 x (1 - nmac_cost) of its value, and a
         # collision at the horizon's end is worth late_collision_value: it may at most tie
         # with that deepest time-out (mcts_sep: 0.05 and 0.05), never outrank it.
@@ -399,6 +398,11 @@ class SearchTree:
     # (M,) with risk as a probability (PlannerConfig.risk): the chance that the line from the
     # root to the node loses separation with some track, which weighted its value; None: off
     risk: np.ndarray | None = None
+    # How a node's children are ranked (best_child): False, by visits then Q (MCTS's mean
+    # backup: the most visited is the most trusted); True, by Q then visits (the best-value
+    # backup, `avoidance.mcts.backup: best`, where Q is the best line found below a child).
+    # The exhaustive search visits each node once, so either ranks its children by Q.
+    by_value: bool = False
     # (M,) with graded separation (PlannerConfig.nmac_cost > 0): the deepest NMAC intrusion
     # on the line from the root to the node, as the search graded it (kernel.nmac_depth: 0
     # none, 1 at d_min_m); None: not graded
@@ -421,19 +425,25 @@ class SearchTree:
         return np.flatnonzero(self.parent == node)
 
     def best_child(self, node: int) -> int | None:
-        """The most visited child of ``node`` (ties: higher Q, then lower action), or None."""
+        """The most visited child of ``node`` (ties: higher Q, then lower action), or with
+        ``by_value`` the one with the highest Q (ties: more visits, then lower action); None
+        when no child was visited."""
         kids = self.children_of(node)
         best, chosen = None, None
         # a few children: plain Python numbers cost less than array calls (and divide alike)
         for kid, n, total, action in zip(kids.tolist(), self.visits[kids].tolist(),
                                          self.value_sum[kids].tolist(),
                                          self.action[kids].tolist(), strict=True):  # fmt: skip
-            if n > 0 and (best is None or (-n, -(total / n), action) < best):
-                best, chosen = (-n, -(total / n), action), kid
+            if n == 0:
+                continue
+            rank = (-(total / n), -n, action) if self.by_value else (-n, -(total / n), action)
+            if best is None or rank < best:
+                best, chosen = rank, kid
         return chosen
 
     def best_line(self, node: int) -> list[int]:
-        """``node`` and the most visited path below it: what the search expects to follow."""
+        """``node`` and the path of best children below it (:meth:`best_child`): what the
+        search expects to follow."""
         line = [node]
         while (nxt := self.best_child(line[-1])) is not None:
             line.append(nxt)
@@ -464,6 +474,7 @@ class SearchTree:
             t_closest=None if self.t_closest is None else self.t_closest[old],
             state=None if self.state is None else self.state[old],
             time_left_s=self.time_left_s,
+            by_value=self.by_value,
         )
 
 
@@ -497,6 +508,8 @@ class Decision:
     # preferred (`mcts_daa`: a detect-and-avoid system leaves its route only to avoid)
     route_kept: bool = False
     planner: str = ""  # which planner decided (mcts, exhaustive, none, ...)
+    # the search ranked its options by Q first (the best-value backup, SearchTree.by_value)
+    by_value: bool = False
     d_min_m: float = 50.0  # the collision distance the planner worked with
     # (explanation, counterfactual) in words. Planners return evidence and leave this None;
     # the words are made on first use by the narrator uavxai.xai registers (set_narrator).

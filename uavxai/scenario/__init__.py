@@ -20,6 +20,7 @@ The package, one job a module (the layers, top first, are checked by import-lint
 from uavxai.errors import ScenarioError
 from uavxai.scenario import schema as _schema
 from uavxai.scenario.aircraft import (
+    aircraft_bank_limit_deg,
     aircraft_height_loop,
     aircraft_roll_rate_deg_s,
     aircraft_speed_range,
@@ -48,6 +49,7 @@ __all__ = [
     "MAX_READ_BYTES",
     "REFERENCE",
     "ScenarioError",
+    "aircraft_bank_limit_deg",
     "aircraft_height_loop",
     "aircraft_roll_rate_deg_s",
     "aircraft_speed_range",

@@ -63,3 +63,11 @@ def aircraft_roll_rate_deg_s(name: str) -> float:
     values, _ = _autopilot(name)
     rate = values.get("ap/roll-rate-limit-rad_sec")
     return 30.0 if rate is None else round(math.degrees(rate), 3)
+
+
+def aircraft_bank_limit_deg(name: str) -> float | None:
+    """The bank limit (deg) of the aircraft's autopilot, ``ap/bank-limit-rad`` in its XML, to
+    a thousandth of a degree (the XML writes 30 deg as 0.5236 rad); None if it declares none."""
+    values, _ = _autopilot(name)
+    limit = values.get("ap/bank-limit-rad")
+    return None if limit is None else round(math.degrees(limit), 3)

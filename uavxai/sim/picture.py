@@ -38,6 +38,7 @@ from uavxai.surveillance.adsb import (
     adsb_message,
     report_from_adsb,
 )
+from uavxai.surveillance.emitters import TrafficCategories
 from uavxai.surveillance.imm import ImmTrack
 from uavxai.surveillance.tracker import Tracker, TrackerConfig, truth_beliefs
 
@@ -96,7 +97,9 @@ class Picture(EngineStep):
     ) -> None:
         self.config = SurveillanceConfig.from_scenario(scenario)
         seed = int(np.random.SeedSequence(scenario.seed, spawn_key=(_STREAM,)).generate_state(1)[0])
-        self.surveillance = Surveillance(self.config, seed)
+        # the frames carry each aircraft's emitter category, the tracks keep it (issue 31)
+        self.categories = TrafficCategories.from_scenario(scenario)
+        self.surveillance = Surveillance(self.config, seed, self.categories)
         self.frame = LocalFrame.from_origin(scenario.world.origin)
         self._packer = MessagePacker(scenario.bridge.system_id, mavlink.MAV_COMP_ID_ADSB)
         self._forward = forward
@@ -150,5 +153,5 @@ class Picture(EngineStep):
 
     def __call__(self, state: TrafficState) -> list[Intruder]:
         if self.truth:
-            return truth_beliefs(state)
+            return truth_beliefs(state, self.categories)
         return self.receiver.beliefs(state.t)

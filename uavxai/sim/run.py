@@ -49,6 +49,7 @@ def mavlink_path(scenario: Scenario, link: str | None, tlog: Path | None = None)
     from uavxai.bridges.signing import default_state_path
     from uavxai.dynamics.geodesy import LocalFrame
     from uavxai.scenario import aircraft_speed_range
+    from uavxai.surveillance.emitters import TrafficCategories, emitter_type
 
     sc, av = scenario, scenario.avoidance
     key = bytes.fromhex(sc.bridge.signing_key_hex) if sc.bridge.signing_key_hex else None
@@ -85,6 +86,8 @@ def mavlink_path(scenario: Scenario, link: str | None, tlog: Path | None = None)
             signing_state=default_state_path(key) if key else None,
             ground_stations=[(g.system_id, g.address) for g in sc.bridge.ground_stations],
             tlog=tlog,
+            # a ground station shows the intruders as what they are (a Cessna: LIGHT)
+            traffic_emitter=emitter_type(TrafficCategories.from_scenario(sc).intruders),
         )
         encoder = CommandEncoder(sc.bridge.system_id, sc.bridge.system_id, signing_key=key)
         return MavlinkPath(bridge, encoder)

@@ -37,6 +37,7 @@ from uavxai.dynamics.state import TrafficState, is_member, member_id
 from uavxai.errors import UserError
 from uavxai.scenario import Scenario, checked
 from uavxai.scenario import Surveillance as SurveillanceSection
+from uavxai.surveillance.emitters import TrafficCategories, emitter_category, emitter_type
 from uavxai.surveillance.sensor import SensorConfig, sensor_sees
 
 # 95 % horizontal position bound (EPU) per NACp, m (DO-260B Table 2-14). 8 = 0.05 NM.
@@ -140,7 +141,8 @@ class Report:
     """One surveillance report: intruder ``id``'s state at ``t_measured`` as received at
     ``t_delivered``. ``vel`` None: a position-only report (the onboard sensor).
     ``sigma_pos`` / ``sigma_vel`` are the per-axis 1-sigma errors (horizontal, vertical)
-    the source claims (0: exact)."""
+    the source claims (0: exact). ``emitter``: the ADS-B emitter category the aircraft
+    broadcasts (:mod:`uavxai.surveillance.emitters`); None: none (the onboard sensor's, NO_INFO)."""
 
     id: str
     t_measured: float
@@ -150,6 +152,7 @@ class Report:
     sigma_pos: tuple[float, float]
     sigma_vel: tuple[float, float]
     source: str  # "adsb" | "sensor" | "truth"
+    emitter: str | None = None
 
 
 def _number(ident: str) -> int:
@@ -177,11 +180,19 @@ class Surveillance:
 
     The ownship is row 0 of the state; intruders are rows 1..N, known by their ids (an id
     seen for the first time gets its report phase and cooperative flag then).
+    ``categories``: the emitter category each broadcasts (the episode's aircraft; None:
+    every one a UAV).
     """
 
-    def __init__(self, config: SurveillanceConfig, seed: int = 0) -> None:
+    def __init__(
+        self,
+        config: SurveillanceConfig,
+        seed: int = 0,
+        categories: TrafficCategories | None = None,
+    ) -> None:
         self.config = config
         self.seed = int(seed)
+        self.categories = categories or TrafficCategories()
         self._rng = np.random.default_rng(
             np.random.SeedSequence(self.seed, spawn_key=(_NOISE_STREAM,))
         )
@@ -271,6 +282,7 @@ class Surveillance:
                         sigma_pos=sp,
                         sigma_vel=sv,
                         source="adsb",
+                        emitter=self.categories.of(ident),
                     )
                 )
             elif seen[j]:
@@ -360,7 +372,7 @@ def adsb_fields(report: Report, frame: LocalFrame) -> dict[str, int | bytes]:
         "hor_velocity": hor,
         "ver_velocity": ver,
         "callsign": f"{'UAV' if is_member(report.id) else 'INTR'}{number:02d}"[:8].encode(),
-        "emitter_type": mavlink.ADSB_EMITTER_TYPE_UAV,
+        "emitter_type": emitter_type(report.emitter),
         "tslc": min(255, max(0, round(report.t_delivered - report.t_measured))),
         "flags": flags,
         "squawk": 0,
@@ -411,4 +423,5 @@ def report_from_adsb(
         sigma_pos=cfg.sigma_pos,
         sigma_vel=cfg.sigma_vel if vel is not None else (math.inf, math.inf),
         source="adsb",
+        emitter=emitter_category(msg.emitter_type),  # type: ignore[attr-defined]
     )

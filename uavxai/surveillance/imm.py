@@ -28,6 +28,7 @@ import numpy as np
 from uavxai.avoidance.types import Intruder
 from uavxai.surveillance import tracker as ekf
 from uavxai.surveillance.adsb import Report
+from uavxai.surveillance.emitters import emitter_table
 
 X, Y, VX, VY, H, VH = range(6)
 DIM = 6
@@ -52,6 +53,7 @@ class ImmTrack:
     def __init__(self, report: Report, cfg: ekf.TrackerConfig) -> None:
         self.id = report.id
         self.cfg = cfg
+        self.emitter = report.emitter
         self.t = self.t_first = report.t_measured
         self.updates = 1
         w = cfg.imm_turn_rate  # straight; right and left at w and 2 w (positive: right)
@@ -129,6 +131,7 @@ class ImmTrack:
         self.mu = np.maximum(post / post.sum(), 1e-6)
         self.mu /= self.mu.sum()
         self.x, self.P, self.t = xs, Ps, report.t_measured
+        self.emitter = report.emitter or self.emitter  # a sensor report carries none
         self.updates += 1
         return True
 
@@ -140,4 +143,5 @@ class ImmTrack:
             turn_rate=float(mu @ self.rates),
             sigma_m=ekf.largest_sd(P, X, Y), sigma_v=ekf.largest_sd(P, VX, VY),
             age_s=float(max(t - self.t, 0.0)),
+            bank_limit_deg=emitter_table().bank_limit(self.emitter),
         )  # fmt: skip

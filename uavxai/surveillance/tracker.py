@@ -14,7 +14,9 @@ A track is updated at each report's *measurement* time (so the latency is accoun
 predicted to the time asked for when beliefs are read: tracks without fresh reports coast,
 their covariance growing, and are dropped once their last measurement is older than
 ``max_age_s``. The answer is a list of :class:`uavxai.avoidance.types.Intruder` with
-``turn_rate``, ``sigma_m``, ``sigma_v`` and ``age_s`` filled in.
+``turn_rate``, ``sigma_m``, ``sigma_v`` and ``age_s`` filled in, and ``bank_limit_deg`` by the
+emitter category the track's ADS-B reports carry (:mod:`uavxai.surveillance.emitters`; None for
+a sensor-only track, which has none).
 
 In wind the filter runs in the frame of the air mass (``Tracker(wind_mps=...)``, the steady
 wind of ``environment.wind``): an aircraft turns at a constant rate through the air, so its
@@ -44,6 +46,7 @@ from uavxai.errors import UserError
 from uavxai.geometry import turn_rate_of_bank
 from uavxai.scenario import Scenario
 from uavxai.surveillance.adsb import Report
+from uavxai.surveillance.emitters import TrafficCategories, emitter_table
 
 X, Y, VX, VY, W, H, VH = range(7)
 DIM = 7
@@ -186,11 +189,12 @@ def initial_state(report: Report, cfg: TrackerConfig) -> tuple[np.ndarray, np.nd
 
 class Track:
     """One intruder's filter: mean ``x`` and covariance ``P`` at time ``t`` (its last
-    measurement)."""
+    measurement); ``emitter`` the category its reports carry (None: none yet)."""
 
     def __init__(self, report: Report, cfg: TrackerConfig) -> None:
         self.id = report.id
         self.cfg = cfg
+        self.emitter = report.emitter
         self.t = report.t_measured
         self.t_first = report.t_measured
         self.updates = 1
@@ -237,6 +241,7 @@ class Track:
         lim = self.cfg.max_turn_rate
         x[W] = min(max(x[W], -lim), lim)
         self.x, self.P, self.t = x, 0.5 * (P + P.T), report.t_measured
+        self.emitter = report.emitter or self.emitter  # a sensor report carries none
         self.updates += 1
         return True
 
@@ -255,6 +260,7 @@ class Track:
             sigma_m=largest_sd(P, X, Y),
             sigma_v=largest_sd(P, VX, VY),
             age_s=float(max(t - self.t, 0.0)),
+            bank_limit_deg=emitter_table().bank_limit(self.emitter),
         )
 
 
@@ -310,9 +316,13 @@ class Tracker:
         return replace(b, x=b.x + we * t, y=b.y + wn * t, vx=b.vx + we, vy=b.vy + wn)
 
 
-def truth_beliefs(state: TrafficState) -> list[Intruder]:
+def truth_beliefs(
+    state: TrafficState, categories: TrafficCategories | None = None
+) -> list[Intruder]:
     """Every intruder's exact state (``surveillance.model: truth``), with the turn rate of
-    its coordinated turn, g tan(phi) / V (true airspeed), and no uncertainty."""
+    its coordinated turn, g tan(phi) / V (true airspeed), and no uncertainty; with the
+    episode's ``categories`` the bank limit of each one's category too (None: the planner's
+    default for every one)."""
     out = []
     for i in range(1, state.n):
         v = max(float(state.airspeed[i]), 1.0)
@@ -326,6 +336,9 @@ def truth_beliefs(state: TrafficState) -> list[Intruder]:
                 vy=float(state.vel[i, 1]),
                 vh=float(state.vel[i, 2]),
                 turn_rate=turn_rate_of_bank(float(state.att[i, 0]), v),
+                bank_limit_deg=None if categories is None else categories.bank_limit_deg(
+                    state.ids[i]
+                ),
             )
         )
     return out

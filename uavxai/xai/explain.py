@@ -15,7 +15,7 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
-from uavxai.avoidance.lines import conflicts, cornered_key, leaves
+from uavxai.avoidance.lines import conflicts, cornered_key, leaves, search_key
 from uavxai.avoidance.types import ChildStats, Decision, Intruder, Ownship, set_narrator
 from uavxai.errors import UserError
 from uavxai.vocabulary import ACTIONS, HOLD
@@ -64,7 +64,9 @@ def counterfactual(decision: Decision) -> str:
     chosen = next((c for c in decision.children if c.action == decision.action), None)
     if chosen is None:
         return ""
-    runner = runner_up(decision.children, chosen, cornered=decision.cornered)
+    runner = runner_up(
+        decision.children, chosen, cornered=decision.cornered, by_value=decision.by_value
+    )
     if runner is None:
         return ""
     head = f"why not {_short(runner.action)}{_flies_as(runner)}"
@@ -122,16 +124,21 @@ def _breach(c: ChildStats, d_min: float) -> str:
 
 
 def runner_up(
-    children: Sequence[ChildStats], chosen: ChildStats, *, cornered: bool = False
+    children: Sequence[ChildStats],
+    chosen: ChildStats,
+    *,
+    cornered: bool = False,
+    by_value: bool = False,
 ) -> ChildStats | None:
     """The best option that flies another manoeuvre than ``chosen``: by the cornered rule
-    when the planner chose by it, else as the search ranks (simulations, Q, action order)."""
+    when the planner chose by it, else as the search ranks (:func:`search_key`; ``by_value``:
+    Q first, the best-value backup)."""
     others = [c for c in children if c.flies != chosen.flies]
     if not others:
         return None
     if cornered:
-        return max(others, key=cornered_key)
-    return max(others, key=lambda c: (c.visits, c.q, -c.action))
+        return max(others, key=lambda c: cornered_key(c, by_value))
+    return max(others, key=lambda c: search_key(c, by_value))
 
 
 def is_avoidance(children: Sequence[ChildStats], action: int, d_min_m: float) -> bool:
@@ -177,9 +184,10 @@ def _q_against(runner: ChildStats, chosen: ChildStats, decision: Decision) -> st
 
 def _why_this_one(chosen: ChildStats, other: ChildStats, decision: Decision) -> str:
     """What decided between two options of equal printed Q, as the search decides: the more
-    simulated one (MCTS), then the higher Q, then action order. Never claims "more
+    simulated one (MCTS), then the higher Q, then action order (with the best-value backup,
+    ``by_value``, and in the exhaustive search the higher Q first). Never claims "more
     simulations" on a tie of visits."""
-    if not _sampled(decision):
+    if not _sampled(decision) or (decision.by_value and chosen.q > other.q):
         if chosen.q > other.q:
             return "a higher Q beyond 3 decimals decided"
         return "the tie goes to the first in action order"
@@ -201,7 +209,7 @@ def _cornered(chosen: ChildStats, decision: Decision) -> str:
         out = any(not c.trapped for c in later)
         head += (f"stays in the flight area (an option that meets later "
                  f"{'leaves it' if out else 'can no longer stay in it'}) and ")  # fmt: skip
-    runner = runner_up(decision.children, chosen, cornered=True)
+    runner = runner_up(decision.children, chosen, cornered=True, by_value=decision.by_value)
     if runner is None or m is None or runner.meets is None:
         return head + "meets its intruder latest"
     r = runner.meets
@@ -408,6 +416,9 @@ def decision_record(
                 "sigma_m": i.sigma_m,
                 "sigma_v": i.sigma_v,
                 "age_s": i.age_s,
+                # the bank limit its turn cover assumed (its aircraft's, issue 31); None: the
+                # planner's avoidance.mcts.intruder_bank_limit_deg
+                "bank_limit_deg": i.bank_limit_deg,
             }
             for i in intruders
         ],
@@ -546,10 +557,15 @@ def render_record(record: dict[str, Any], index: int, total: int) -> str:
                 f"{_num(sep) + ' m' if sep is not None else 'clear':>10}",
                 f"  {who if who is not None else '-':<12}",
                 f"{_num(when, '.1f') + ' s' if when is not None else '-':>7}",
-                f"  {c.get('outcome') or 'open'}",
+                f"  {c.get('outcome') or 'open'}{_TRAPPED if c.get('trapped') else ''}",
             ]
             lines.append(f"  {mark} " + "".join(cells))
     return "\n".join(lines)
+
+
+# decisions.jsonl's `trapped` (planners that weigh the walls): the line stays in the area to its
+# end but can no longer turn away from an edge there, so the cornered rule counts it as leaving.
+_TRAPPED = ", cannot turn from the edge"
 
 
 def render_overview(records: Sequence[dict[str, Any]]) -> str:

@@ -22,6 +22,7 @@ from uavxai.scenario.schema.base import (
 )
 from uavxai.vocabulary import (
     ACTION_SETS,
+    BACKUPS,
     CONFLICT_VOLUMES,
     RISK_MODELS,
     action_set_problem,
@@ -102,6 +103,10 @@ class MCTSConfig(Section):
     # turbulence it meets the collision goal, at a cost in goal rate among 40 intruders
     # (docs/results/README.md).
     reach_horizon_s: Annotated[float, Field(ge=0, le=60)] = 4.0
+    # The bank limit that cover assumes of an intruder whose own it does not know (issue 31):
+    # a track with no ADS-B emitter category (the onboard sensor's) or one the table
+    # aircraft/emitter_categories.yaml leaves out. The others turn within their own.
+    intruder_bank_limit_deg: Annotated[float, Field(gt=0, lt=90)] = 30.0
     # How far the ownship strays from the tree planners' model 10 s ahead (1 sigma per axis,
     # growing as t^1.5), added to the intruders' track uncertainty (uavxai.avoidance.model.
     # intruder_margin); 0: the model's path is taken as flown. docs/scenario.md has the values
@@ -133,6 +138,12 @@ class MCTSConfig(Section):
     # most 0.5: a collision at the horizon's end (worth 0.05) may at most tie with the deepest
     # time-out through the NMAC volume (0.1 x (1 - nmac_cost); PlannerConfig's check).
     nmac_cost: Annotated[float, Field(ge=0, le=0.5)] = 0.0
+    # What the MCTS planners back up (issue 31, docs/results "MCTS episodes as short as
+    # exhaustive search's"): "mean" (the paper) values a node by the mean of its walks and takes
+    # the most visited root action; "best" values it by the best walk (the model is
+    # deterministic: a node is worth its best line), takes the root action with the best Q and
+    # prefers reaching the goal sooner (kernel.goal_delay), as the exhaustive search does.
+    backup: Literal[BACKUPS] = "mean"  # type: ignore[valid-type]
 
 
 class NMAC(Section):
