@@ -133,6 +133,12 @@ class MCTSConfig(Section):
     # most 0.5: a collision at the horizon's end (worth 0.05) may at most tie with the deepest
     # time-out through the NMAC volume (0.1 x (1 - nmac_cost); PlannerConfig's check).
     nmac_cost: Annotated[float, Field(ge=0, le=0.5)] = 0.0
+    # Walls in the MCTS planners' compiled search (uavxai.avoidance.kernel.wall_factor): a
+    # leaf heading for a wall of the world keeps the share of its value that its slack
+    # (seconds before it must turn away at the bank limit to stay in) is of wall_slack_s, and
+    # so does a late collision by its edge's end; 0: the walls are ignored (the paper).
+    # `mcts_sep` flies 4 whatever is set. At most 60 s: a slack that long is the horizon's.
+    wall_slack_s: Annotated[float, Field(ge=0, le=60)] = 0.0
 
 
 class NMAC(Section):
