@@ -22,7 +22,6 @@ from uavxai.scenario import default_scenario, load_scenario
 from uavxai.vocabulary import Outcome
 
 FLEET = Path(__file__).resolve().parents[1] / "scenarios" / "fleet.yaml"
-FLEET_MISSION = FLEET.with_name("fleet-mission.yaml")
 START = {"x": 150, "y": 1300, "h": 120, "heading_deg": 90, "speed_mps": 20}
 WORLD = {"x": [-400, 2000]}  # fleet.yaml's: the homes' orbits clear of the edges
 
@@ -203,8 +202,6 @@ def test_member_0_plans_with_the_members_intent_and_clearance_and_its_own_survei
         speed = float(np.hypot(*s.vel[row, :2]))
         assert one.turn_rate == pytest.approx(turn_rate_of_bank(math.radians(20), speed))
         assert one.keep_m == fleet_keep_m(sc) and seen["ownship-2"].keep_m == 0.0
-        assert one.shares_intent and seen["ownship-2"].shares_intent  # members, in a layer or not
-        assert not any(b.shares_intent for k, b in seen.items() if k.startswith("intruder"))
 
 
 def test_the_planner_adds_a_tracks_keep_to_its_margin_and_nothing_without_one() -> None:
@@ -222,28 +219,6 @@ def test_the_planner_adds_a_tracks_keep_to_its_margin_and_nothing_without_one() 
         base = np.zeros_like(k.margin) if p.margin is None else p.margin
         np.testing.assert_allclose(k.margin[:, 0], base[:, 0])  # the intruder's as it was
         np.testing.assert_allclose(k.margin[:, 1], base[:, 1] + 100.0)
-        np.testing.assert_array_equal(k.pos, p.pos)
-
-
-def test_a_member_sharing_its_intent_gets_its_clearance_without_the_reachable_margin() -> None:
-    """A fleet track that shares its intent (``shares_intent``) is kept its clearance alone:
-    the reachable margin (what a non-cooperative intruder could do unannounced) is the
-    intruders' only; theirs is unchanged beside it."""
-    from uavxai.avoidance.mcts import predict_levels
-    from uavxai.avoidance.model import EncounterModel
-    from uavxai.avoidance.types import Intruder, PlannerConfig
-
-    cfg = PlannerConfig.from_scenario(default_scenario("intent"))
-    assert cfg.intruder_model == "reachable" and cfg.reach_horizon_s > 0
-    model = EncounterModel(cfg)
-    pair = [Intruder(id=i, x=800.0, y=1000.0 + 300 * i, h=120.0, vx=-20.0, vy=0.0) for i in (1, 2)]
-    plain = predict_levels(model, pair, cfg.depth, cfg.action_hold_s)
-    member = dataclasses.replace(pair[1], keep_m=100.0, shares_intent=True)
-    shared = predict_levels(model, [pair[0], member], cfg.depth, cfg.action_hold_s)
-    assert plain[-1].margin[:, 1].max() > 10.0  # the reachable margin, grown by then
-    for p, k in zip(plain, shared, strict=True):
-        np.testing.assert_allclose(k.margin[:, 0], p.margin[:, 0])  # the intruder's as it was
-        np.testing.assert_allclose(k.margin[:, 1], 100.0)  # the clearance, nothing else
         np.testing.assert_array_equal(k.pos, p.pos)
 
 
@@ -798,51 +773,3 @@ def test_members_have_adsb_addresses_of_their_own_and_always_carry_it() -> None:
     assert [ident_from_icao(a) for a in addresses] == ids
     assert is_cooperative("ownship-1", 1.0, seed=3)  # all intruders non-cooperative
     assert not is_cooperative("intruder-1", 1.0, seed=3)
-
-
-# fleet-mission.yaml seed 44 (round 9) at 180 s: member 2, avoiding on station (1230, 880,
-# 120), 3 s after intruder 53 (circling at 0.18 rad/s by its station) took it off its orbit;
-# its picture within 900 m, as decisions-2.jsonl has it
-SEED44_OWN = dict(x=1154.003, y=799.076, h=120.382, speed=18.338, heading=5.282, bank=0.288)
-SEED44_TRACKS = (
-    ("ownship-0", 931.802, 1274.217, 129.247, 16.577, 5.168, 0.084, 0.081),
-    ("ownship-1", 839.46, 929.373, 100.265, 16.785, -1.513, -1.202, 0.336),
-    ("intruder-53", 1253.318, 1026.927, 109.851, 2.8, -25.253, -0.836, 0.179),
-    ("intruder-76", 622.468, 967.127, 137.436, 9.469, -23.737, 0.132, 0.075),
-    ("intruder-84", 1580.708, 1257.21, 131.557, -20.265, -3.105, -0.266, 0.046),
-)
-
-
-@pytest.mark.parametrize("shared", [False, True])
-def test_members_sharing_intent_no_longer_box_a_member_in_on_station(shared: bool) -> None:
-    """Round 9's seed 44: member 2's neighbours (members 0 and 1, same layer, 525 m and 340 m
-    off) got the intruders' reachable margin on top of the fleet's clearance, so every option
-    of its planner met one of them (needed 233 m, predicted 218-232 m) or intruder 53: cornered
-    for 25 s, it fled 430 m from its station into intruder 86. Members share their intent
-    (IntentPicture: ``shares_intent``), so they get the clearance without that margin: the
-    same picture leaves the planner an option that meets nothing, and it is not cornered."""
-    from uavxai.avoidance.planners import make_planner
-    from uavxai.avoidance.types import Intruder, Ownship, PlannerConfig
-    from uavxai.sim.fleet import fleet_keep_m
-
-    sc = load_scenario(FLEET_MISSION)
-    cfg = PlannerConfig.from_scenario(sc)
-    own = Ownship(**SEED44_OWN)
-    tracks = []
-    for id_, x, y, h, vx, vy, vh, turn in SEED44_TRACKS:
-        member = id_.startswith("ownship")
-        keep = fleet_keep_m(sc) if member else 0.0  # both within a layer of member 2
-        tracks.append(Intruder(id_, x, y, h, vx, vy, vh, turn, keep_m=keep,
-                               shares_intent=member and shared))  # fmt: skip
-    station, r = (1230.0, 880.0, 120.0), 106.0
-    ahead = math.atan2(own.x - station[0], own.y - station[1]) + 20.0 * 16.0 / r
-    goal = (station[0] + r * math.sin(ahead), station[1] + r * math.cos(ahead), station[2])
-    planner = make_planner("mcts", cfg)
-    planner.reset(2)
-    decision = planner.plan(own, tracks, goal, step=180)
-    chosen = next(c for c in decision.children if c.action == decision.action)
-    if shared:
-        assert not decision.cornered and chosen.meets is None
-    else:
-        assert decision.cornered and all(c.meets is not None for c in decision.children)
-        assert any(str(c.meets.intruder).startswith("ownship") for c in decision.children)

@@ -193,10 +193,8 @@ def predict_levels(
     cfg = model.config
     pos, vel = intruder_arrays(intruders)
     turn = intruder_turn_rates(intruders, cfg)
-    shared = np.array([i.shares_intent for i in intruders], dtype=bool)
     margin = with_keep(intruder_margin(
-        cfg, vel, np.zeros(len(intruders)) if turn is None else turn, *_track_errors(intruders),
-        unannounced=~shared if shared.any() else None,
+        cfg, vel, np.zeros(len(intruders)) if turn is None else turn, *_track_errors(intruders)
     ), intruders)  # fmt: skip
     sigma = None
     if cfg.risk == "probability":  # the track error as a chance, not a wall (avoidance.risk)

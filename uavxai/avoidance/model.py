@@ -324,12 +324,9 @@ def intruder_margin(
     turn_rate: np.ndarray,
     sigma_m: np.ndarray | None = None,
     sigma_v: np.ndarray | None = None,
-    unannounced: np.ndarray | None = None,
 ) -> Callable[[np.ndarray], np.ndarray] | None:
     """The separation needed beyond ``d_min`` from each intruder, as a function of the time
-    ``t`` (T,) from now, (T, N); None when there is none. ``unannounced`` (N,) bool: the
-    tracks that may manoeuvre unannounced and so get the reachable part below (None: all; a
-    fleet member sharing its intent does not, ``Intruder.shares_intent``).
+    ``t`` (T,) from now, (T, N); None when there is none.
 
     Two parts add up: the uncertainty (with ``risk="probability"`` only over the first
     ``risk_wall_s`` seconds, none beyond them nor when that is None), ``uncertainty_k`` sigmas of
@@ -349,9 +346,6 @@ def intruder_margin(
     k = 0.0 if config.risk == "probability" and wall_s is None else config.uncertainty_k
     sigma = track_sigma(config, n, sigma_m, sigma_v)
     reach = config.intruder_model == "reachable" and config.reach_horizon_s > 0
-    if reach and unannounced is not None:
-        unannounced = np.asarray(unannounced, dtype=bool)
-        reach = bool(unannounced.any())
     uncertain = k > 0 and sigma is not None
     if not n or not (reach or uncertain):
         return None
@@ -365,8 +359,7 @@ def intruder_margin(
             wall = k * sigma(t)
             out += wall if wall_s is None else np.where((t <= wall_s)[..., None], wall, 0.0)
         if reach:  # turns differ through the air: the wind carries all of them alike
-            spread = manoeuvre_spread(air, turn_rate, np.minimum(t, horizon), limit)
-            out += spread if unannounced is None else spread * unannounced
+            out += manoeuvre_spread(air, turn_rate, np.minimum(t, horizon), limit)
         return out
 
     return margin

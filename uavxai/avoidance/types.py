@@ -66,11 +66,6 @@ class Intruder:
     # separation to keep beyond d_min from it, m: a fleet member's cooperative clearance
     # (uavxai.sim.fleet.IntentPicture, docs/fleet.md); 0 for traffic
     keep_m: float = 0.0
-    # a fleet member sharing its intent (IntentPicture): its next manoeuvre is its own
-    # planner's, made keeping the clearance from this ownship's shared intent, or its orbit
-    # law's circle, so the tree gives it no reachable margin (what a non-cooperative intruder
-    # could do unannounced; intruder_model "reachable"); False for traffic
-    shares_intent: bool = False
 
 
 INTRUDER_MODELS = ("cv", "ct", "reachable")

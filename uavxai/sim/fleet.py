@@ -111,13 +111,7 @@ class IntentPicture:
     height (not in a layer of its own) also gets the fleet's clearance ``keep_m``
     (:func:`fleet_keep_m`). Only the planner reads it, and the planner flies a member only off
     its orbit (in transit, avoiding, returning): on their orbits the placement and the spacing
-    keep members apart. A fleet track shares its intent (``Intruder.shares_intent``), so the
-    planner gives it no reachable margin: the other member's next manoeuvre is made by its own
-    planner keeping the clearance from this one's shared intent (or is its orbit law's
-    circle). With that margin a member avoiding on station needed some 225-235 m from its
-    same-layer neighbours, whose orbits the placement keeps only 158 m from its own: boxed in
-    between them and an intruder, it fled 430 m from its station (round 9, seed 44; docs/fleet.md,
-    round 10)."""
+    keep members apart."""
 
     receiver = None  # the beliefs are formed here: member 0's planner never tracks onboard
 
@@ -142,9 +136,7 @@ class IntentPicture:
                 bank = w.aircraft[row].read_command()["bank_cmd_rad"]
                 speed = max(float(np.hypot(b.vx, b.vy)), 1.0)
                 keep = self._keep_m if abs(b.h - own_h) < self._layer_m else 0.0
-                b = dataclasses.replace(
-                    b, turn_rate=turn_rate_of_bank(bank, speed), keep_m=keep, shares_intent=True
-                )
+                b = dataclasses.replace(b, turn_rate=turn_rate_of_bank(bank, speed), keep_m=keep)
             elif self._traffic is not None:
                 continue  # an intruder: surveillance's belief below
             out.append(b)
