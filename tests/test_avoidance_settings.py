@@ -42,6 +42,7 @@ NON_DEFAULT: dict[str, Any] = {
     "avoidance.mcts.uncertainty_k": 3.0,
     "avoidance.mcts.nmac_cost": 0.3,
     "avoidance.mcts.backup": "best",
+    "avoidance.mcts.wall_slack_s": 3.0,
     "avoidance.nmac.horizontal_m": 100.0,
     "avoidance.nmac.vertical_m": 20.0,
     "avoidance.well_clear.horizontal_m": 500.0,
@@ -155,3 +156,19 @@ def test_nmac_cost_is_refused_where_no_planner_could_fly_it_and_mcts_daa_ignores
     assert cfg.nmac_cost == 0.5
     daa = make_planner("mcts_daa", cfg)
     assert daa.config.nmac_cost == 0.0 and daa.config.d_min_m > cfg.nmac_m[0]
+
+
+def test_wall_slack_is_a_scenario_key_refused_by_name_and_mcts_daa_ignores_it():
+    """avoidance.mcts.wall_slack_s (issue 32's fleet mission: `mcts` members that keep off the
+    world's edges) reaches `mcts`, is refused by its name outside 0 ... 60 s, and changes
+    neither `mcts_sep` (which flies 4 s whatever is set) nor `mcts_daa` (which ignores it)."""
+    from uavxai.avoidance.planners import make_planner
+
+    for bad in (-1, 61):
+        with pytest.raises(UserError, match=r"avoidance\.mcts\.wall_slack_s' = "):
+            default_scenario(avoidance={"mcts": {"wall_slack_s": bad}})
+    assert PlannerConfig.from_scenario(default_scenario()).wall_slack_s == 0.0
+    cfg = PlannerConfig.from_scenario(default_scenario(avoidance={"mcts": {"wall_slack_s": 9}}))
+    assert make_planner("mcts", cfg).config.wall_slack_s == 9.0
+    assert make_planner("mcts_sep", cfg).config.wall_slack_s == 4.0
+    assert make_planner("mcts_daa", cfg).config.wall_slack_s == 0.0

@@ -272,3 +272,23 @@ def test_random_intruders_start_clear_of_every_fleet_members_start() -> None:
     solo = draw_intruders(alone, np.random.default_rng(43))
     assert any(min(math.hypot(p.x - s.x, p.y - s.y) for s in starts[1:]) < gap for p in solo)
     assert all(math.hypot(p.x - starts[0].x, p.y - starts[0].y) >= gap for p in solo)
+
+
+def test_intruders_with_no_room_to_start_are_refused_by_the_keys_to_change() -> None:
+    """A world whose every point is within intruders.min_start_distance_m of a member's start
+    (three members 370 m apart in a 1.3 km square, 900 m kept clear): a UserError naming both
+    keys that fence the starts off and what to change (before: a bare ValueError)."""
+    sc = default_scenario(
+        world={"x": [0, 1300], "y": [0, 1300]},
+        ownship={"start": {"x": 600, "y": 1000, "h": 120, "heading_deg": 90}},
+        fleet={"size": 3},
+        intruders={"count": 2, "min_start_distance_m": 900},
+        mission={"service_s": 60},
+    )
+    with pytest.raises(UserError) as err:
+        draw_intruders(sc, np.random.default_rng(0))
+    said = str(err.value)
+    assert "intruders.min_start_distance_m (900 m)" in said
+    assert "fleet.spacing_m 370 m" in said and "a smaller fleet.spacing_m" in said
+    alone = sc.model_copy(update={"fleet": sc.fleet.model_copy(update={"size": 1})})
+    assert len(draw_intruders(alone, np.random.default_rng(0))) == 2  # one start leaves room

@@ -9,6 +9,7 @@ import csv
 import dataclasses
 import json
 import math
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -421,9 +422,12 @@ def test_nearest_stations_moves_the_fleet_least() -> None:
 @pytest.fixture(scope="module")
 def leave_run(tmp_path_factory) -> Path:
     """fleet.yaml's fleet without intruders, 40 s on station, member 1 leaving at 45 s.
-    Seed 6 (seed 3 until issue 32's round 9: the orbit check's way onto the orbit changed
-    where the members were at 45 s, and none was then farther from its new station than it
-    goes on station from, so the flight no longer showed the move in transit)."""
+    Seed 6, not 3: at seed 3 (flown with round 9's code) member 2, on station at 160 m over
+    member 1's layer (70 m, stations 140 m apart), was handed to its planner at 32 s by its
+    orbit check, whose sphere of 2 d_min (100 m, 3-D, blind to the layers) met member 1
+    orbiting 90 m below; avoiding until the leave, at 45 s neither member 2 (66 m) nor member
+    0 (154 m) was farther from its new station than it goes on station from (156 m), so the
+    flight no longer showed a move flown in transit. At seed 6 member 0 is 346 m from its."""
     import yaml
 
     out = tmp_path_factory.mktemp("leave")
@@ -692,10 +696,11 @@ def test_every_member_writes_its_own_decisions(fleet_run: Path) -> None:
 
 
 def test_explain_reads_a_members_decisions_and_names_the_members_there_are(
-    fleet_run: Path, capsys
+    fleet_run: Path, capsys, tmp_path: Path
 ) -> None:
     """`uavxai explain RUN --member J`: member J's decision in words, from decisions-J.jsonl;
-    a member the run has not: exit 2 naming the members it has."""
+    a member the run has not: exit 2 naming the members it has; a member the run has whose
+    file is missing: exit 2 saying that file is missing (before, both gave one message)."""
     n = len(json.loads((fleet_run / "summary.json").read_text())["fleet"])
     last = member_decisions(fleet_run, n - 1)[-1]
     capsys.readouterr()
@@ -704,7 +709,14 @@ def test_explain_reads_a_members_decisions_and_names_the_members_there_are(
     assert f"at t = {last['t']:.1f} s" in text and last["explanation"] in text
     assert main(["explain", str(fleet_run), "--member", str(n)]) == 2
     err = capsys.readouterr().err
-    assert f"decisions-{n}.jsonl" in err and f"members are 0 to {n - 1}" in err
+    assert f"has no member {n}; it flew members 0 to {n - 1}" in err
+    assert "missing" not in err
+    copy = tmp_path / "run"
+    shutil.copytree(fleet_run, copy)
+    (copy / f"decisions-{n - 1}.jsonl").unlink()
+    assert main(["explain", str(copy), "--member", str(n - 1)]) == 2
+    err = capsys.readouterr().err
+    assert f"decisions-{n - 1}.jsonl is missing, though the run flew member {n - 1}" in err
 
 
 def test_the_console_names_the_members_decision_files(fleet_run: Path, capfd) -> None:

@@ -293,14 +293,14 @@ def test_the_orbit_law_gets_the_aircraft_back_only_when_its_way_onto_the_orbit_i
     is clear of an intruder standing on the law's way back (its turn about, 5 s ahead) and
     the mission keeps the planner flying; with the intruder far off, it hands back."""
     from uavxai.avoidance.types import Intruder, Ownship
-    from uavxai.dynamics.orbit import OrbitGuidance
+    from uavxai.dynamics.loiter import orbit_guidance
     from uavxai.sim.mission import Mission, Orbit, Phase, orbit_clearance, way_clearance
 
     sc = default_scenario("mission-rejoin", intruders={"count": 0}, seed=1)
     cfg = PlannerConfig.from_scenario(sc)
     c = MissionConfig(STATION, (150.0, 1300.0, 120.0), 300.0, True, 106.0, 20.0)
     own = Ownship(STATION[0], STATION[1] + 221.0, 120.0, 20.0, 0.0)  # north, heading north
-    law = OrbitGuidance(STATION[:2], 106.0, True, math.radians(cfg.bank_limit_deg))
+    law = orbit_guidance(cfg.bank_limit_deg, STATION[0], STATION[1], 106.0, True)  # the world's
     roll = math.radians(cfg.roll_rate_limit_deg_s)
     on_way = law.fly((own.x, own.y), (0.0, 20.0), 0.0, roll, 5.0, 0.1)[-1]
     at = on_way if blocked else (2500.0, 2500.0)

@@ -351,9 +351,9 @@ def test_explain_counts_the_members_by_the_runs_summary_not_by_files_left_in_the
     assert len(read_decisions(tmp_path, 2)) == 1  # no summary: three files, three members
     (tmp_path / "summary.json").write_text(json.dumps({"fleet": [{"id": 0}, {"id": 1}]}))
     assert len(read_decisions(tmp_path, 1)) == 1
-    with pytest.raises(UserError, match="members are 0 to 1"):
+    with pytest.raises(UserError, match="has no member 2; it flew members 0 to 1"):
         read_decisions(tmp_path, 2)
     (tmp_path / "summary.json").write_text(json.dumps({"outcome": "goal"}))  # one ownship
-    with pytest.raises(UserError, match="members are 0 to 0"):
+    with pytest.raises(UserError, match="has no member 1; it flew one UAV, member 0"):
         read_decisions(tmp_path, 1)
     assert len(read_decisions(tmp_path, 0)) == 1

@@ -82,7 +82,10 @@ def _daa_config(config: PlannerConfig) -> PlannerConfig:
     h, v = config.nmac_m
     # Its conflict volume holds the NMAC cylinder, so there is no NMAC volume left to grade:
     # avoidance.mcts.nmac_cost does not apply (with it the d_min check refused the planner).
-    config = dataclasses.replace(config, nmac_cost=0.0)
+    # Nor does avoidance.mcts.wall_slack_s: its alerting stage hands the ownship back to its
+    # route within seconds of a threat, and its judged figures (docs/results) are without
+    # walls; walls in its tree would be a new planner, to be judged as one.
+    config = dataclasses.replace(config, nmac_cost=0.0, wall_slack_s=0.0)
     if config.conflict_volume == "cylinder":
         return dataclasses.replace(
             config,

@@ -158,12 +158,13 @@ class PlannerConfig(SchemaSettings):  # type: ignore[misc,valid-type]
     # cylinder (nmac_m; its horizontal miss less the track's margin, intruder_margin) keeps
     # 1 - nmac_cost x its depth (kernel.nmac_depth: 0 at the rim, 1 at d_min_m) of its value,
     # its deepest intrusion counting; the conflict at d_min_m stays the hard one.
-    # Walls in the leaf value (`mcts_sep`): a leaf heading for a wall keeps the share of its
-    # value that its slack (seconds before it must turn away at the bank limit to stay in the
-    # area) is of wall_slack_s (kernel.wall_factor), and so does a line's late collision, by
-    # its edge's end (issue 31: a meeting re-planning may still turn into a miss is worth
-    # something only if the ownship is still in the area); 0: the walls are ignored (the paper).
-    wall_slack_s: float = 0.0
+    # Walls in the leaf value, wall_slack_s, is a schema setting too
+    # (`avoidance.mcts.wall_slack_s`, issue 32's fleet mission; `mcts_sep` sets it to 4): a
+    # leaf heading for a wall keeps the share of its value that its slack (seconds before it
+    # must turn away at the bank limit to stay in the area) is of wall_slack_s
+    # (kernel.wall_factor), and so does a line's late collision, by its edge's end (issue 31:
+    # a meeting re-planning may still turn into a miss is worth something only if the ownship
+    # is still in the area); 0: the walls are ignored (the paper).
 
     def __post_init__(self) -> None:
         values = {name: getattr(self, name) for name in SCHEMA_PATHS}

@@ -15,16 +15,19 @@ from uavxai.scenario import Scenario
 GUIDANCE_PERIOD_S = 0.1  # the outer loop's rate (10 Hz), a multiple of the integrator's tick
 
 
-def orbit_guidance(scenario: Scenario, x: float, y: float, radius_m: float, clockwise: bool):
-    """The loiter law for an orbit of ``radius_m`` about (x, y) within the scenario's bank
-    limit."""
+def orbit_guidance(
+    bank_limit_deg: float, x: float, y: float, radius_m: float, clockwise: bool
+):
+    """The loiter law for an orbit of ``radius_m`` about (x, y) within the bank limit
+    (`avoidance.bank_limit_deg`): the one the worlds fly and the one the mission predicts
+    (``uavxai.sim.mission.way_clearance``), built here only."""
     from uavxai.dynamics.orbit import OrbitGuidance
 
     return OrbitGuidance(
         (float(x), float(y)),
         float(radius_m),
         clockwise=clockwise,
-        bank_limit_rad=math.radians(scenario.avoidance.bank_limit_deg),
+        bank_limit_rad=math.radians(bank_limit_deg),
     )
 
 
@@ -39,7 +42,7 @@ class LoiterAutopilot:
     def command_orbit(self, x: float, y: float, radius_m: float, clockwise: bool = True) -> None:
         """Orbit (x, y) at ``radius_m`` at the height target, until a bank command takes
         over."""
-        self._orbit = orbit_guidance(self.scenario, x, y, radius_m, clockwise)
+        self._orbit = orbit_guidance(self._bank_limit_deg, x, y, radius_m, clockwise)
         self._fly_orbit()
 
     def command_member_orbit(
@@ -47,7 +50,7 @@ class LoiterAutopilot:
     ) -> None:
         """Fleet member ``row``'s :meth:`command_orbit`."""
         self._member_orbits = {**self._member_orbits, row: orbit_guidance(
-            self.scenario, x, y, radius_m, clockwise)}  # fmt: skip
+            self._bank_limit_deg, x, y, radius_m, clockwise)}  # fmt: skip
         self._fly_member_orbits()
 
     def _fly_member_orbits(self) -> None:
@@ -55,6 +58,10 @@ class LoiterAutopilot:
         for row, orbit in self._member_orbits.items():
             bank = orbit.bank_command(s.pos[row, :2], s.vel[row, :2], float(s.airspeed[row]))
             self._bank_from_guidance(bank, row)
+
+    @property
+    def _bank_limit_deg(self) -> float:
+        return self.scenario.avoidance.bank_limit_deg
 
     @property
     def orbit(self):

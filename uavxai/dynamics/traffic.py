@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 
+from uavxai.errors import UserError
 from uavxai.scenario import IntruderSpec, Scenario
 
 
@@ -37,11 +38,7 @@ def draw_intruders(
             if all(math.hypot(x - s.x, y - s.y) >= ic.min_start_distance_m for s in starts):
                 break
         else:
-            raise ValueError(
-                "cannot place an intruder at least intruders.min_start_distance_m "
-                f"({ic.min_start_distance_m} m) from the ownship's start (every fleet member's) "
-                "inside the world"
-            )
+            raise UserError(_no_room(scenario))
         specs.append(
             IntruderSpec(
                 x=x,
@@ -53,3 +50,21 @@ def draw_intruders(
             )
         )
     return specs
+
+
+def _no_room(scenario: Scenario) -> str:
+    """Why no random intruder could be placed, and what to change: the keys that fence off
+    the starts (a fleet's members start `fleet.spacing_m` apart, each start fenced off)."""
+    ic, w, n = scenario.intruders, scenario.world, scenario.fleet.size
+    who = "the ownship's start"
+    change = "a smaller intruders.min_start_distance_m"
+    if n > 1:
+        spacing = scenario.fleet.spacing_m
+        who = f"each of the {n} fleet members' starts (fleet.spacing_m {spacing:g} m apart)"
+        change += ", a smaller fleet.spacing_m or fleet.size"
+    return (
+        f"cannot place a random intruder at least intruders.min_start_distance_m "
+        f"({ic.min_start_distance_m:g} m) from {who} inside the world (x {w.x[0]:g} ... "
+        f"{w.x[1]:g} m, y {w.y[0]:g} ... {w.y[1]:g} m) in 1000 draws; set {change}, "
+        "or a larger world.x / world.y"
+    )

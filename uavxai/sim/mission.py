@@ -32,8 +32,8 @@ from enum import StrEnum
 import numpy as np
 
 from uavxai.avoidance.types import Decision, Intruder, Ownship, PlannerConfig
-from uavxai.dynamics.loiter import GUIDANCE_PERIOD_S
-from uavxai.dynamics.orbit import OrbitGuidance, scenario_orbit_radius
+from uavxai.dynamics.loiter import GUIDANCE_PERIOD_S, orbit_guidance
+from uavxai.dynamics.orbit import scenario_orbit_radius
 from uavxai.dynamics.state import TrafficState
 from uavxai.geometry import turn_positions
 from uavxai.scenario import Scenario
@@ -223,7 +223,7 @@ class Mission(EngineStep):
         if c.return_home:
             left += max(home_m, 0.0) / speed
         if self.phase == Phase.TRANSIT:
-            to_orbit = math.dist(own[:2], c.station[:2]) - c.radius_m - goal_radius_m
+            to_orbit = math.dist(own[:2], c.station[:2]) - orbit_reach_m(c.radius_m, goal_radius_m)
             left += max(to_orbit, 0.0) / speed
         return left
 
@@ -306,9 +306,8 @@ class Mission(EngineStep):
         if self.suspended:
             return
         p = ep.state.pos[0]
-        far = math.hypot(p[0] - c.station[0], p[1] - c.station[1])
-        if fly_there and self.serving and not on_orbit(p, c.station, c.radius_m,
-                                                       ep.judge.goal_radius_m):
+        far = math.hypot(p[0] - c.station[0], p[1] - c.station[1])  # on_orbit's, said too
+        if fly_there and self.serving and far > orbit_reach_m(c.radius_m, ep.judge.goal_radius_m):
             self._enter(Phase.TRANSIT, t, f"to the new service point, {far:.0f} m away", ep)
         elif self.phase == Phase.ON_STATION:
             speed = ep.path.cruise_speed(c.speed_mps)
@@ -340,7 +339,13 @@ def on_orbit(
     flying under its planner for a goal inside the orbit, where every branch reaches it at
     once (docs/fleet.md, round 9). The one test of the three (the station's, home's, a moved
     station's), which had different height rules before."""
-    return math.hypot(p[0] - centre[0], p[1] - centre[1]) <= radius_m + goal_radius_m
+    return math.hypot(p[0] - centre[0], p[1] - centre[1]) <= orbit_reach_m(radius_m, goal_radius_m)
+
+
+def orbit_reach_m(radius_m: float, goal_radius_m: float) -> float:
+    """How far from an orbit's centre (horizontally) an aircraft is on it (:func:`on_orbit`):
+    the radius + the goal radius."""
+    return radius_m + goal_radius_m
 
 
 def orbit_clearance(
@@ -385,12 +390,13 @@ def way_clearance(
     ``horizon_s``: from where it is, onto the orbit and along it (``OrbitGuidance.fly`` at the
     loiter law's rate, within ``config``'s bank and roll rate limits; the height towards the
     orbit's at the climb rate), against each intruder's track less twice its position error,
-    as the circle's check. The circle from the ownship's bearing (:func:`orbit_clearance`) is
+    as the circle's check; the law is the one the worlds fly (``loiter.orbit_guidance``).
+    The circle from the ownship's bearing (:func:`orbit_clearance`) is
     the way only once it is on the orbit: fleet-mission.yaml seed 1's member 2, handed back
     221 m from its station's centre with the circle clear, was flown by the law out to 320 m
     and into intruder 14 (48.6 m; docs/fleet.md)."""
-    law = OrbitGuidance(orbit.centre[:2], orbit.radius_m, orbit.clockwise,
-                        math.radians(config.bank_limit_deg))  # fmt: skip
+    x, y, _ = orbit.centre
+    law = orbit_guidance(config.bank_limit_deg, x, y, orbit.radius_m, orbit.clockwise)
     bank = own.bank if own.phi is None else own.phi
     roll = math.radians(config.roll_rate_limit_deg_s)
     xy = law.fly((own.x, own.y), _ground_velocity(own), bank, roll, horizon_s, GUIDANCE_PERIOD_S)

@@ -457,10 +457,16 @@ def read_decisions(run_dir: Path, member: int = 0) -> list[dict[str, Any]]:
         raise UserError(f"--member {member}: a fleet's members are numbered from 0.")
     path = run_dir / decisions_file(member)
     members = _members(run_dir)
-    if member > 0 and (member >= members or not path.is_file()):
+    if member >= members:  # the run has no such member: say which it has
+        flew = "flew one UAV, member 0" if members == 1 else f"flew members 0 to {members - 1}"
         raise UserError(
-            f"--member {member}: {run_dir} has no {path.name} of this run; its members are 0 "
-            f"to {members - 1} (a fleet's member j writes decisions-j.jsonl)."
+            f"--member {member}: the run in {run_dir} has no member {member}; it {flew} "
+            "(a fleet's member j writes decisions-j.jsonl)."
+        )
+    if member > 0 and not path.is_file():  # the run has it, but its file is gone
+        raise UserError(
+            f"--member {member}: {path} is missing, though the run flew member {member} "
+            f"(members 0 to {members - 1}); was it moved or deleted?"
         )
     if not path.is_file():
         raise UserError(f"{path}: not found; is {run_dir} the output folder of `uavxai run`?")

@@ -144,6 +144,12 @@ class MCTSConfig(Section):
     # deterministic: a node is worth its best line), takes the root action with the best Q and
     # prefers reaching the goal sooner (kernel.goal_delay), as the exhaustive search does.
     backup: Literal[BACKUPS] = "mean"  # type: ignore[valid-type]
+    # Walls in the MCTS planners' compiled search (uavxai.avoidance.kernel.wall_factor): a
+    # leaf heading for a wall of the world keeps the share of its value that its slack
+    # (seconds before it must turn away at the bank limit to stay in) is of wall_slack_s, and
+    # so does a late collision by its edge's end; 0: the walls are ignored (the paper).
+    # `mcts_sep` flies 4 whatever is set. At most 60 s: a slack that long is the horizon's.
+    wall_slack_s: Annotated[float, Field(ge=0, le=60)] = 0.0
 
 
 class NMAC(Section):
