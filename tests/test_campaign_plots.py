@@ -9,7 +9,8 @@ from pathlib import Path
 import matplotlib.image
 import pytest
 
-from uavxai.campaign.plots import DAA_FIGURE, DAA_PLOTTED, plot_campaign, plot_daa
+from uavxai.campaign.plots import _STYLE, DAA_FIGURE, DAA_PLOTTED, plot_campaign, plot_daa
+from uavxai.vocabulary import AVOIDANCE_PLANNERS
 
 RESULTS = Path(__file__).resolve().parents[1] / "docs" / "results"
 
@@ -45,3 +46,12 @@ def test_every_plotted_estimate_is_a_results_column(key: str) -> None:
     from uavxai.campaign import DAA_COLUMNS
 
     assert {key, key + "_lo", key + "_hi"} <= set(DAA_COLUMNS)
+
+
+def test_every_built_in_planner_has_a_style_of_its_own() -> None:
+    """A figure comparing any built-in planners tells them apart: no planner falls back to the
+    colour cycle (whose first colours are the table's own), no two share a colour or marker."""
+    assert set(_STYLE) == set(AVOIDANCE_PLANNERS)
+    colours, markers = zip(*_STYLE.values(), strict=True)
+    assert len(set(colours)) == len(colours)
+    assert len(set(markers)) == len(markers)

@@ -21,11 +21,17 @@ PLOTS = (
 
 
 # One look per method in every figure.
+# One colour and marker per built-in planner, none shared, so a figure comparing any of them
+# tells them apart (a plugin planner gets the next of matplotlib's cycle).
 _STYLE = {
     "mcts": ("tab:blue", "o"),
     "mcts_fast": ("tab:orange", "s"),
     "mcts_vertical": ("tab:cyan", "*"),
     "mcts_daa": ("tab:olive", "X"),
+    "mcts_route": ("goldenrod", "<"),
+    "mcts_sep": ("tab:gray", "h"),
+    "mcts_sep_daa": ("black", "d"),
+    "mvp": ("tab:pink", "p"),
     "exhaustive": ("tab:green", "^"),
     "dqn": ("tab:purple", "v"),
     "safe_dqn": ("tab:brown", "P"),
