@@ -172,6 +172,7 @@ def test_member_0_plans_with_the_members_intent_and_clearance_and_its_own_survei
     the intruders stay as its surveillance believes them; it never tracks onboard."""
     from uavxai.dynamics.world import JSBSimWorld
     from uavxai.geometry import turn_rate_of_bank
+    from uavxai.scenario import aircraft_bank_limit_deg
     from uavxai.sim.clock import Clock
     from uavxai.sim.fleet import IntentPicture, fleet_keep_m, orbit_separation
     from uavxai.sim.picture import Picture
@@ -202,6 +203,10 @@ def test_member_0_plans_with_the_members_intent_and_clearance_and_its_own_survei
         speed = float(np.hypot(*s.vel[row, :2]))
         assert one.turn_rate == pytest.approx(turn_rate_of_bank(math.radians(20), speed))
         assert one.keep_m == fleet_keep_m(sc) and seen["ownship-2"].keep_m == 0.0
+        # a member is covered by its own aircraft's bank limit, as surveillance's tracks are
+        assert one.bank_limit_deg == aircraft_bank_limit_deg(sc.ownship.aircraft)
+        alone = IntentPicture.of(sc, world)  # members 1...n: the exact picture of everyone
+        assert {b.bank_limit_deg for b in alone(s)} == {aircraft_bank_limit_deg("uav_fw")}
 
 
 def test_the_planner_adds_a_tracks_keep_to_its_margin_and_nothing_without_one() -> None:

@@ -177,7 +177,10 @@ def test_a_table_of_our_own_loads(tmp_path):
         ("categories:\n  HEAVY: {bank_limit_deg: 30, source: ''}\n", "say where the figure"),
         ("categories:\n  HEAVY: {bank_limit_deg: 30}\n", r"allowed: \{aircraft: FOLDER\}"),
         ("categories:\n  HEAVY: {aircraft: uav_fw, bank_limit_deg: 30}\n", "allowed: "),
-        ("categories: {UAV: [\n", "cannot read the emitter table"),
+        ("categories: {UAV: [\n", "not valid YAML at line 2"),
+        # a category written twice: the later would silently replace the earlier
+        ("categories:\n  LIGHT: {bank_limit_deg: 60, source: x}\n  LIGHT: {aircraft: ga_c172}\n",
+         "duplicate key 'LIGHT'"),
     ],
 )
 def test_a_broken_table_is_refused_by_name(tmp_path, text, message):

@@ -705,8 +705,9 @@ def _as_search_tree(
     d = depth[:size].copy()
     states = state[:size].copy()
     n = visits[:size].copy()
-    # with the best-value backup Q = value_sum / visits reads the best value found below a
-    # node, as in the exhaustive search's tree
+    # with the best-value backup value_sum holds best x visits (what sums values keeps working)
+    # and SearchTree.best the best value found below a node itself, which Q reads, as in the
+    # exhaustive search's tree
     total = np.where(n > 0, best[:size], 0.0) * n if by_best else value_sum[:size].copy()
     return SearchTree(
         parent=parent[:size].copy(),
@@ -727,4 +728,5 @@ def _as_search_tree(
         by_value=by_best,
         # clear = 1 - nmac_cost x depth (_nmac_factor): the depth it was graded by
         nmac_depth=(1.0 - clear[:size]) / nmac_cost if nmac_cost > 0 else None,
+        best=best[:size].copy() if by_best else None,
     )

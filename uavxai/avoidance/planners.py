@@ -84,8 +84,9 @@ def _daa_config(config: PlannerConfig) -> PlannerConfig:
     # avoidance.mcts.nmac_cost does not apply (with it the d_min check refused the planner).
     # Nor does avoidance.mcts.wall_slack_s: its alerting stage hands the ownship back to its
     # route within seconds of a threat, and its judged figures (docs/results) are without
-    # walls; walls in its tree would be a new planner, to be judged as one.
-    config = dataclasses.replace(config, nmac_cost=0.0, wall_slack_s=0.0)
+    # walls; walls in its tree would be a new planner, to be judged as one. So too the
+    # best-value backup (avoidance.mcts.backup): its campaigns were flown with the mean.
+    config = dataclasses.replace(config, nmac_cost=0.0, wall_slack_s=0.0, backup="mean")
     if config.conflict_volume == "cylinder":
         return dataclasses.replace(
             config,

@@ -408,9 +408,16 @@ class SearchTree:
     # on the line from the root to the node, as the search graded it (kernel.nmac_depth: 0
     # none, 1 at d_min_m); None: not graded
     nmac_depth: np.ndarray | None = None
+    # (M,) with the best-value backup: the best value a walk through the node scored, exactly.
+    # Q is read from it, not as value_sum / visits, which rounds (best * n / n differs from
+    # best in the last bit for about one node in eight) and would break ties between equally
+    # good lines by that noise instead of by visits, then action order.
+    best: np.ndarray | None = None
 
     @property
     def q(self) -> np.ndarray:
+        if self.best is not None:
+            return np.where(self.visits > 0, self.best, 0.0)
         return np.divide(self.value_sum, np.maximum(self.visits, 1))
 
     @property
@@ -431,13 +438,14 @@ class SearchTree:
         when no child was visited."""
         kids = self.children_of(node)
         best, chosen = None, None
+        values = (self.value_sum if self.best is None else self.best)[kids].tolist()
         # a few children: plain Python numbers cost less than array calls (and divide alike)
-        for kid, n, total, action in zip(kids.tolist(), self.visits[kids].tolist(),
-                                         self.value_sum[kids].tolist(),
+        for kid, n, value, action in zip(kids.tolist(), self.visits[kids].tolist(), values,
                                          self.action[kids].tolist(), strict=True):  # fmt: skip
             if n == 0:
                 continue
-            rank = (-(total / n), -n, action) if self.by_value else (-n, -(total / n), action)
+            q = value if self.best is not None else value / n
+            rank = (-q, -n, action) if self.by_value else (-n, -q, action)
             if best is None or rank < best:
                 best, chosen = rank, kid
         return chosen
@@ -475,7 +483,10 @@ class SearchTree:
             t_closest=None if self.t_closest is None else self.t_closest[old],
             state=None if self.state is None else self.state[old],
             time_left_s=self.time_left_s,
+            risk=None if self.risk is None else self.risk[old],
             by_value=self.by_value,
+            nmac_depth=None if self.nmac_depth is None else self.nmac_depth[old],
+            best=None if self.best is None else self.best[old],
         )
 
 

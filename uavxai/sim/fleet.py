@@ -27,6 +27,7 @@ from uavxai.sim.command import DirectPath
 from uavxai.sim.episode import EngineStep, Episode, Observer
 from uavxai.sim.mission import Mission, MissionConfig
 from uavxai.sim.steps import Energy, OrbitBreak, service_files
+from uavxai.surveillance.emitters import TrafficCategories
 from uavxai.surveillance.tracker import truth_beliefs
 from uavxai.vocabulary import Outcome
 
@@ -115,11 +116,21 @@ class IntentPicture:
 
     receiver = None  # the beliefs are formed here: member 0's planner never tracks onboard
 
-    def __init__(self, world, keep_m: float = 0.0, layer_m: float = 0.0, traffic=None) -> None:
+    def __init__(
+        self,
+        world,
+        keep_m: float = 0.0,
+        layer_m: float = 0.0,
+        traffic=None,
+        categories: TrafficCategories | None = None,
+    ) -> None:
         self._world = world
         self._keep_m = keep_m
         self._layer_m = layer_m
         self._traffic = traffic
+        # each aircraft's emitter category, so that a member covers what an intruder (or
+        # another member) can do by its own bank limit, as member 0's surveillance does
+        self._categories = categories
 
     @property
     def truth(self) -> bool:
@@ -130,7 +141,7 @@ class IntentPicture:
         fleet = {w.ids[r]: r for r in w.fleet_rows}
         own_h = float(state.pos[0, 2])
         out = []
-        for b in truth_beliefs(state):
+        for b in truth_beliefs(state, self._categories):
             row = fleet.get(str(b.id))
             if row is not None:
                 bank = w.aircraft[row].read_command()["bank_cmd_rad"]
@@ -147,7 +158,8 @@ class IntentPicture:
     @classmethod
     def of(cls, scenario: Scenario, world, traffic=None) -> IntentPicture:
         """The picture a fleet member plans from, with the fleet's clearance and layers."""
-        return cls(world, fleet_keep_m(scenario), orbit_separation(scenario).vertical_m, traffic)
+        return cls(world, fleet_keep_m(scenario), orbit_separation(scenario).vertical_m, traffic,
+                   TrafficCategories.from_scenario(scenario))  # fmt: skip
 
 
 def fleet_keep_m(scenario: Scenario) -> float:

@@ -3,7 +3,8 @@
 ADS-B says what kind of aircraft sends it: DO-260B's emitter category, MAVLink's
 ``ADSB_EMITTER_TYPE`` field of ADSB_VEHICLE. The table ``aircraft/emitter_categories.yaml``
 gives, per category, the envelope a planner may assume of such traffic: one of our aircraft
-models (whose autopilot XML then gives the bank limit: what JSBSim flies, one source) or a
+models (whose autopilot XML then gives the bank limit it declares, one source; the worlds fly
+``avoidance.bank_limit_deg``, docs/scenario.md) or a
 figure with its source, for traffic we have no model of (real ADS-B, a BlueSky bridge's
 airliners). The same table says which category each of our models broadcasts. A category the
 table leaves out, and a track with none (the onboard sensor's), get the planner's default,
@@ -22,13 +23,13 @@ from functools import cache
 from pathlib import Path
 from typing import Any
 
-import yaml
 from pymavlink.dialects.v20 import common as mavlink
 
 from uavxai.dynamics.state import is_member
 from uavxai.errors import UserError
 from uavxai.paths import aircraft_dir
 from uavxai.scenario import Scenario, aircraft_bank_limit_deg
+from uavxai.scenario.loader import safe_yaml
 
 TABLE_NAME = "emitter_categories.yaml"
 _PREFIX = "ADSB_EMITTER_TYPE_"
@@ -77,9 +78,12 @@ def load_emitter_table(path: str | Path) -> EmitterTable:
     the format); a :class:`UserError` naming the file, the entry and what is allowed."""
     p = Path(path)
     try:
-        data = yaml.safe_load(p.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+        text = p.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
         raise UserError(f"{p}: cannot read the emitter table ({exc}).") from None
+    # the scenario files' reader: bounded, and a key written twice is refused, not silently
+    # replaced (a user raising LIGHT's limit above would otherwise lose it to a later LIGHT)
+    data = safe_yaml(text, str(p))
     if not isinstance(data, dict) or set(data) != {"categories"}:
         raise UserError(f"{p}: the emitter table must be a mapping with the one key `categories`.")
     entries = data["categories"]
