@@ -82,6 +82,13 @@ def test_the_route_is_kept_only_while_its_line_stays_out_of_the_nmac_volume() ->
         assert near.action != route and not near.route_kept
         chosen = next(c for c in near.children if c.action == near.action)
         assert chosen.nmac_depth < line.nmac_depth
+        # decisions.jsonl says why the route was left: its line's NMAC depth, and none where 0
+        rows = near.to_json()["children"]
+        assert next(r for r in rows if r["action"]["index"] == route)["nmac_depth"] == (
+            line.nmac_depth
+        )
+        for c, r in zip(near.children, rows, strict=True):
+            assert ("nmac_depth" in r) == (c.nmac_depth > 0)
 
 
 def test_a_line_is_clear_without_a_meeting_and_without_an_nmac_intrusion() -> None:

@@ -584,8 +584,12 @@ class Decision:
                     # with risk as a probability only: the line's chance of losing separation
                     **({} if c.risk is None else {
                         "risk": c.risk, "losses": [[who, p] for who, p in c.losses]}),
-                    # mcts_sep only: the line ends unable to turn away from a wall
+                    # planners that weigh the walls: the line ends unable to turn away from one
                     **({"trapped": True} if c.trapped else {}),
+                    # planners that grade NMAC intrusion (nmac_cost > 0): how deep the line
+                    # comes into a track's NMAC cylinder (0 at the rim, 1 at d_min_m); with
+                    # mcts_sep_daa a route line with one is not kept, though it meets no one
+                    **({"nmac_depth": c.nmac_depth} if c.nmac_depth > 0 else {}),
                 }
                 for c in self.children
             ],
