@@ -120,3 +120,35 @@ def test_random_command_sequences_never_lose_control(seed: int) -> None:
             lowest_speed = min(lowest_speed, w.state().airspeed.min())
         assert w.failure() is None
     assert lowest_speed > 9.0  # 1 g stall speed is about 10 m/s; brief dips only
+
+
+@pytest.mark.parametrize("downdraft", [5.7, 8.0])
+def test_a_downdraft_beyond_the_climb_is_sunk_in_not_stalled_in(downdraft: float) -> None:
+    """Issue 32, round 11 (docs/fleet.md): round 10's seed-51 member 0 met a downdraft of
+    2.7-9.5 m/s (5.7 on average over 26 s) on its orbit; its altitude hold, at full throttle,
+    pitched up to 36 deg to hold the height and traded the airspeed away, 17.4 -> 9.4 m/s, and
+    it sank through the floor. A lone uav_fw (JSBSim), level at 20 m/s, 26 s in a steady
+    downdraft: the pitch limit holds the nose near 25 deg, so it keeps within 1 m/s of its
+    minimum speed and below the stall's angle of attack (15 deg), and sinks instead (before,
+    the limit's gain 2 /s let the height's demand hold 33-43 deg: 11.0 and 8.7 m/s, 0.44 rad
+    at 8 m/s)."""
+    from uavxai.dynamics.aircraft import SPEED_MIN, WIND_DOWN, Aircraft
+    from uavxai.dynamics.geodesy import LocalFrame
+    from uavxai.scenario import default_scenario
+    from uavxai.units import FT
+
+    sc = default_scenario()
+    dt = 1.0 / sc.dynamics.rate_hz
+    a = Aircraft("uav_fw", LocalFrame.from_origin(sc.world.origin), dt, 0)
+    assert a.start(0.0, 0.0, 120.0, 0.0, 20.0)
+    for _ in range(round(5.0 / dt)):
+        a.run()
+    a.fdm[WIND_DOWN] = downdraft / FT
+    slowest, alpha = 20.0, 0.0
+    for _ in range(round(26.0 / dt)):
+        a.run()
+        slowest = min(slowest, a.fdm["velocities/vt-fps"] * FT)
+        alpha = max(alpha, a.fdm["aero/alpha-rad"])
+    assert slowest > a.fdm[SPEED_MIN] - 1.0, slowest
+    assert alpha < math.radians(15.0), alpha
+    assert a.fdm["position/h-agl-ft"] * FT < 120.0 - 10.0  # it sank: height came second
