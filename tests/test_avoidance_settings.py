@@ -51,6 +51,8 @@ NON_DEFAULT: dict[str, Any] = {
 # Keys whose non-default value another non-default refuses (probability needs the sphere),
 # checked together in a scenario of their own (the risk wall needs the probability).
 ALONE = {"avoidance.mcts.risk": "probability", "avoidance.mcts.risk_wall_s": 4.0}
+# A vertical margin of its own needs the sphere and the margin: a scenario of its own too.
+ALONE_VERTICAL = {"avoidance.mcts.vertical_reach_mps": 2.5}
 # Where the planner reads the keys it names otherwise: (PlannerConfig field, index in its pair).
 RENAMED = {
     "world.x": ("x_bounds", None),
@@ -97,7 +99,7 @@ def test_every_avoidance_key_reaches_the_planner_config():
     assert set(ENGINE_KEYS) == {"planner", "checkpoint", "decision_latency_s"}
     keys = [k for k in _leaves(Avoidance, "avoidance")
             if k.removeprefix("avoidance.") not in ENGINE_KEYS]  # fmt: skip
-    missing = sorted(set(keys) - set(NON_DEFAULT) - set(ALONE))
+    missing = sorted(set(keys) - set(NON_DEFAULT) - set(ALONE) - set(ALONE_VERTICAL))
     assert missing == [], f"give {missing} a non-default value in NON_DEFAULT"
     default = PlannerConfig.from_scenario(default_scenario())
     cfg = PlannerConfig.from_scenario(default_scenario(**_nested(NON_DEFAULT)))
@@ -105,9 +107,10 @@ def test_every_avoidance_key_reaches_the_planner_config():
         expected = tuple(value) if isinstance(value, list) else value
         assert _read(cfg, dotted) == expected, dotted
         assert _read(default, dotted) != expected, dotted
-    cfg = PlannerConfig.from_scenario(default_scenario(**_nested(ALONE)))
-    for dotted, value in ALONE.items():
-        assert _read(cfg, dotted) == value != _read(default, dotted), dotted
+    for alone in (ALONE, ALONE_VERTICAL):
+        cfg = PlannerConfig.from_scenario(default_scenario(**_nested(alone)))
+        for dotted, value in alone.items():
+            assert _read(cfg, dotted) == value != _read(default, dotted), dotted
 
 
 def test_the_new_key_reaches_the_search():

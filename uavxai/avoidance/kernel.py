@@ -33,7 +33,7 @@ BALLRE, BALLIM, BALLR, OWNSTEP = range(4)
 # Entries of ``par``.
 (DMIN, GOALR, XB0, XB1, YB0, YB1, HB0, HB1, CLIMB, DUR, TLEFT, LATE, DMAX, VERT, TDOWN, TLEVEL,
  TUP, GX, GY, GH, CULL, ASPECT, RISK, NMACW, NMACH, NMACV, WALLT, TURNG,
- ROLLT, BEST, GDELAY) = range(31)  # fmt: skip
+ ROLLT, BEST, GDELAY, VSCALED) = range(32)  # fmt: skip
 _TAU = 2.0 * math.pi
 GOAL_DELAY = 1e-4  # value of reaching the goal one tree level later (a tie-break, goal_delay)
 _NONE, _GOAL, _COLLISION, _OUT, _TIMEOUT = 0, 1, 2, 3, 4
@@ -87,10 +87,15 @@ def _cylinder_chord(x0, y0, h0, x1, y1, h1):
 
 
 @njit(cache=True)
-def _hits(xy, hs, txy, th, tm, lvl, ids, k, own_step, step_max, margined, dmin, aspect, k_hit):
+def _hits(xy, hs, txy, th, tm, lvl, ids, k, own_step, step_max, margined, dmin, aspect, k_hit,
+          tv, tvmax, scaled):  # fmt: skip
     """EncounterModel._intruder_hits and _closest_approach's inputs for K rows against the
     ``k`` intruders ``ids``: fills ``k_hit``; returns (sep2, frac, exact). ``aspect`` > 0:
-    in the conflict cylinder's norm (0: the sphere's 3-D distance)."""
+    in the conflict cylinder's norm (0: the sphere's 3-D distance). ``scaled`` (the sphere
+    with a vertical margin of its own, Track.vscale): height differences stretched by ``tv``
+    (a chord's by the smaller of its two ends', a sample's by the smallest of the chords'
+    beside it: the smaller, the taller the volume), at most ``tvmax``, so that the sphere of
+    d_min + margin in that norm is the spheroid."""
     rows, m = xy.shape[0], xy.shape[1]
     n = m - 1
     sep2 = np.empty((rows, m, k))
@@ -104,10 +109,16 @@ def _hits(xy, hs, txy, th, tm, lvl, ids, k, own_step, step_max, margined, dmin, 
                     rh = aspect * rh
                     sep2[a, i, q] = max(rel.real**2 + rel.imag**2, rh**2)
                 else:
+                    if scaled:  # no more than the chords on either side stretch it
+                        j = ids[q]
+                        rh = min(tv[lvl, i, j], tv[lvl, min(i + 1, n), j],
+                                 tv[lvl, max(i - 1, 0), j]) * rh  # fmt: skip
                     sep2[a, i, q] = rel.real**2 + rel.imag**2 + rh**2
     slack = 0.5 * (own_step + step_max) + 1e-6
     if aspect > 0:
         slack = max(1.0, aspect) * (slack - 1e-6) + 1e-6
+    elif scaled:
+        slack = tvmax * (slack - 1e-6) + 1e-6
     lowest = np.inf
     for a in range(rows):
         for i in range(m):
@@ -133,6 +144,11 @@ def _hits(xy, hs, txy, th, tm, lvl, ids, k, own_step, step_max, margined, dmin, 
                 if aspect > 0:
                     d2, s = _cylinder_chord(r0.real, r0.imag, aspect * h0, r1.real, r1.imag,
                                             aspect * h1)  # fmt: skip
+                elif scaled:
+                    f = min(tv[lvl, i, j], tv[lvl, i + 1, j])
+                    h0, h1 = f * h0, f * h1
+                    d2, s = _chord(r0.real, r0.imag, h0, r1.real, r1.imag, h1,
+                                   r0.real**2 + r0.imag**2 + h0**2)  # fmt: skip
                 else:
                     d2, s = _chord(r0.real, r0.imag, h0, r1.real, r1.imag, h1, sep2[a, i, q])
                 chords[a, i, q], frac[a, i, q] = d2, s
@@ -306,7 +322,7 @@ def _expand(node, tree, bz, brise, bend, bscal, child, tracks, climbs, drift, pa
     to the tree; returns the first child's index."""
     (visits, value_sum, best, first_child, is_leaf, value, key, state, depth, parent, action,
      code, min_sep, closest, t_closest, surv, clear, count, depth_limit) = tree  # fmt: skip
-    txy, th, tm, tmargined, tstep, tc, tr, ts = tracks
+    txy, th, tm, tmargined, tstep, tc, tr, ts, tv, tvmax = tracks
     kn, n = climbs.size, bz.shape[2] - 1
     first = count[0]
     count[0] += kn
@@ -333,7 +349,7 @@ def _expand(node, tree, bz, brise, bend, bscal, child, tracks, climbs, drift, pa
         if k:
             sep2, frac, exact = _hits(xy, hs, txy, th, tm, lvl, near, k, bscal[kk, OWNSTEP],
                                       tstep[lvl], tmargined[lvl], par[DMIN], par[ASPECT],
-                                      k_hit)  # fmt: skip
+                                      k_hit, tv, tvmax[lvl], par[VSCALED] > 0)  # fmt: skip
         k_out = _first_out(xy, hs, par) if walls else np.full(kn, n)
         k_goal = _first_goal(xy, hs, par) if goal else np.full(kn, n)
         for a in range(kn):  # the first event wins; collision, then the walls, then the goal
@@ -603,6 +619,8 @@ def _uct_tables(simulations: int, c: float) -> tuple[np.ndarray, np.ndarray]:
 def _pack(tracks: Sequence[Track], n: int) -> tuple:
     """The intruders' tracks per tree level, as arrays."""
     count = tracks[0].count
+    vscale = np.stack([np.ones((n + 1, count)) if t.vscale is None else t.vscale
+                       for t in tracks])  # fmt: skip
     margin = np.stack([np.zeros((n + 1, count)) if t.margin is None else t.margin
                        for t in tracks])  # fmt: skip
     return (
@@ -615,6 +633,8 @@ def _pack(tracks: Sequence[Track], n: int) -> tuple:
         np.stack([t.radius for t in tracks]).reshape(len(tracks), count),
         np.stack([np.zeros((n + 1, count)) if t.sigma is None else t.sigma
                   for t in tracks]),  # fmt: skip
+        vscale,
+        vscale.reshape(len(tracks), -1).max(axis=1, initial=1.0),
     )
 
 
@@ -643,7 +663,8 @@ def _params(
          cfg.cylinder_aspect or 0.0, float(_risky(model, tracks)), cfg.nmac_cost, *cfg.nmac_m,
          cfg.wall_slack_s, G * math.tan(cfg.bank_limit_rad),
          cfg.bank_limit_deg / cfg.roll_rate_limit_deg_s, float(cfg.backup == "best"),
-         goal_delay(cfg, len(tracks))],  # fmt: skip
+         goal_delay(cfg, len(tracks)),
+         float(any(t.vscale is not None for t in tracks))],  # fmt: skip
         dtype=float,
     )
 

@@ -37,6 +37,7 @@ Intruders are predicted as ``PlannerConfig.intruder_model`` says (:func:`predict
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Callable, Sequence
@@ -62,6 +63,7 @@ from uavxai.avoidance.model import (
     place_children,
     track_sigma,
     vertical_command,
+    vertical_margin,
 )
 from uavxai.avoidance.types import (
     ChildStats,
@@ -221,8 +223,30 @@ def predict_levels(
     if cfg.risk == "probability":  # the track error as a chance, not a wall (avoidance.risk)
         sigma = track_sigma(cfg, len(intruders), *_track_errors(intruders))
     starts = [d * hold_s for d in range(depth)]
-    return model.predict_levels(
+    tracks = model.predict_levels(
         pos, vel, hold_s, starts, turn_rate=turn, margin=margin, sigma=sigma
+    )
+    vertical = with_keep(vertical_margin(cfg, *_vertical_errors(intruders)), intruders)
+    if vertical is None or margin is None:
+        return tracks
+    # the vertical margin at each level's sub-step instants, as the horizontal one was taken
+    n = model.substeps(hold_s)
+    t = np.array(starts, dtype=float)[:, None] + (hold_s / n) * np.arange(n + 1)
+    d = cfg.d_min_m
+    return [
+        dataclasses.replace(
+            tr, vscale=(d + tr.margin) / (d + np.minimum(v, tr.margin))
+        ) if tr.margin is not None else tr
+        for tr, v in zip(tracks, vertical(t), strict=True)
+    ]
+
+
+def _vertical_errors(intruders: Sequence[Intruder]) -> tuple[np.ndarray, np.ndarray]:
+    """(N,) vertical position and (N,) vertical velocity 1-sigma errors of the tracks (the
+    horizontal ones where a track does not know its own: never a smaller margin unknowingly)."""
+    return (
+        np.array([i.sigma_m if i.sigma_h_m is None else i.sigma_h_m for i in intruders]),
+        np.array([i.sigma_v if i.sigma_vh is None else i.sigma_vh for i in intruders]),
     )
 
 

@@ -181,6 +181,11 @@ class Track:
     # as a probability (PlannerConfig.risk "probability", uavxai.avoidance.risk); None: not.
     # The ball reaches RISK_SIGMAS of it beyond the margin, where the chance is counted.
     sigma: np.ndarray | None = field(default=None, repr=False)
+    # (n+1, N) with a vertical margin of its own (PlannerConfig.vertical_reach_mps): how much
+    # the compiled search stretches the height difference to a track, (d_min + margin) /
+    # (d_min + vertical margin) >= 1, so that the sphere of d_min + margin in that norm is a
+    # spheroid as tall as d_min + the vertical margin (kernel._hits); None: the sphere.
+    vscale: np.ndarray | None = field(default=None, repr=False)
 
     @classmethod
     def of(
@@ -365,6 +370,37 @@ def intruder_margin(
             out += wall if wall_s is None else np.where((t <= wall_s)[..., None], wall, 0.0)
         if reach:  # turns differ through the air: the wind carries all of them alike
             out += manoeuvre_spread(air, turn_rate, np.minimum(t, horizon), limit)
+        return out
+
+    return margin
+
+
+def vertical_margin(
+    config: PlannerConfig, sigma_h: np.ndarray, sigma_vh: np.ndarray
+) -> Callable[[np.ndarray], np.ndarray] | None:
+    """The vertical separation needed beyond ``d_min`` from each of N intruders at times ``t``
+    (..., T), (..., T, N), when the margin has a vertical part of its own
+    (``vertical_reach_mps``; None when not): what it could climb or descend,
+    ``vertical_reach_mps`` over ``min(t, reach_horizon_s)`` (the turn cover's horizon, with
+    ``intruder_model="reachable"``), plus ``uncertainty_k`` sigmas of its vertical track error
+    (:func:`track_sigma` of the vertical position and velocity sigmas ``sigma_h``,
+    ``sigma_vh`` (N,)). Why: the horizontal margin (turns, horizontal velocity error) stood as
+    tall as it is wide and fenced off a thin traffic layer as a slab (issue 31, sep32)."""
+    reach_mps = config.vertical_reach_mps
+    if reach_mps is None:
+        return None
+    n = np.size(sigma_h)
+    sigma = track_sigma(config, n, sigma_h, sigma_vh) if config.uncertainty_k > 0 else None
+    reach = config.intruder_model == "reachable" and config.reach_horizon_s > 0
+    horizon = config.reach_horizon_s
+
+    def margin(t: np.ndarray) -> np.ndarray:
+        tt = np.asarray(t, dtype=float)
+        out = np.zeros((*tt.shape, n))
+        if sigma is not None:
+            out += config.uncertainty_k * sigma(tt)
+        if reach:
+            out += (reach_mps * np.minimum(tt, horizon))[..., None]
         return out
 
     return margin

@@ -70,6 +70,11 @@ class Intruder:
     # by the ADS-B emitter category, uavxai.surveillance.emitters); None: the planner's
     # PlannerConfig.intruder_bank_limit_deg (the scenario's avoidance.mcts one)
     bank_limit_deg: float | None = None
+    # 1-sigma vertical position (m) and vertical velocity (m/s) errors of the track (the
+    # tracker's); None: not known, taken as the horizontal ones (avoidance.mcts.
+    # vertical_reach_mps: a vertical margin of its own)
+    sigma_h_m: float | None = None
+    sigma_vh: float | None = None
 
 
 INTRUDER_MODELS = ("cv", "ct", "reachable")
@@ -177,6 +182,14 @@ class PlannerConfig(SchemaSettings):  # type: ignore[misc,valid-type]
         hh = self.conflict_half_height_m
         if hh is not None and not hh > 0:
             raise UserError(f"PlannerConfig.conflict_half_height_m must be > 0 or None, got {hh}.")
+        if self.vertical_reach_mps is not None and (
+            self.conflict_volume != "sphere" or self.risk != "margin"
+        ):
+            raise UserError(
+                "PlannerConfig.vertical_reach_mps (avoidance.mcts.vertical_reach_mps) needs "
+                "conflict_volume 'sphere' and risk 'margin': it gives the sphere's margin a "
+                "vertical part of its own."
+            )
         if self.intruder_model not in INTRUDER_MODELS:
             raise UserError(
                 f"PlannerConfig.intruder_model must be one of {', '.join(INTRUDER_MODELS)}, "

@@ -144,4 +144,6 @@ class ImmTrack:
             sigma_m=ekf.largest_sd(P, X, Y), sigma_v=ekf.largest_sd(P, VX, VY),
             age_s=float(max(t - self.t, 0.0)),
             bank_limit_deg=emitter_table().bank_limit(self.emitter),
+            sigma_h_m=float(np.sqrt(max(P[H, H], 0.0))),
+            sigma_vh=float(np.sqrt(max(P[VH, VH], 0.0))),
         )  # fmt: skip

@@ -150,6 +150,14 @@ class MCTSConfig(Section):
     # so does a late collision by its edge's end; 0: the walls are ignored (the paper).
     # `mcts_sep` flies 4 whatever is set. At most 60 s: a slack that long is the horizon's.
     wall_slack_s: Annotated[float, Field(ge=0, le=60)] = 0.0
+    # A vertical margin of its own in the MCTS planners' compiled search (issue 31, sep32;
+    # docs/results "A vertical margin of its own"): an intruder's vertical reach, this climb
+    # or descent rate (m/s) over reach_horizon_s, plus uncertainty_k sigmas of its vertical
+    # track error, instead of the horizontal margin (turn cover and horizontal track error)
+    # standing as tall as it is wide. The conflict volume is then a spheroid, d_min_m plus the
+    # horizontal margin wide and d_min_m plus the vertical one (never more than the
+    # horizontal) tall: inside the sphere, around the collision sphere. null: the sphere.
+    vertical_reach_mps: Annotated[float, Field(ge=0, le=50)] | None = None
 
 
 class NMAC(Section):
@@ -225,5 +233,13 @@ class Avoidance(Section):
             raise ValueError(
                 "avoidance.mcts.risk: probability needs avoidance.conflict_volume: sphere "
                 "(the chance of losing separation is worked out for a sphere of d_min_m)"
+            )
+        if self.mcts.vertical_reach_mps is not None and (
+            self.conflict_volume != "sphere" or self.mcts.risk != "margin"
+        ):
+            raise ValueError(
+                "avoidance.mcts.vertical_reach_mps needs avoidance.conflict_volume: sphere and "
+                "avoidance.mcts.risk: margin (it gives the sphere's margin a vertical part of "
+                "its own)"
             )
         return self
