@@ -106,3 +106,11 @@ def test_the_trees_that_grade_no_nmac_intrusion_report_none(name: str) -> None:
     d = make_planner(name, CONFIG).plan(OWN, [_coming_south(1120.0, 300.0)], GOAL)
     assert d.tree is not None and d.tree.nmac_depth is None  # a tree was searched: it grades none
     assert all(c.nmac_depth == 0.0 for c in d.children)
+
+
+def test_mcts_daa_flies_the_mean_backup_whatever_the_scenario_asks() -> None:
+    """Its campaigns were flown with the mean backup: `avoidance.mcts.backup: best` would make
+    another planner of it (planners._daa_config), so it is ignored there, and only there."""
+    cfg = dataclasses.replace(CONFIG, backup="best")
+    assert make_planner("mcts_daa", cfg).inner.config.backup == "mean"
+    assert make_planner("mcts_sep_daa", cfg).inner.config.backup == "best"

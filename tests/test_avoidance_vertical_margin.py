@@ -47,7 +47,11 @@ def test_the_vertical_margin_is_the_reach_plus_k_sigma_of_the_vertical_error() -
 
 def test_tracks_carry_the_stretch_only_with_the_setting() -> None:
     intr = [Intruder(id=1, x=800.0, y=800.0, h=130.0, vx=-15.0, vy=0.0, sigma_m=4.0,
-                     sigma_v=2.5, sigma_h_m=4.0, sigma_vh=0.75)]  # fmt: skip
+                     sigma_v=2.5, sigma_h_m=4.0, sigma_vh=0.75),
+            # a fleet member's track, with the fleet's clearance: no stretch without the
+            # setting either (the keep is no vertical margin of its own)
+            Intruder(id="ownship-2", x=900.0, y=1200.0, h=160.0, vx=0.0, vy=-18.0,
+                     keep_m=30.0)]  # fmt: skip
     for cfg in (PlannerConfig(), PlannerConfig(vertical_reach_mps=2.5)):
         model = EncounterModel(cfg)
         tracks = predict_levels(model, intr, cfg.depth, cfg.action_hold_s)

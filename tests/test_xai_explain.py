@@ -11,7 +11,7 @@ from uavxai.cli import main
 from uavxai.errors import UserError
 from uavxai.scenario import default_scenario
 from uavxai.sim.build import run_kinematic as run_episode
-from uavxai.xai.explain import explain_command, is_avoidance
+from uavxai.xai.explain import decision_record, explain_command, is_avoidance
 
 HEAD_ON = (Ownship(1000, 400, 120, 20, 0.0), [Intruder(7, 1000, 800, 120, 0.0, -20.0)])
 
@@ -357,3 +357,20 @@ def test_explain_counts_the_members_by_the_runs_summary_not_by_files_left_in_the
     with pytest.raises(UserError, match="has no member 1; it flew one UAV, member 0"):
         read_decisions(tmp_path, 1)
     assert len(read_decisions(tmp_path, 0)) == 1
+
+
+def test_a_record_holds_every_intruder_field_the_planner_read() -> None:
+    """decisions.jsonl's believed intruders rebuild the planner's inputs exactly (the audit
+    re-plans from them with Intruder(**record)): every field of Intruder is written, the
+    vertical errors and a fleet member's clearance included."""
+    import dataclasses
+
+    seen = Intruder(id="ownship-2", x=900.0, y=1000.0, h=130.0, vx=-15.0, vy=2.0, vh=0.5,
+                    turn_rate=0.05, sigma_m=4.0, sigma_v=2.5, age_s=0.4, keep_m=30.0,
+                    bank_limit_deg=45.0, sigma_h_m=3.0, sigma_vh=0.7)  # fmt: skip
+    assert all(getattr(seen, f.name) != f.default for f in dataclasses.fields(Intruder)
+               if f.name != "id")  # fmt: skip  (every field set off its default)
+    own = Ownship(500.0, 1000.0, 120.0, 20.0, 1.5708)
+    decision = MCTSPlanner(PlannerConfig(seed=0)).plan(own, [seen], (1500.0, 1000.0, 120.0))
+    record = json.loads(json.dumps(decision_record(0.0, own, [seen], decision)))
+    assert [Intruder(**i) for i in record["state"]["intruders"]] == [seen]

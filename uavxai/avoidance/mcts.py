@@ -226,9 +226,10 @@ def predict_levels(
     tracks = model.predict_levels(
         pos, vel, hold_s, starts, turn_rate=turn, margin=margin, sigma=sigma
     )
-    vertical = with_keep(vertical_margin(cfg, *_vertical_errors(intruders)), intruders)
-    if vertical is None or margin is None:
+    vertical = vertical_margin(cfg, *_vertical_errors(intruders))
+    if vertical is None or margin is None:  # before the keep: with_keep makes a margin of none
         return tracks
+    vertical = with_keep(vertical, intruders)
     # the vertical margin at each level's sub-step instants, as the horizontal one was taken
     n = model.substeps(hold_s)
     t = np.array(starts, dtype=float)[:, None] + (hold_s / n) * np.arange(n + 1)

@@ -419,6 +419,11 @@ def decision_record(
                 # the bank limit its turn cover assumed (its aircraft's, issue 31); None: the
                 # planner's avoidance.mcts.intruder_bank_limit_deg
                 "bank_limit_deg": i.bank_limit_deg,
+                # its height's own errors (the vertical margin, avoidance.mcts.
+                # vertical_reach_mps); None: the horizontal ones stand in
+                "sigma_h_m": i.sigma_h_m,
+                "sigma_vh": i.sigma_vh,
+                "keep_m": i.keep_m,  # a fleet member's clearance beyond d_min; 0 for traffic
             }
             for i in intruders
         ],
