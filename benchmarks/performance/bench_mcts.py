@@ -16,7 +16,7 @@ time, which is printed too); the load average is printed beside them.
     .venv/bin/python benchmarks/performance/bench_mcts.py [--quick] [--encounters 40]
         [--episodes 20] [--baseline DIR]
         [--intruders 20,40] [--simulations 200] [--depth 4] [--repeats 5] [--no-vertical] [--sep]
-        [--risk margin|probability] [--track-error 2.9,2.4]
+        [--risk margin|probability] [--track-error 2.9,2.4] [--mcts KEY=VALUE ...]
 
 ``--baseline DIR`` times the MCTS planners of another source tree too (a checkout of the
 code before a change, first on the path of a child process that builds the same encounters),
@@ -135,9 +135,10 @@ def against_optimum(mcts: Planner, exhaustive: Planner, cases) -> None:
     )
 
 
-def episodes(planner: Planner, scenario, n_intruders: int, count: int) -> dict:
-    """Outcome counts and mean steps of ``count`` seeded kinematic episodes."""
-    results = [run_episode(planner, scenario, seed, n_intruders) for seed in range(count)]
+def episodes(planner: Planner, scenario, n_intruders: int, count: int, first: int = 0) -> dict:
+    """Outcome counts and mean steps of ``count`` seeded kinematic episodes from ``first``."""
+    results = [run_episode(planner, scenario, seed, n_intruders)
+               for seed in range(first, first + count)]  # fmt: skip
     outcomes = [r.outcome for r in results]
     out = {k: outcomes.count(k) for k in ("goal", "collision", "out_of_bounds", "timeout")}
     out["steps"] = float(np.mean([r.steps for r in results]))
@@ -155,7 +156,7 @@ def setup(args, n_intruders: int):
         "bench-mcts",
         intruders={"count": n_intruders},
         avoidance={"mcts": {"simulations": args.simulations, "depth": args.depth,
-                            "risk": args.risk}},  # fmt: skip
+                            "risk": args.risk, **args.mcts}},  # fmt: skip
     )
     cfg = PlannerConfig.from_scenario(scenario)
     cases = encounters(scenario, args.encounters, n_intruders, args.track_error)
@@ -190,6 +191,7 @@ def against_baseline(args, n_intruders: int, cfg: PlannerConfig, cases) -> None:
             "--track-error", ",".join(str(e) for e in args.track_error)]  # fmt: skip
     if args.no_vertical:
         argv.append("--no-vertical")
+    argv += [f"--mcts={k}={v}" for k, v in args.mcts.items()]
     env = {**os.environ, "PYTHONPATH": os.path.abspath(args.baseline)}
     for _ in range(args.repeats):
         for mcts, _ in pairs(cfg, not args.no_vertical):
@@ -212,7 +214,8 @@ def density(args, n_intruders: int) -> None:
     scenario, cases, planners = setup(args, n_intruders)
     print(
         f"{n_intruders} intruders, {len(cases)} encounters, MCTS {args.simulations} simulations, "
-        f"depth {args.depth}, risk {args.risk}, track error {args.track_error} "
+        f"depth {args.depth}, risk {args.risk}, track error {args.track_error}, "
+        f"settings {args.mcts or 'default'} "
         f"(load average {os.getloadavg()[0]:.2f})"
     )
     for mcts, exhaustive in planners:
@@ -231,14 +234,26 @@ def density(args, n_intruders: int) -> None:
         against_baseline(args, n_intruders, PlannerConfig.from_scenario(scenario), cases)
     if not args.episodes:
         return
-    print(f"  {args.episodes} kinematic episodes each (seeds 0..{args.episodes - 1}):")
+    last = args.seed + args.episodes - 1
+    print(f"  {args.episodes} kinematic episodes each (seeds {args.seed}..{last}):")
     for mcts, exhaustive in planners:
-        m = episodes(mcts, scenario, n_intruders, args.episodes)
-        e = episodes(exhaustive, scenario, n_intruders, args.episodes)
+        m = episodes(mcts, scenario, n_intruders, args.episodes, args.seed)
+        e = episodes(exhaustive, scenario, n_intruders, args.episodes, args.seed)
         print(
             f"  steps ratio {mcts.name} / {exhaustive.name}: {m['steps'] / e['steps']:.3f}; "
             f"collisions {m['collision']} vs {e['collision']}"
         )
+
+
+def _setting(ap: argparse.ArgumentParser, kv: str) -> tuple[str, object]:
+    """``--mcts KEY=VALUE``: a number where it reads as one (the scenario checks the rest)."""
+    key, sep, value = kv.partition("=")
+    if not sep or not key:
+        ap.error(f"--mcts: KEY=VALUE, e.g. backup=best, got {kv!r}")
+    try:
+        return key, float(value)
+    except ValueError:
+        return key, value
 
 
 def main() -> None:
@@ -246,6 +261,7 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true", help="10 encounters, 4 episodes, 1 repeat")
     ap.add_argument("--encounters", type=int, default=40)
     ap.add_argument("--episodes", type=int, default=20)
+    ap.add_argument("--seed", type=int, default=0, help="the episodes' first seed")
     ap.add_argument("--intruders", default="20,40", help="comma-separated traffic densities")
     ap.add_argument("--simulations", type=int, default=200)
     ap.add_argument("--depth", type=int, default=4)
@@ -256,6 +272,8 @@ def main() -> None:
                     help="avoidance.mcts.risk (default: margin)")  # fmt: skip
     ap.add_argument("--track-error", default="0,0",
                     help="intruders' 1-sigma position m, velocity m/s errors")  # fmt: skip
+    ap.add_argument("--mcts", action="append", default=[], metavar="KEY=VALUE",
+                    help="an avoidance.mcts setting, e.g. backup=best (repeatable)")  # fmt: skip
     ap.add_argument("--baseline", metavar="DIR",
                     help="a source tree whose MCTS planners are timed alternately")  # fmt: skip
     ap.add_argument("--child-times", action="store_true", help=argparse.SUPPRESS)
@@ -266,6 +284,7 @@ def main() -> None:
         args.track_error = ()
     if len(args.track_error) != 2 or min(args.track_error) < 0:
         ap.error("--track-error: two numbers >= 0, position m and velocity m/s (2.9,2.4)")
+    args.mcts = dict(_setting(ap, kv) for kv in args.mcts)
     if args.quick:
         args.encounters, args.episodes, args.repeats = 10, 4, 1
     try:

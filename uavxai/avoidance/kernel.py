@@ -33,7 +33,7 @@ BALLRE, BALLIM, BALLR, OWNSTEP = range(4)
 # Entries of ``par``.
 (DMIN, GOALR, XB0, XB1, YB0, YB1, HB0, HB1, CLIMB, DUR, TLEFT, LATE, DMAX, VERT, TDOWN, TLEVEL,
  TUP, GX, GY, GH, CULL, ASPECT, RISK, NMACW, NMACH, NMACV, WALLT, TURNG,
- ROLLT, BEST, GDELAY, VSCALED) = range(32)  # fmt: skip
+ ROLLT, BEST, GDELAY, VSCALED, HSCALE) = range(33)  # fmt: skip
 _TAU = 2.0 * math.pi
 GOAL_DELAY = 1e-4  # value of reaching the goal one tree level later (a tie-break, goal_delay)
 _NONE, _GOAL, _COLLISION, _OUT, _TIMEOUT = 0, 1, 2, 3, 4
@@ -527,8 +527,10 @@ def run(tree, bz, brise, bend, bscal, child, tracks, climbs, drift, par, explore
             length += 1
         v = value[node]
         if v != v:  # nan: an open leaf at the depth limit, scored when first reached
+            # goal_height_scale: a metre of height off the goal's counts as that many (1: the
+            # paper's 3-D distance)
             d = math.sqrt((state[node, 0] - par[GX]) ** 2 + (state[node, 1] - par[GY]) ** 2
-                          + (state[node, 2] - par[GH]) ** 2)  # fmt: skip
+                          + (par[HSCALE] * (state[node, 2] - par[GH])) ** 2)  # fmt: skip
             v = (1.0 - d / par[DMAX]) * clear[node]
             if par[WALLT] > 0:
                 v *= wall_factor(state[node], par)
@@ -664,7 +666,7 @@ def _params(
          cfg.wall_slack_s, G * math.tan(cfg.bank_limit_rad),
          cfg.bank_limit_deg / cfg.roll_rate_limit_deg_s, float(cfg.backup == "best"),
          goal_delay(cfg, len(tracks)),
-         float(any(t.vscale is not None for t in tracks))],  # fmt: skip
+         float(any(t.vscale is not None for t in tracks)), cfg.goal_height_scale],  # fmt: skip
         dtype=float,
     )
 

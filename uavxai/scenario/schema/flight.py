@@ -158,6 +158,14 @@ class MCTSConfig(Section):
     # horizontal margin wide and d_min_m plus the vertical one (never more than the
     # horizontal) tall: inside the sphere, around the collision sphere. null: the sphere.
     vertical_reach_mps: Annotated[float, Field(ge=0, le=50)] | None = None
+    # How a leaf of the MCTS planners' compiled search counts its height off the goal's in its
+    # distance to the goal, 1 - d/d_max (issue 31; docs/results "The leg's height"): each
+    # metre as this many metres over the ground. 1: the paper's 3-D distance, under which a
+    # line 50 m below the leg 1.5 km out loses 0.8 m, so the vertical action set's tree sits
+    # out of the traffic's layer at the floor's or the ceiling's level-off and is cornered
+    # there or times out above the goal. The ownship's airspeed over its climb rate (20 / 2.5
+    # = 8) counts a metre of height as the time it takes. `exhaustive` keeps the paper's.
+    goal_height_scale: Annotated[float, Field(ge=1, le=50)] = 1.0
 
 
 class NMAC(Section):
