@@ -293,6 +293,13 @@ def check_campaign(
             f"scenario '{scenario.name}': intruders.list fixes the traffic, so --intruders "
             "cannot vary it; campaigns need random intruders (intruders.count)."
         )
+    if scenario.fleet.size > 1:
+        raise UserError(
+            f"scenario '{scenario.name}' flies a fleet (fleet.size = {scenario.fleet.size}): "
+            "`uavxai evaluate` of a fleet is not built, and its episodes would fly one ownship "
+            "to a one-UAV service point, not the fleet's mission. Fly the mission with `uavxai "
+            "run SCENARIO --seed S` (docs/fleet.md), or evaluate a scenario without `fleet`."
+        )
     if episodes < 1:
         raise UserError(f"--episodes {episodes}: must be >= 1.")
     if dynamics not in DYNAMICS:
