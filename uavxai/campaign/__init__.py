@@ -39,6 +39,8 @@ The package, one job a module (the layers, top first, are checked by import-lint
 - ``runner``: the tasks flown in this process, a local worker pool or Ray; settings checked;
 - ``merge``: `uavxai merge`, campaigns of one scenario pooled into one;
 - ``episode``: one campaign episode flown on the engine -> its ``episodes.csv`` row;
+- ``fleet``: a fleet campaign's episode (the fleet mission `uavxai run` flies, by its code)
+  -> its ``fleet_episodes.csv`` row, and its ``fleet_results.csv`` rows;
 - ``statistics``: the ``results.csv`` rows (rates and intervals, risk ratios, DAA estimates);
 - ``plots``: the figures drawn from the results rows;
 - ``files``: the columns of both files, a CSV written whole, a source's rows read and checked.
@@ -51,6 +53,10 @@ from uavxai.campaign.files import (
     DAA_EPISODE_COLUMNS,
     DAA_RATES,
     EPISODE_COLUMNS,
+    FLEET_EPISODE_COLUMNS,
+    FLEET_EPISODES,
+    FLEET_RESULT_COLUMNS,
+    FLEET_RESULTS,
     FLIGHT_COLUMNS,
     FLIGHT_RESULTS,
     GOAL_COLUMNS,
@@ -59,6 +65,7 @@ from uavxai.campaign.files import (
     columns_of,
     write_csv,
 )
+from uavxai.campaign.fleet import run_fleet_episode, summarise_fleet
 from uavxai.campaign.merge import merge_campaigns
 from uavxai.campaign.plots import plot_campaign
 from uavxai.campaign.runner import DYNAMICS, Task, campaign_tasks, run_campaign
@@ -70,6 +77,10 @@ __all__ = [
     "DYNAMICS",
     "DAA_EPISODE_COLUMNS",
     "EPISODE_COLUMNS",
+    "FLEET_EPISODES",
+    "FLEET_EPISODE_COLUMNS",
+    "FLEET_RESULTS",
+    "FLEET_RESULT_COLUMNS",
     "FLIGHT_COLUMNS",
     "FLIGHT_RESULTS",
     "GOAL_COLUMNS",
@@ -87,6 +98,8 @@ __all__ = [
     "results_table",
     "run_campaign",
     "run_campaign_episode",
+    "run_fleet_episode",
     "summarise",
+    "summarise_fleet",
     "write_csv",
 ]
