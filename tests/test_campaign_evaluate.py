@@ -370,12 +370,3 @@ def test_a_campaign_extended_with_another_seed_merges_without_ownship_goal(
     _, rows = _read(out / "results.csv")
     assert [(r["method"], r["episodes"]) for r in rows] == [("none", "4")]
 
-
-def test_a_fleet_campaign_is_refused_by_name(tmp_path: Path, capsys) -> None:
-    """Issue 32: a fleet given to `uavxai evaluate` flew one ownship to a one-UAV service point
-    (the members uncommanded rows of its traffic); now a clear refusal, no traceback."""
-    fleet = Path(__file__).resolve().parents[1] / "scenarios" / "fleet-mission.yaml"
-    args = ["evaluate", str(fleet), "--methods", "mcts", "--intruders", "20", "--episodes", "1"]
-    assert main([*args, "--out", str(tmp_path / "out")]) == 2
-    err = capsys.readouterr().err
-    assert "fleet.size = 3" in err and "uavxai run" in err and "Traceback" not in err

@@ -86,13 +86,14 @@ def fleet_row(summary: dict, method: str, n_intruders: int, wall_s: float) -> di
     def each(key: str, fmt: str) -> str:
         return " ".join("-" if u.get(key) is None else format(u[key], fmt) for u in fleet)
 
-    def number(v) -> float:
-        return math.nan if v is None else float(v)
+    def number(v) -> float | None:  # None: not defined (an empty cell; rows compare equal)
+        return None if v is None else float(v)
 
     def metres(v) -> float:
         return math.inf if v is None else round(float(v), 3)
 
     energy = [number(u.get("energy_wh")) for u in fleet]
+    total_wh = None if None in energy else float(sum(energy))
     return {
         "method": method,
         "intruders": int(n_intruders),
@@ -106,7 +107,7 @@ def fleet_row(summary: dict, method: str, n_intruders: int, wall_s: float) -> di
         "member_delivered_bits": each("delivered_bits", ".0f"),
         "qos_share": number(mission.get("qos_user_seconds_share")),
         "jain_fairness": number(mission.get("jain_fairness")),
-        "energy_wh": float(sum(energy)),
+        "energy_wh": total_wh,
         "member_energy_wh": each("energy_wh", ".3f"),
         "member_min_separation_m": each("min_separation_m", ".1f"),
         "member_collisions": len(meet["member_collisions"]),

@@ -47,6 +47,9 @@ class FleetEncounters(Observer):
         av = scenario.avoidance
         return cls(av.d_min_m, (float(av.nmac.horizontal_m), float(av.nmac.vertical_m)))
 
+    def on_start(self, ep: Episode) -> None:
+        self._prev = ep.state  # the first sample is measured from the start, as the judge's
+
     def on_sample(self, ep: Episode, state: TrafficState) -> None:
         prev = self._prev if self._prev is not None else state
         self._prev = state
