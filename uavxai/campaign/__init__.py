@@ -26,6 +26,11 @@ rows carry the detect-and-avoid record ``DAA_EPISODE_COLUMNS`` (weight 1 for ran
 and its results the weighted ``DAA_COLUMNS`` against ``none`` on the same seeds
 (docs/daa-metrics.md).
 
+A fleet (``fleet.size`` > 1, JSBSim only) flies episode ``i`` as the fleet mission `uavxai run
+--seed` flies at ``scenario.seed + i``, by the run's own code, every member flying the method
+(:mod:`uavxai.campaign.fleet`), into ``fleet_episodes.csv`` and ``fleet_results.csv`` instead
+(docs/fleet.md, "Fleet campaigns").
+
 Episodes run in this process (``workers=1``), in local worker processes (``workers>1``; the
 ``forkserver`` context, one torch thread each) or as Ray tasks (``ray_address``: ``local``
 starts a private Ray instance on this machine, ``auto`` joins the cluster this machine belongs
