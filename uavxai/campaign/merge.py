@@ -29,6 +29,18 @@ from uavxai.outputs import cell_number
 from uavxai.processes import interrupts_deferred
 
 
+def _episodes_file(src: Path) -> Path:
+    """A source campaign's episodes.csv; a fleet campaign's folder refused by name (its files
+    are not these)."""
+    if (src / FLEET_EPISODES).is_file() and not (src / "episodes.csv").exists():
+        raise UserError(
+            f"{src}: a fleet campaign ({FLEET_EPISODES}); merge pools one-ownship campaigns "
+            "only. Pooling fleet campaigns is not built: fly one campaign with every seed, "
+            "or read the sources' fleet_episodes.csv together (docs/fleet.md)."
+        )
+    return src / "episodes.csv"
+
+
 def merge_campaigns(sources: Sequence[str | Path], out: str | Path, title: str = "") -> list[dict]:
     """One campaign from several of the same scenario and dynamics: other methods, other
     intruder counts, or more seeds of the same ones (a campaign extended later, or split over
@@ -44,14 +56,8 @@ def merge_campaigns(sources: Sequence[str | Path], out: str | Path, title: str =
     p50: dict[tuple[str, int], float] = {}
     goals: dict[tuple[str, ...], Path] = {}
     for src in map(Path, sources):
-        if (src / FLEET_EPISODES).is_file() and not (src / "episodes.csv").exists():
-            raise UserError(
-                f"{src}: a fleet campaign ({FLEET_EPISODES}); merge pools one-ownship campaigns "
-                "only. Pooling fleet campaigns is not built: fly one campaign with every seed, "
-                "or read the sources' fleet_episodes.csv together (docs/fleet.md)."
-            )
         # files written before the goal was recorded lack its columns, and are taken on trust
-        rows = read_rows(src / "episodes.csv", EPISODE_COLUMNS[: -len(GOAL_COLUMNS)])
+        rows = read_rows(_episodes_file(src), EPISODE_COLUMNS[: -len(GOAL_COLUMNS)])
         rows = [checked_row(r, src / "episodes.csv", i) for i, r in enumerate(rows, start=2)]
         for i, r in enumerate(rows, start=2):
             try:
