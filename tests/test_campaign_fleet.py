@@ -201,6 +201,39 @@ def test_a_member_leaving_early_fills_the_leave_columns(tmp_path: Path) -> None:
         assert row[f"leave_{key}"] == pytest.approx(gone[key]), key
 
 
+def test_a_fleet_campaign_opens_no_external_link(tmp_path: Path) -> None:
+    """A scenario with a link (bridge.mavlink to a listening peer, a signing key, a ground
+    station, link.tlog on): the campaign's episode connects to no one, writes no link.tlog,
+    and its row is the row of the same scenario without the link."""
+    import socket
+
+    peer = socket.socket()  # a peer the link would connect to; no one may arrive
+    peer.bind(("127.0.0.1", 0))
+    peer.listen(4)
+    peer.setblocking(False)
+    port = peer.getsockname()[1]
+    linked = {**SHORT, "bridge": {"mavlink": f"tcp:127.0.0.1:{port}", "tlog": True,
+                                  "signing_key_hex": "ab" * 32,
+                                  "ground_stations": [{"system_id": 255}]}}  # fmt: skip
+    path = tmp_path / "linked.yaml"
+    path.write_text(yaml.safe_dump(linked))
+    plain = tmp_path / "plain.yaml"
+    plain.write_text(yaml.safe_dump(SHORT))
+    try:
+        row = run_fleet_episode(load_scenario(path), "mcts", 3, 7, tmp_path / "linked")
+        with pytest.raises(BlockingIOError):
+            peer.accept()
+    finally:
+        peer.close()
+    assert not list((tmp_path / "linked").rglob("*.tlog"))
+    assert json.loads((tmp_path / "linked" / "summary.json").read_text())["bridge"] is not None
+    alone = run_fleet_episode(load_scenario(plain), "mcts", 3, 7, tmp_path / "plain")
+    untimed = [{k: v for k, v in r.items() if k not in TIMING_COLUMNS} for r in (row, alone)]
+    assert untimed[0] == untimed[1]
+    for name in ("trajectory.csv", "service.csv"):
+        assert (tmp_path / "linked" / name).read_bytes() == (tmp_path / "plain" / name).read_bytes()
+
+
 def test_bad_fleet_campaigns_are_user_errors(campaign: Path, capsys) -> None:
     """The kinematic world has no members: refused by name (it flew one ownship to a one-UAV
     service point before, silently); a count the scenario cannot take; merge of a fleet."""

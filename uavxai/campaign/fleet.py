@@ -31,12 +31,20 @@ RUNS = "fleet-runs"  # the campaign folder's subfolder of the episodes' run file
 
 def fleet_scenario(scenario: Scenario, method: str, n_intruders: int) -> Scenario:
     """``scenario`` with every member flying ``method`` and ``n_intruders`` random intruders,
-    checked as a scenario file would be (a fleet refuses what it cannot fly, by name)."""
+    checked as a scenario file would be (a fleet refuses what it cannot fly, by name).
+
+    The copy has no external link (docs/fleet.md, "Fleet campaigns"): no ``bridge.mavlink``
+    (no socket: two workers would listen on one port, an outside peer could command the
+    flight, and a row would no longer be its scenario and seed's), no ``link.tlog``, no
+    signing key (no signing state file shared by episodes) and no ground stations; the
+    in-process bridges keep their system ids and command time-out, as a one-ownship
+    campaign, which never opens a link."""
     from pydantic import ValidationError
 
     data = scenario.model_dump()
     data["avoidance"]["planner"] = method
     data["intruders"]["count"] = int(n_intruders)
+    data["bridge"].update(mavlink=None, tlog=False, signing_key_hex=None, ground_stations=[])
     try:
         return Scenario.model_validate(data)
     except ValidationError as exc:
