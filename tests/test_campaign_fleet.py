@@ -284,3 +284,42 @@ def test_fleet_encounters_count_pairs_between_samples_by_the_judges_rules() -> N
     assert s["intruder_nmacs"] == [["ownship-1", "intruder-1"]]
     assert s["intruder_collisions"] == []
     assert s["closest_intruder_m"] == pytest.approx(100.0)
+
+
+def test_fleet_encounters_and_the_judge_agree_on_a_replaced_rows_sample() -> None:
+    """Members 0 and 1 pass through each other (200 m apart before and after) in the sample
+    in which intruder-1 is replaced (persistent traffic): the judge (member 0's) and the
+    fleet's encounters both say collision and NMAC at 0 m (the encounters restarted every
+    pair on any replacement before: 200 m, none); the newcomer, now 100 m above the point
+    both members flew through, is judged where it is (141 m from each), not as if it had
+    stood there all along (100 m)."""
+    import numpy as np
+
+    from uavxai.dynamics.state import TrafficState
+    from uavxai.scenario import default_scenario
+    from uavxai.sim.fleet_record import FleetEncounters
+    from uavxai.sim.judge import Judge
+
+    def state(t: float, ids: tuple[str, ...], xyz: list) -> TrafficState:
+        z = np.zeros((len(xyz), 3))
+        return TrafficState(t, ids, np.array(xyz, dtype=float), z, z, np.full(len(xyz), 20.0))
+
+    prev = state(0.0, ("ownship-0", "intruder-1", "ownship-1"),
+                 [(0, 0, 100), (0, 900, 100), (200, 0, 100)])  # fmt: skip
+    now = state(0.1, ("ownship-0", "intruder-4", "ownship-1"),
+                [(200, 0, 100), (100, 0, 200), (0, 0, 100)])  # fmt: skip
+
+    class Start:  # what on_start reads of the episode: its state at the start
+        state = prev
+
+    meet = FleetEncounters(d_min_m=50.0, nmac_m=(152.4, 30.48))
+    meet.on_start(Start())  # type: ignore[arg-type]
+    meet.on_sample(None, now)  # type: ignore[arg-type]
+    s = meet.section()
+    judge = Judge(default_scenario("f").world, 50.0, None, 50.0, nmac_m=(152.4, 30.48))
+    assert judge.separation(prev, now) == s["closest_members_m"] == 0.0
+    assert judge.nmac(prev, now)
+    assert s["member_collisions"] == s["member_nmacs"] == [["ownship-0", "ownship-1"]]
+    assert s["closest_intruder_m"] == pytest.approx(math.hypot(100, 100), abs=1e-3)
+    assert s["intruder_collisions"] == s["intruder_nmacs"] == []
+

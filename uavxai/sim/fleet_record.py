@@ -3,13 +3,13 @@ campaigns"): ``summary.fleet_encounters``, written by every fleet run and read b
 campaign's row.
 
 Every sample, each member is measured against every other member and every intruder by the
-judge's own rules: the closest approach between two samples, both moving linearly
-(:func:`uavxai.geometry.closest_on_pieces`, as
-:func:`uavxai.geometry.closest_approach`), and the NMAC cylinder (``avoidance.nmac``,
-:func:`uavxai.metrics.nmac`), so a pass-through between samples counts, as it does for the
-judge. A row whose aircraft was replaced in between (persistent traffic) counts from now, as
-the judge's. Counts are of distinct pairs (a pair inside the cylinder for a minute is one
-NMAC), by the aircraft's ids: a replaced intruder is another aircraft.
+judge's own rules, along the judge's own pieces since the last sample
+(:func:`uavxai.sim.judge.pieces_since_last_sample`: both moving linearly, so a pass-through
+between samples counts; a pair one of whose rows was replaced in between, persistent traffic,
+counts from now, the other pairs keep their piece): the closest approach
+(:func:`uavxai.geometry.closest_approaches`) and the NMAC cylinder (``avoidance.nmac``,
+:func:`uavxai.metrics.nmac`). Counts are of distinct pairs (a pair inside the cylinder for a
+minute is one NMAC), by the aircraft's ids: a replaced intruder is another aircraft.
 """
 
 from __future__ import annotations
@@ -18,13 +18,12 @@ import math
 
 import numpy as np
 
-from uavxai.dynamics.state import TrafficState
-from uavxai.geometry import closest_on_pieces
+from uavxai.dynamics.state import TrafficState, is_member
+from uavxai.geometry import closest_approaches
 from uavxai.metrics import nmac
 from uavxai.scenario import Scenario
 from uavxai.sim.episode import Episode, Observer
-
-MEMBER = "ownship"  # a fleet's rows are ownship-0 .. ownship-(N-1); the others are traffic
+from uavxai.sim.judge import pieces_since_last_sample
 
 
 class FleetEncounters(Observer):
@@ -53,11 +52,9 @@ class FleetEncounters(Observer):
     def on_sample(self, ep: Episode, state: TrafficState) -> None:
         prev = self._prev if self._prev is not None else state
         self._prev = state
-        if prev.ids != state.ids:  # a replaced row: everyone judged where they are now
-            prev = state
         ids = state.ids
-        members = [i for i, who in enumerate(ids) if who.startswith(MEMBER)]
-        traffic = [i for i, who in enumerate(ids) if not who.startswith(MEMBER)]
+        members = [i for i, who in enumerate(ids) if is_member(who)]
+        traffic = [i for i, who in enumerate(ids) if not is_member(who)]
         for n, m in enumerate(members):
             self._pairs(prev, state, m, members[n + 1 :], member=True)
             self._pairs(prev, state, m, traffic, member=False)
@@ -66,8 +63,8 @@ class FleetEncounters(Observer):
                member: bool) -> None:  # fmt: skip
         if not others:
             return
-        r0 = prev.pos[others] - prev.pos[m]  # the others relative to member m, then and now
-        dist, _ = closest_on_pieces(r0, (now.pos[others] - now.pos[m]) - r0)
+        own, them = pieces_since_last_sample(prev, now, m, others)
+        dist = closest_approaches(own[0], own[1], them[0], them[1])
         dist = np.where(np.isnan(dist), np.inf, dist)  # a row not present (NaN) meets no one
         if member:
             self.closest_members_m = min(self.closest_members_m, float(dist.min()))
@@ -76,9 +73,7 @@ class FleetEncounters(Observer):
         near = dist < math.hypot(*self.nmac_m)  # beyond the cylinder's corner: not inside it
         inside = np.zeros(len(others), dtype=bool)
         if near.any():
-            own = np.stack([prev.pos[m], now.pos[m]])
-            rows = [o for o, n in zip(others, near, strict=True) if n]
-            inside[near] = nmac(own, np.stack([prev.pos[rows], now.pos[rows]]), *self.nmac_m)
+            inside[near] = nmac(own[:, near], them[:, near], *self.nmac_m)
         for o, d, hit in zip(others, dist, inside, strict=True):
             pair = (now.ids[m], now.ids[o])
             if d < self.d_min_m:
