@@ -22,14 +22,16 @@ from uavxai.campaign import (
     FLEET_RESULTS,
     TIMING_COLUMNS,
     merge_campaigns,
+    rerun_row,
     run_campaign,
+    run_campaign_episode,
     run_fleet_episode,
 )
 from uavxai.campaign.fleet import episode_folder
 from uavxai.cli import main
 from uavxai.errors import UserError
 from uavxai.journal import JOURNAL
-from uavxai.scenario import load_scenario
+from uavxai.scenario import Scenario, load_scenario
 
 FLEET_MISSION = Path(__file__).resolve().parents[1] / "scenarios" / "fleet-mission.yaml"
 # Two members, six walking users, three intruders, 10 s on station: 3-6 s a flight.
@@ -245,6 +247,16 @@ def test_bad_fleet_campaigns_are_user_errors(campaign: Path, capsys) -> None:
         run_campaign(load_scenario(FLEET_MISSION), ["mcts"], [501], 1, dynamics="jsbsim")
     with pytest.raises(UserError, match="a fleet campaign"):
         merge_campaigns([campaign], campaign.parent / "merged")
+    # what `uavxai run` asks before flying: a learned service planner with no shipped model
+    unshipped = {**SHORT, "service": {"planner": "d3qn"},
+                 "comms": {**SHORT["comms"], "power_levels": 4}}  # fmt: skip
+    with pytest.raises(UserError, match="power_levels = 4"):
+        run_campaign(Scenario.model_validate(unshipped), ["mcts"], [3], 1, dynamics="jsbsim")
+    # from Python: one ownship's episode of a fleet scenario, refused pointing to the fleet's
+    with pytest.raises(UserError, match=r"fleet.size = 3.*run_fleet_episode"):
+        run_campaign_episode(load_scenario(FLEET_MISSION), "mcts", 20, 0, "jsbsim")
+    with pytest.raises(UserError, match=r"fleet.size = 3.*run_fleet_episode"):
+        rerun_row(FLEET_MISSION, "mcts", 20, 0, "jsbsim")
 
 
 def test_fleet_encounters_count_pairs_between_samples_by_the_judges_rules() -> None:

@@ -321,6 +321,9 @@ def check_campaign(
                 f"{scenario.fleet.size}), which flies in JSBSim only (the kinematic world has no "
                 "members); give --dynamics jsbsim (docs/fleet.md, \"Fleet campaigns\")."
             )
+        from uavxai.service.stage import check_planner_fits
+
+        check_planner_fits(scenario)  # what `uavxai run` asks: each episode is its run
         for m in methods:  # every member flies the method: refused now, by name, if it cannot
             for n in intruders:
                 fleet_scenario(scenario, m, n)
