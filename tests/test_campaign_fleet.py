@@ -26,6 +26,7 @@ from uavxai.campaign import (
     run_campaign,
     run_campaign_episode,
     run_fleet_episode,
+    summarise_fleet,
 )
 from uavxai.campaign.fleet import episode_folder
 from uavxai.cli import main
@@ -88,8 +89,10 @@ def test_a_fleet_campaign_writes_one_row_per_episode_and_its_results(campaign: P
     completed = sum(int(r["completed"]) for r in rows)
     assert float(result["completed_rate"]) == pytest.approx(completed / 2)
     assert float(result["completed_rate_lo"]) <= completed / 2 <= float(result["completed_rate_hi"])
-    assert float(result["min_delivered_bits"]) == pytest.approx(
-        min(float(r["delivered_bits"]) for r in rows), rel=1e-5)  # fmt: skip
+    # bits as whole numbers, not six digits of them
+    assert int(result["min_delivered_bits"]) == min(int(r["delivered_bits"]) for r in rows)
+    assert int(result["mean_delivered_bits"]) == round(
+        sum(int(r["delivered_bits"]) for r in rows) / 2)  # fmt: skip
     assert float(result["min_closest_members_m"]) == pytest.approx(
         min(float(r["closest_members_m"]) for r in rows), rel=1e-5)  # fmt: skip
     for r in rows:
@@ -201,6 +204,16 @@ def test_a_member_leaving_early_fills_the_leave_columns(tmp_path: Path) -> None:
     for key in ("qos_share_before", "qos_share_after", "crowd_qos_share_before",
                 "crowd_qos_share_after"):  # fmt: skip
         assert row[f"leave_{key}"] == pytest.approx(gone[key]), key
+    # the leave's worst case beside its mean: the lowest share after, the slowest recovery,
+    # and the departures never recovered (a copy of the row that never recovered)
+    never = {**row, "seed": 8, "leave_qos_share_after": 0.25, "leave_recovered_after_s": None}
+    slow = {**row, "seed": 9, "leave_qos_share_after": 0.5, "leave_recovered_after_s": 1e4}
+    (result,) = summarise_fleet([row, never, slow])
+    assert result["min_leave_qos_share_after"] == 0.25
+    assert result["mean_leave_qos_share_after"] == pytest.approx(
+        (row["leave_qos_share_after"] + 0.75) / 3)  # fmt: skip
+    assert result["max_leave_recovered_after_s"] == 1e4
+    assert result["leave_never_recovered"] == 1 + (row["leave_recovered_after_s"] is None)
 
 
 def test_a_fleet_campaign_opens_no_external_link(tmp_path: Path) -> None:

@@ -97,6 +97,7 @@ FLEET_RESULT_COLUMNS = (
     "min_closest_intruder_m", "mean_delivered_bits", "min_delivered_bits", "mean_qos_share",
     "min_qos_share", "mean_jain_fairness", "min_jain_fairness", "mean_energy_wh",
     "max_energy_wh", "mean_leave_qos_share_before", "mean_leave_qos_share_after",
+    "min_leave_qos_share_after", "leave_never_recovered", "max_leave_recovered_after_s",
     "mean_wall_s",
 )  # fmt: skip
 # The columns whose values depend on the machine, not on the seed.

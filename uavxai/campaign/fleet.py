@@ -169,6 +169,9 @@ def _fleet_result(method: str, n: int, rs: list[dict]) -> dict:
         v = v[~np.isnan(v)]
         return float(pick(v)) if v.size else math.nan
 
+    def whole(v: float) -> float | int:  # bits: whole numbers in the file, not six digits
+        return round(v) if math.isfinite(v) else v
+
     outcomes = [r["outcome"] for r in rs]
     k = len(rs)
     row: dict = {"method": method, "intruders": n, "episodes": k}
@@ -188,8 +191,8 @@ def _fleet_result(method: str, n: int, rs: list[dict]) -> dict:
     row.update({
         "min_closest_members_m": worst("closest_members_m", np.min),
         "min_closest_intruder_m": worst("closest_intruder_m", np.min),
-        "mean_delivered_bits": mean("delivered_bits"),
-        "min_delivered_bits": worst("delivered_bits", np.min),
+        "mean_delivered_bits": whole(mean("delivered_bits")),
+        "min_delivered_bits": whole(worst("delivered_bits", np.min)),
         "mean_qos_share": mean("qos_share"),
         "min_qos_share": worst("qos_share", np.min),
         "mean_jain_fairness": mean("jain_fairness"),
@@ -198,6 +201,13 @@ def _fleet_result(method: str, n: int, rs: list[dict]) -> dict:
         "max_energy_wh": worst("energy_wh", np.max),
         "mean_leave_qos_share_before": mean("leave_qos_share_before"),
         "mean_leave_qos_share_after": mean("leave_qos_share_after"),
+        "min_leave_qos_share_after": worst("leave_qos_share_after", np.min),
+        # a departure after which its users never came back to their share before it
+        "leave_never_recovered": sum(
+            1 for r in rs
+            if str(r.get("leave_uav", "")) != "" and math.isnan(cell_number(r.get(
+                "leave_recovered_after_s")))),  # fmt: skip
+        "max_leave_recovered_after_s": worst("leave_recovered_after_s", np.max),
         "mean_wall_s": mean("wall_s"),
     })  # fmt: skip
     return row
