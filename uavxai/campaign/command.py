@@ -59,7 +59,9 @@ def evaluate_command(
 ) -> dict:
     """The `uavxai evaluate` command: the campaign with a progress bar, each finished episode
     journaled (:mod:`uavxai.journal`), ``results.csv``, ``episodes.csv`` and the plots in
-    ``out``; a short report back. ``goal``: see :func:`_campaign_goal`; ``resume``: fly only
+    ``out`` (a fleet's: ``fleet_results.csv``, ``fleet_episodes.csv`` and each episode's run
+    files under ``fleet-runs/``, no plots; docs/fleet.md, "Fleet campaigns"); a short report
+    back. ``goal``: see :func:`_campaign_goal`; ``resume``: fly only
     what an interrupted run of the same campaign did not journal in ``out``."""
     import torch
     from rich.console import Console

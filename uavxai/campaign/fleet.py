@@ -48,9 +48,11 @@ def fleet_scenario(scenario: Scenario, method: str, n_intruders: int) -> Scenari
     try:
         return Scenario.model_validate(data)
     except ValidationError as exc:
+        first = exc.errors()[0]
+        field = ".".join(str(part) for part in first["loc"]) or "the scenario"
         raise UserError(
             f"--methods {method} --intruders {n_intruders}: scenario '{scenario.name}' cannot "
-            f"fly it ({exc.errors()[0]['msg']})."
+            f"fly it ({field}: {first['msg']})."
         ) from None
 
 

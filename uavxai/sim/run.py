@@ -20,7 +20,6 @@ from uavxai.processes import interrupts_deferred
 from uavxai.scenario import Scenario
 from uavxai.sim.quicklook import PLOT
 from uavxai.sim.run_flight import (
-    _replanner,
     fleet_placement,
     mavlink_path,
     member_link,
@@ -32,7 +31,6 @@ from uavxai.sim.run_flight import (
 )
 
 __all__ = [
-    "_replanner",
     "aggregate",
     "fleet_placement",
     "mavlink_path",
