@@ -42,11 +42,12 @@ def nmac(
 ) -> np.ndarray:
     """(N,) bool: does intruder ``j`` come inside the NMAC cylinder around the ownship?
 
-    ``own`` (T, 3) and ``intruders`` (T, N, 3) are positions (x, y, h) at the same T
-    instants; between instants both move linearly, so an intrusion between two samples counts.
-    On each piece the horizontal condition holds on an interval of the piece (a quadratic in
-    the piece's fraction s) and the vertical one on another (linear in s): an NMAC is a piece
-    where both intervals overlap. NaN positions (an intruder not present) never count.
+    ``own`` (T, 3), or (T, N, 3) with one own track per intruder, and ``intruders`` (T, N, 3)
+    are positions (x, y, h) at the same T instants; between instants both move linearly, so
+    an intrusion between two samples counts. On each piece the horizontal condition holds on
+    an interval of the piece (a quadratic in the piece's fraction s) and the vertical one on
+    another (linear in s): an NMAC is a piece where both intervals overlap. NaN positions (an
+    intruder not present) never count.
     """
     own = np.asarray(own, dtype=float)
     intruders = np.asarray(intruders, dtype=float)
