@@ -369,3 +369,4 @@ def test_a_campaign_extended_with_another_seed_merges_without_ownship_goal(
     assert main(["merge", str(tmp_path / "first"), str(tmp_path / "later"), "--out", str(out)]) == 0
     _, rows = _read(out / "results.csv")
     assert [(r["method"], r["episodes"]) for r in rows] == [("none", "4")]
+

@@ -13,6 +13,8 @@ from uavxai.campaign import (
     DAA_COLUMNS,
     DAA_EPISODE_COLUMNS,
     EPISODE_COLUMNS,
+    FLEET_EPISODE_COLUMNS,
+    FLEET_RESULT_COLUMNS,
     FLIGHT_COLUMNS,
     FLIGHT_RESULTS,
     RESULT_COLUMNS,
@@ -57,3 +59,11 @@ def test_the_readme_lists_the_campaign_csvs_as_declared():
     for column in RESULT_COLUMNS[n:] + FLIGHT_RESULTS + DAA_COLUMNS:
         base = re.sub(r"_(lo|hi)$", "", column)
         assert f"`{base}`" in row, column
+
+
+@pytest.mark.parametrize(
+    ("name", "columns"),
+    [("fleet_episodes.csv", FLEET_EPISODE_COLUMNS), ("fleet_results.csv", FLEET_RESULT_COLUMNS)],
+)
+def test_the_readme_lists_the_fleet_campaign_csvs_as_declared(name, columns):
+    assert _column_lists(_readme_row(name)) == [columns]

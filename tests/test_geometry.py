@@ -11,6 +11,7 @@ import pytest
 from uavxai.geometry import (
     bank_of_turn_rate,
     closest_approach,
+    closest_approaches,
     closest_on_pieces,
     closest_point_of_approach,
     turn_rate_of_bank,
@@ -111,3 +112,20 @@ def test_coordinated_turn_rate_and_bank_are_inverse_and_element_wise():
                                           for b, v in zip(banks, speeds, strict=True)])
     back = [bank_of_turn_rate(float(w), float(v)) for w, v in zip(rates, speeds, strict=True)]
     np.testing.assert_allclose(back, banks, atol=1e-12)
+
+
+def test_closest_approaches_is_each_rows_and_closest_approach_their_least():
+    """Per row, with one point's piece for all rows or one per row (a judge's pair that
+    restarts on a replaced row): each row's closest approach alone; the least is
+    closest_approach's."""
+    rng = np.random.default_rng(5)
+    q0, q1 = rng.uniform(-50, 50, (6, 3)), rng.uniform(-50, 50, (6, 3))
+    p0, p1 = rng.uniform(-50, 50, 3), rng.uniform(-50, 50, 3)
+    each = closest_approaches(p0, p1, q0, q1)
+    assert each.shape == (6,)
+    for j in range(6):
+        assert each[j] == closest_approach(p0, p1, q0[j : j + 1], q1[j : j + 1])
+    assert closest_approach(p0, p1, q0, q1) == each.min()
+    per_row = closest_approaches(np.tile(p0, (6, 1)), np.tile(p1, (6, 1)), q0, q1)
+    np.testing.assert_array_equal(per_row, each)
+

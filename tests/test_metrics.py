@@ -68,6 +68,13 @@ def test_nmac_several_intruders_and_bad_shapes():
     assert nmac(own, np.stack([near, far, missing], axis=1)).tolist() == [True, False, False]
     with pytest.raises(UserError, match="same T instants"):
         nmac(own, np.zeros((4, 1, 3)))
+    # one own piece per intruder (a pair restarted on a replaced row): each row as alone
+    far_own = line((900, 0, 100), (900, 0, 100), 3)  # standing where `far` starts
+    pieces = np.stack([own, far_own, own], axis=1)
+    both = np.stack([near, far, missing], axis=1)
+    assert nmac(pieces, both).tolist() == [True, True, False]
+    with pytest.raises(UserError, match=r"\(T, N, 3\)"):
+        nmac(pieces[:, :2], both)
 
 
 def test_wilson_interval_known_values():

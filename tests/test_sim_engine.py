@@ -240,3 +240,35 @@ def test_judge_nmac_shortcut_by_separation_never_changes_the_answer() -> None:
         assert judge.nmac(a, b, judge.separation(a, b)) == full
         inside += full
     assert 50 < inside < 350  # both answers were exercised
+
+
+def _states(ids0, ids1, p0, p1):
+    from uavxai.dynamics.state import TrafficState
+
+    p0, p1 = np.array(p0, dtype=float), np.array(p1, dtype=float)
+    z = np.zeros_like(p0)
+    n = len(p0)
+    return (TrafficState(0.0, ids0, p0, z, z, np.ones(n)),
+            TrafficState(0.1, ids1, p1, z, z, np.ones(n)))  # fmt: skip
+
+
+def test_a_replaced_row_restarts_only_its_own_pair_for_separation_and_nmac() -> None:
+    """intruder-2 is replaced (persistent traffic) in the sample in which the ownship and
+    intruder-1 pass through each other (200 m apart before and after): the pass-through is a
+    collision and an NMAC (before, the NMAC test measured every row from now on any
+    replacement: a collision but no NMAC). The newcomer stands now where the ownship was:
+    it was not there then, so 200 m, not 0 m."""
+    judge = Judge(default_scenario("r").world, 50.0, None, 50.0)
+    prev, now = _states(("ownship", "intruder-1", "intruder-2"),
+                        ("ownship", "intruder-1", "intruder-3"),
+                        [(0, 0, 100), (200, 0, 100), (0, 900, 100)],
+                        [(200, 0, 100), (0, 0, 100), (0, 0, 100)])  # fmt: skip
+    assert judge.separation(prev, now) == pytest.approx(0.0, abs=1e-9)
+    assert judge.nmac(prev, now) and judge.nmac(prev, now, judge.separation(prev, now))
+    # without the pass-through, the newcomer alone: judged where it is, 200 m away
+    prev, now = _states(("ownship", "intruder-1", "intruder-2"),
+                        ("ownship", "intruder-1", "intruder-3"),
+                        [(0, 0, 100), (900, 0, 100), (0, 900, 100)],
+                        [(200, 0, 100), (900, 0, 100), (0, 0, 100)])  # fmt: skip
+    assert judge.separation(prev, now) == pytest.approx(200.0)
+    assert not judge.nmac(prev, now)

@@ -96,7 +96,7 @@ def test_walking_users_make_the_mission_replan_and_move_its_orbit() -> None:
     from uavxai.scenario import default_scenario
     from uavxai.service.stage import plan_service
     from uavxai.sim.build import fly
-    from uavxai.sim.run import _replanner
+    from uavxai.sim.run_flight import _replanner
     from uavxai.sim.spec import episode_spec
     from uavxai.sim.steps import Service
 

@@ -691,7 +691,9 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
     # the goal of the file's own seed: --seed draws other encounters, not another goal, so a
     # campaign extended with another --seed merges with the first (`uavxai merge`)
-    goal = episode_goal(load_scenario(args.scenario)) if args.seed is not None else None
+    # (a fleet has no goal: each member's station is planned per episode)
+    extended = args.seed is not None and sc.fleet.size == 1
+    goal = episode_goal(load_scenario(args.scenario)) if extended else None
 
     evaluate_command(
         sc,

@@ -54,16 +54,25 @@ def bearing(dx: float, dy: float) -> float:
 
 def closest_approach(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndarray) -> float:
     """Smallest distance between one point moving p0 -> p1 and each of N points moving
-    q0 -> q1 ((N, 3) arrays), all linearly over the same interval; inf with N = 0.
+    q0 -> q1 ((N, 3) arrays), all linearly over the same interval; inf with N = 0: the
+    least of :func:`closest_approaches`.
 
     Between two samples a pass-through that neither sample shows is still caught: this is the
     collision test of every episode, whatever the dynamics.
     """
     if len(q0) == 0:
         return math.inf
+    return float(np.min(closest_approaches(p0, p1, q0, q1)))
+
+
+def closest_approaches(
+    p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndarray
+) -> np.ndarray:
+    """(N,) closest approach of each of N points moving q0 -> q1 ((N, 3) arrays) to a point
+    moving p0 -> p1 ((3,), or (N, 3): one point's piece per row), all linearly over the same
+    interval."""
     d0 = q0 - p0
-    dist, _ = closest_on_pieces(d0, (q1 - p1) - d0)
-    return float(np.min(dist))
+    return closest_on_pieces(d0, (q1 - p1) - d0)[0]
 
 
 def closest_on_pieces(r0: np.ndarray, dr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

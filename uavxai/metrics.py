@@ -42,24 +42,28 @@ def nmac(
 ) -> np.ndarray:
     """(N,) bool: does intruder ``j`` come inside the NMAC cylinder around the ownship?
 
-    ``own`` (T, 3) and ``intruders`` (T, N, 3) are positions (x, y, h) at the same T
-    instants; between instants both move linearly, so an intrusion between two samples counts.
-    On each piece the horizontal condition holds on an interval of the piece (a quadratic in
-    the piece's fraction s) and the vertical one on another (linear in s): an NMAC is a piece
-    where both intervals overlap. NaN positions (an intruder not present) never count.
+    ``own`` (T, 3), or (T, N, 3) with one own track per intruder, and ``intruders`` (T, N, 3)
+    are positions (x, y, h) at the same T instants; between instants both move linearly, so
+    an intrusion between two samples counts. On each piece the horizontal condition holds on
+    an interval of the piece (a quadratic in the piece's fraction s) and the vertical one on
+    another (linear in s): an NMAC is a piece where both intervals overlap. NaN positions (an
+    intruder not present) never count.
     """
     own = np.asarray(own, dtype=float)
     intruders = np.asarray(intruders, dtype=float)
     if intruders.ndim == 2:
         intruders = intruders[:, None, :]
-    if own.ndim != 2 or own.shape[1] != 3 or intruders.shape[::2] != own.shape:
+    # (T, N, 3) own: the ownship's own piece for each intruder (a pair that restarts on a
+    # replaced row, :func:`uavxai.sim.judge.pieces_since_last_sample`)
+    per_row = own.ndim == 3 and own.shape == intruders.shape
+    if not per_row and (own.ndim != 2 or own.shape[1] != 3 or intruders.shape[::2] != own.shape):
         raise UserError(
-            f"nmac: own must be (T, 3) and intruders (T, N, 3) at the same T instants, got "
-            f"{own.shape} and {intruders.shape}"
+            f"nmac: own must be (T, 3) or (T, N, 3) and intruders (T, N, 3) at the same T "
+            f"instants, got {own.shape} and {intruders.shape}"
         )
     if not (horizontal_m > 0 and vertical_m > 0):
         raise UserError("nmac: horizontal_m and vertical_m must be > 0")
-    rel = intruders - own[:, None, :]  # (T, N, 3)
+    rel = intruders - (own if per_row else own[:, None, :])  # (T, N, 3)
     if rel.shape[0] == 1:  # one instant: no pieces
         r = rel[0]
         return (np.hypot(r[:, 0], r[:, 1]) < horizontal_m) & (np.abs(r[:, 2]) < vertical_m)

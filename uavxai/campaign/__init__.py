@@ -26,6 +26,11 @@ rows carry the detect-and-avoid record ``DAA_EPISODE_COLUMNS`` (weight 1 for ran
 and its results the weighted ``DAA_COLUMNS`` against ``none`` on the same seeds
 (docs/daa-metrics.md).
 
+A fleet (``fleet.size`` > 1, JSBSim only) flies episode ``i`` as the fleet mission `uavxai run
+--seed` flies at ``scenario.seed + i``, by the run's own code, every member flying the method
+(:mod:`uavxai.campaign.fleet`), into ``fleet_episodes.csv`` and ``fleet_results.csv`` instead
+(docs/fleet.md, "Fleet campaigns").
+
 Episodes run in this process (``workers=1``), in local worker processes (``workers>1``; the
 ``forkserver`` context, one torch thread each) or as Ray tasks (``ray_address``: ``local``
 starts a private Ray instance on this machine, ``auto`` joins the cluster this machine belongs
@@ -39,6 +44,8 @@ The package, one job a module (the layers, top first, are checked by import-lint
 - ``runner``: the tasks flown in this process, a local worker pool or Ray; settings checked;
 - ``merge``: `uavxai merge`, campaigns of one scenario pooled into one;
 - ``episode``: one campaign episode flown on the engine -> its ``episodes.csv`` row;
+- ``fleet``: a fleet campaign's episode (the fleet mission `uavxai run` flies, by its code)
+  -> its ``fleet_episodes.csv`` row, and its ``fleet_results.csv`` rows;
 - ``statistics``: the ``results.csv`` rows (rates and intervals, risk ratios, DAA estimates);
 - ``plots``: the figures drawn from the results rows;
 - ``files``: the columns of both files, a CSV written whole, a source's rows read and checked.
@@ -51,6 +58,10 @@ from uavxai.campaign.files import (
     DAA_EPISODE_COLUMNS,
     DAA_RATES,
     EPISODE_COLUMNS,
+    FLEET_EPISODE_COLUMNS,
+    FLEET_EPISODES,
+    FLEET_RESULT_COLUMNS,
+    FLEET_RESULTS,
     FLIGHT_COLUMNS,
     FLIGHT_RESULTS,
     GOAL_COLUMNS,
@@ -59,6 +70,7 @@ from uavxai.campaign.files import (
     columns_of,
     write_csv,
 )
+from uavxai.campaign.fleet import run_fleet_episode, summarise_fleet
 from uavxai.campaign.merge import merge_campaigns
 from uavxai.campaign.plots import plot_campaign
 from uavxai.campaign.runner import DYNAMICS, Task, campaign_tasks, run_campaign
@@ -70,6 +82,10 @@ __all__ = [
     "DYNAMICS",
     "DAA_EPISODE_COLUMNS",
     "EPISODE_COLUMNS",
+    "FLEET_EPISODES",
+    "FLEET_EPISODE_COLUMNS",
+    "FLEET_RESULTS",
+    "FLEET_RESULT_COLUMNS",
     "FLIGHT_COLUMNS",
     "FLIGHT_RESULTS",
     "GOAL_COLUMNS",
@@ -87,6 +103,8 @@ __all__ = [
     "results_table",
     "run_campaign",
     "run_campaign_episode",
+    "run_fleet_episode",
     "summarise",
+    "summarise_fleet",
     "write_csv",
 ]

@@ -11,7 +11,15 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from uavxai.campaign.episode import planner_for
-from uavxai.campaign.files import columns_of, write_csv
+from uavxai.campaign.files import (
+    FLEET_EPISODE_COLUMNS,
+    FLEET_EPISODES,
+    FLEET_RESULT_COLUMNS,
+    FLEET_RESULTS,
+    columns_of,
+    write_csv,
+)
+from uavxai.campaign.fleet import RUNS, fleet_table, is_fleet_rows, summarise_fleet
 from uavxai.campaign.plots import plot_campaign
 from uavxai.campaign.runner import check_campaign, run_campaign, versions
 from uavxai.campaign.statistics import summarise
@@ -27,6 +35,10 @@ def _campaign_goal(scenario: Scenario, goal: Sequence[float] | None, console) ->
     same goal and merges with the first."""
     from uavxai.sim.spec import episode_goal
 
+    if scenario.fleet.size > 1:
+        console.print(f"fleet of {scenario.fleet.size}: each member's station and users planned "
+                      "per episode (the fleet's joint placement of its seed's users)")  # fmt: skip
+        return ()
     goal = tuple(float(g) for g in (episode_goal(scenario) if goal is None else goal))
     where = "ownship.goal" if scenario.ownship.goal is not None else "the service point"
     console.print(f"goal ({where}): ({goal[0]:.0f}, {goal[1]:.0f}, {goal[2]:.0f}) m")
@@ -47,7 +59,9 @@ def evaluate_command(
 ) -> dict:
     """The `uavxai evaluate` command: the campaign with a progress bar, each finished episode
     journaled (:mod:`uavxai.journal`), ``results.csv``, ``episodes.csv`` and the plots in
-    ``out``; a short report back. ``goal``: see :func:`_campaign_goal`; ``resume``: fly only
+    ``out`` (a fleet's: ``fleet_results.csv``, ``fleet_episodes.csv`` and each episode's run
+    files under ``fleet-runs/``, no plots; docs/fleet.md, "Fleet campaigns"); a short report
+    back. ``goal``: see :func:`_campaign_goal`; ``resume``: fly only
     what an interrupted run of the same campaign did not journal in ``out``."""
     import torch
     from rich.console import Console
@@ -95,6 +109,7 @@ def evaluate_command(
                 on_done=done,
                 goal=goal,
                 finished=before,
+                out=out,
             )
         except KeyboardInterrupt:
             _keep_finished(finished, out, console)
@@ -103,23 +118,45 @@ def evaluate_command(
             journal.close()
     results, plots = _save(rows, out, f"{scenario.name}, {dynamics}, {episodes} episodes")
     wall = time.perf_counter() - wall0
+    _report(rows, results, plots, out, console)
+    return {"episodes": len(rows), "wall_s": wall, "results": results}
+
+
+def _report(rows: list[dict], results: list[dict], plots: list[Path], out: Path, console) -> None:
+    """A finished campaign's tables and files, on ``console``."""
+    if is_fleet_rows(rows):
+        console.print(fleet_table(results))
+        console.print(f"wrote {out / FLEET_RESULTS}, {out / FLEET_EPISODES} and each episode's "
+                      f"run files in {out / RUNS}/")  # fmt: skip
+        return
     console.print(results_table(results))
     if any(math.isfinite(cell_number(r.get("nmac_prob"))) for r in results):
         console.print(daa_table(results))
     console.print(f"wrote {out / 'results.csv'}, {out / 'episodes.csv'} and {len(plots)} plots")
-    return {"episodes": len(rows), "wall_s": wall, "results": results}
 
 
 def _save(rows: list[dict], out: Path, title: str) -> tuple[list[dict], list[Path]]:
     """A finished campaign's ``episodes.csv``, ``results.csv`` and plots; a signal that comes
-    meanwhile waits for them to be whole. Its results and the plots' paths."""
+    meanwhile waits for them to be whole. Its results and the plots' paths (a fleet
+    campaign's: fleet_episodes.csv and fleet_results.csv, no plots)."""
     with interrupts_deferred():
-        results = summarise(rows)
-        out.mkdir(parents=True, exist_ok=True)
-        episode_columns, result_columns = columns_of(rows)
-        write_csv(out / "episodes.csv", episode_columns, rows)
-        write_csv(out / "results.csv", result_columns, results)
-        return results, plot_campaign(results, out, title)
+        results = _write_rows(rows, out)
+        return results, [] if is_fleet_rows(rows) else plot_campaign(results, out, title)
+
+
+def _write_rows(rows: list[dict], out: Path) -> list[dict]:
+    """A campaign's two files from its episodes' rows; its results."""
+    out.mkdir(parents=True, exist_ok=True)
+    if is_fleet_rows(rows):
+        results = summarise_fleet(rows)
+        write_csv(out / FLEET_EPISODES, FLEET_EPISODE_COLUMNS, rows)
+        write_csv(out / FLEET_RESULTS, FLEET_RESULT_COLUMNS, results)
+        return results
+    results = summarise(rows)
+    episode_columns, result_columns = columns_of(rows)
+    write_csv(out / "episodes.csv", episode_columns, rows)
+    write_csv(out / "results.csv", result_columns, results)
+    return results
 
 
 def _keep_finished(rows: list[dict], out: Path, console) -> None:
@@ -132,13 +169,12 @@ def _keep_finished(rows: list[dict], out: Path, console) -> None:
     # Already ending for a signal: another one (a second Ctrl-C, a supervisor's repeated
     # SIGTERM) must not cut the files short, and changes nothing after them.
     with interrupts_deferred(deliver=False):
-        out.mkdir(parents=True, exist_ok=True)
-        episode_columns, result_columns = columns_of(rows)
-        write_csv(out / "episodes.csv", episode_columns, rows)
-        write_csv(out / "results.csv", result_columns, summarise(rows))
+        _write_rows(rows, out)
+        files = ((FLEET_EPISODES, FLEET_RESULTS) if is_fleet_rows(rows)
+                 else ("episodes.csv", "results.csv"))  # fmt: skip
         console.print(
-            f"interrupted: kept the {len(rows)} finished episodes in {out / 'episodes.csv'} "
-            f"and {out / 'results.csv'}; the same command with --resume flies the others"
+            f"interrupted: kept the {len(rows)} finished episodes in {out / files[0]} "
+            f"and {out / files[1]}; the same command with --resume flies the others"
         )
 
 

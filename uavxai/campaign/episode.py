@@ -75,6 +75,12 @@ def run_campaign_episode(
     from uavxai.sim.daa_record import DaaObserver
     from uavxai.sim.flight_quality import FlightQuality
 
+    if scenario.fleet.size > 1:  # it would fly member 0 alone, the others uncommanded traffic
+        raise UserError(
+            f"scenario '{scenario.name}' flies a fleet (fleet.size = {scenario.fleet.size}): "
+            "run_campaign_episode and rerun_row fly one ownship; a fleet's episode is "
+            "uavxai.campaign.run_fleet_episode (uavxai evaluate --dynamics jsbsim)."
+        )
     if method not in avoidance_planners():
         raise UserError(f"method '{method}' is not one of {', '.join(avoidance_planners())}.")
     spec = campaign_spec(scenario, n_intruders, seed, dynamics, goal)

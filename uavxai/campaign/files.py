@@ -73,8 +73,35 @@ DAA_COLUMNS = (
     *(f"{k}{end}" for k in DAA_RATES for end in ("", "_lo", "_hi")),
     "ci_check", "mean_reversals", "mean_path_excess",
 )
+# A fleet campaign's files (docs/fleet.md, "Fleet campaigns"), in place of episodes.csv and
+# results.csv, whose columns are one ownship's transit to a goal: fleet_episodes.csv one row per
+# episode (the fleet mission `uavxai run` flies at its seed; per-member cells space-separated in
+# member order), fleet_results.csv one row per method and intruder count.
+FLEET_EPISODES = "fleet_episodes.csv"
+FLEET_RESULTS = "fleet_results.csv"
+FLEET_EPISODE_COLUMNS = (
+    "method", "intruders", "episode", "seed", "outcome", "completed", "member_outcomes",
+    "flight_time_s", "delivered_bits", "member_delivered_bits", "qos_share", "jain_fairness",
+    "energy_wh", "member_energy_wh", "member_min_separation_m", "member_collisions",
+    "intruder_collisions", "member_nmacs", "intruder_nmacs", "closest_members_m",
+    "closest_intruder_m", "departures", "leave_uav", "leave_t_s", "leave_qos_share_before",
+    "leave_qos_share_after", "leave_crowd_qos_share_before", "leave_crowd_qos_share_after",
+    "leave_recovered_after_s", "decision_ms_p50", "wall_s",
+)
+FLEET_RESULT_COLUMNS = (
+    "method", "intruders", "episodes",
+    *(f"{k}{end}" for k in ("completed_rate", "collision_rate", "member_nmac_rate",
+                            "intruder_nmac_rate") for end in ("", "_lo", "_hi")),
+    "timeout_rate", "out_of_bounds_rate", "fdm_failure_rate", "member_collisions",
+    "intruder_collisions", "member_nmacs", "intruder_nmacs", "min_closest_members_m",
+    "min_closest_intruder_m", "mean_delivered_bits", "min_delivered_bits", "mean_qos_share",
+    "min_qos_share", "mean_jain_fairness", "min_jain_fairness", "mean_energy_wh",
+    "max_energy_wh", "mean_leave_qos_share_before", "mean_leave_qos_share_after",
+    "min_leave_qos_share_after", "leave_never_recovered", "max_leave_recovered_after_s",
+    "mean_wall_s",
+)  # fmt: skip
 # The columns whose values depend on the machine, not on the seed.
-TIMING_COLUMNS = ("decision_ms_p50",)
+TIMING_COLUMNS = ("decision_ms_p50", "wall_s", "mean_wall_s")
 
 
 def has_daa_columns(r: dict) -> bool:

@@ -12,6 +12,7 @@ from pathlib import Path
 from uavxai.campaign.files import (
     DAA_EPISODE_COLUMNS,
     EPISODE_COLUMNS,
+    FLEET_EPISODES,
     FLIGHT_COLUMNS,
     GOAL_COLUMNS,
     RESULT_COLUMNS,
@@ -26,6 +27,18 @@ from uavxai.campaign.statistics import summarise
 from uavxai.errors import UserError
 from uavxai.outputs import cell_number
 from uavxai.processes import interrupts_deferred
+
+
+def _episodes_file(src: Path) -> Path:
+    """A source campaign's episodes.csv; a fleet campaign's folder refused by name (its files
+    are not these)."""
+    if (src / FLEET_EPISODES).is_file() and not (src / "episodes.csv").exists():
+        raise UserError(
+            f"{src}: a fleet campaign ({FLEET_EPISODES}); merge pools one-ownship campaigns "
+            "only. Pooling fleet campaigns is not built: fly one campaign with every seed, "
+            "or read the sources' fleet_episodes.csv together (docs/fleet.md)."
+        )
+    return src / "episodes.csv"
 
 
 def merge_campaigns(sources: Sequence[str | Path], out: str | Path, title: str = "") -> list[dict]:
@@ -44,7 +57,7 @@ def merge_campaigns(sources: Sequence[str | Path], out: str | Path, title: str =
     goals: dict[tuple[str, ...], Path] = {}
     for src in map(Path, sources):
         # files written before the goal was recorded lack its columns, and are taken on trust
-        rows = read_rows(src / "episodes.csv", EPISODE_COLUMNS[: -len(GOAL_COLUMNS)])
+        rows = read_rows(_episodes_file(src), EPISODE_COLUMNS[: -len(GOAL_COLUMNS)])
         rows = [checked_row(r, src / "episodes.csv", i) for i, r in enumerate(rows, start=2)]
         for i, r in enumerate(rows, start=2):
             try:

@@ -12,8 +12,10 @@ import multiprocessing
 import os
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from pathlib import Path
 
 from uavxai.campaign.episode import run_campaign_episode
+from uavxai.campaign.fleet import episode_folder, fleet_scenario, run_fleet_episode
 from uavxai.errors import UserError
 from uavxai.processes import interrupts_deferred
 from uavxai.scenario import Scenario
@@ -52,16 +54,24 @@ def _init_pool_worker(start_method: str, owner: int) -> None:
     _init_worker()
 
 
-def _run_task(scenario: Scenario, task: Task, dynamics: str, goal: Sequence[float]) -> dict:
+def _run_task(
+    scenario: Scenario, task: Task, dynamics: str, goal: Sequence[float], out: Path | None
+) -> dict:
     method, n, i = task
-    row = run_campaign_episode(scenario, method, n, scenario.seed + i, dynamics, goal)
+    if scenario.fleet.size > 1:  # the fleet mission, as `uavxai run` flies it (JSBSim)
+        folder = None if out is None else episode_folder(out, method, n, i)
+        row = run_fleet_episode(scenario, method, n, scenario.seed + i, folder)
+    else:
+        row = run_campaign_episode(scenario, method, n, scenario.seed + i, dynamics, goal)
     row["episode"] = i
     return row
 
 
-def _ray_task(scenario: Scenario, task: Task, dynamics: str, goal: Sequence[float]) -> dict:
+def _ray_task(
+    scenario: Scenario, task: Task, dynamics: str, goal: Sequence[float], out: Path | None
+) -> dict:
     _init_worker()
-    return _run_task(scenario, task, dynamics, goal)
+    return _run_task(scenario, task, dynamics, goal, out)
 
 
 def run_campaign(
@@ -76,19 +86,24 @@ def run_campaign(
     on_done: Callable[[dict], None] | None = None,
     goal: Sequence[float] | None = None,
     finished: Mapping[tuple[str, int, int], dict] | None = None,
+    out: Path | None = None,
 ) -> list[dict]:
     """Fly a campaign; returns the episode rows in (method, intruders, episode) order.
 
     ``on_done`` is called with each row as it finishes (for a progress bar). ``goal``: where
     every episode flies (None: :func:`uavxai.sim.spec.episode_goal` of ``scenario``).
     ``finished``: rows of tasks flown before (a resumed campaign's journal,
-    :mod:`uavxai.journal`), taken as they are instead of flown again.
+    :mod:`uavxai.journal`), taken as they are instead of flown again. ``out``: where a fleet
+    campaign keeps each episode's run files (:func:`uavxai.campaign.fleet.episode_folder`;
+    None: nowhere; with Ray, on the node that flew it).
     """
     from uavxai.sim.spec import episode_goal
 
     check_campaign(scenario, methods, intruders, episodes, dynamics, workers)
     tasks = campaign_tasks(methods, intruders, episodes)
-    common = (dynamics, tuple(episode_goal(scenario) if goal is None else goal))
+    if scenario.fleet.size > 1:  # no goal: each member's station is planned per episode
+        goal = ()
+    common = (dynamics, tuple(episode_goal(scenario) if goal is None else goal), out)
     finished = finished or {}
     # Heavy tasks first (many intruders, tree search) so that workers finish together.
     order = sorted(
@@ -299,3 +314,16 @@ def check_campaign(
         raise UserError(f"--dynamics {dynamics}: allowed {', '.join(DYNAMICS)}.")
     if workers < 1:
         raise UserError(f"--workers {workers}: must be >= 1.")
+    if scenario.fleet.size > 1:
+        if dynamics != "jsbsim":
+            raise UserError(
+                f"--dynamics {dynamics}: scenario '{scenario.name}' flies a fleet (fleet.size = "
+                f"{scenario.fleet.size}), which flies in JSBSim only (the kinematic world has no "
+                "members); give --dynamics jsbsim (docs/fleet.md, \"Fleet campaigns\")."
+            )
+        from uavxai.service.stage import check_planner_fits
+
+        check_planner_fits(scenario)  # what `uavxai run` asks: each episode is its run
+        for m in methods:  # every member flies the method: refused now, by name, if it cannot
+            for n in intruders:
+                fleet_scenario(scenario, m, n)

@@ -43,6 +43,14 @@ USERS_COLUMNS = ("t", "user", "x", "y")
 ServiceRow = tuple[float, int, float, float, float]
 
 
+def jain_fairness(bits: np.ndarray) -> float:
+    """Jain's fairness of the per-user delivered ``bits``, (sum x)^2 / (K sum x^2): 1 when
+    everybody got the same, 1/K when one user got everything, 0 when nothing was delivered."""
+    bits = np.asarray(bits, dtype=float)
+    square = float((bits**2).sum())
+    return float(bits.sum()) ** 2 / (len(bits) * square) if square > 0 else 0.0
+
+
 def service_lines(rows: list[ServiceRow], uav: int = 0, users: np.ndarray | None = None) -> str:
     """``rows`` as service.csv's lines, served by ``uav``; ``users`` maps a row's user (an
     index into the serving UAV's own users) to the crowd's (None: the same)."""
@@ -238,8 +246,7 @@ class Delivery:
         """The mission's service fields (README's ``mission``), JSON-ready."""
         bits = self._bits
         total = float(bits.sum())
-        square = float((bits**2).sum())
-        jain = total**2 / (len(bits) * square) if square > 0 else 0.0
+        jain = jain_fairness(bits)
         user_s = self._time_s * self.channel.k
         return {
             "delivered_bits": total,

@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from uavxai.avoidance.types import Intruder
+from uavxai.comms.delivery import jain_fairness
 from uavxai.dynamics.state import TrafficState
 from uavxai.geometry import turn_rate_of_bank
 from uavxai.scenario import Scenario
@@ -367,6 +368,7 @@ class FleetService(EngineStep):
         self._gone: list[int] = []  # the UAVs that left early, in order
         self.departures: list[dict] = []
         self.tally = QosTally(len(channel.users), self.qos_bps)
+        self.bits = np.zeros(len(channel.users))  # each user's delivered bits, whichever UAV
         self._began: dict[int, tuple] = {}  # the tally when each UAV began to serve
         self._marks: list[tuple] = []  # each departure's (its UAV's start, the departure)
         self._files = service_files(out)
@@ -415,6 +417,7 @@ class FleetService(EngineStep):
             rates[mine] = [r[4] for r in rows]
             if self._files:
                 self._service.write(service_lines(rows, n, mine))
+        self.bits += rates * dt
         if anyone:  # the QoS shares before and after a departure
             self.tally.add(rates)
             for d in self.departures:
@@ -501,7 +504,13 @@ class FleetService(EngineStep):
             if self._gone:  # the association changed: whom it serves at the end
                 entry["users_served_after"] = [int(k) for k in self.mine[n]]
             total += bits
-        summary.setdefault("mission", {})["delivered_bits"] = total
+        mission = summary.setdefault("mission", {})
+        mission["delivered_bits"] = total
+        # the crowd's: each user's bits from whichever UAV served it, their Jain fairness, and
+        # the QoS share over every sample in which any UAV served (a user none serves below it)
+        mission["delivered_bits_per_user"] = [float(b) for b in self.bits]
+        mission["jain_fairness"] = jain_fairness(self.bits)
+        mission["qos_user_seconds_share"] = self.tally.share((0.0, 0), self.tally.mark())[0]
         if self._gone or self._leave is not None:
             summary["fleet_departures"] = [
                 self._shares(d, *marks) for d, marks in zip(self.departures, self._marks,

@@ -8,7 +8,7 @@ pass-through between samples counts), then leaving the flight area, then the goa
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 
 import numpy as np
 
@@ -53,24 +53,18 @@ class Judge:
         h, v = self.nmac_m
         if separation_m is not None and separation_m > math.hypot(h, v):
             return False
-        if now.n < 2 or prev.ids != now.ids:
-            prev = now  # a replaced row: judge the newcomer where it is
-        own = np.stack([prev.pos[0], now.pos[0]])
-        intruders = np.stack([prev.pos[1:], now.pos[1:]])
-        return bool(nmac(own, intruders, *self.nmac_m).any()) if now.n > 1 else False
+        if now.n < 2:
+            return False
+        own, intruders = pieces_since_last_sample(prev, now, 0, range(1, now.n))
+        return bool(nmac(own, intruders, *self.nmac_m).any())
 
     def separation(self, prev: TrafficState, now: TrafficState) -> float:
-        """Smallest ownship-intruder distance between two samples (inf without intruders).
-        A row whose aircraft was replaced in between (persistent traffic) counts from now."""
+        """Smallest ownship-intruder distance between two samples (inf without intruders),
+        along :func:`pieces_since_last_sample` (a replaced row counts from now)."""
         if now.n < 2 or prev.n != now.n:
             return now.min_separation()
-        if prev.ids == now.ids:
-            return closest_approach(prev.pos[0], now.pos[0], prev.pos[1:], now.pos[1:])
-        same = np.array([a == b for a, b in zip(prev.ids[1:], now.ids[1:], strict=True)])
-        new = now.pos[1:][~same]
-        fresh = float(np.min(np.linalg.norm(new - now.pos[0], axis=1))) if len(new) else math.inf
-        kept = closest_approach(prev.pos[0], now.pos[0], prev.pos[1:][same], now.pos[1:][same])
-        return min(kept, fresh)
+        own, intruders = pieces_since_last_sample(prev, now, 0, range(1, now.n))
+        return closest_approach(own[0], own[1], intruders[0], intruders[1])
 
     def judge(self, now: TrafficState, flown_min_m: float, failure: str | None) -> Outcome | None:
         """The outcome the episode ends with after this sample, or None to go on."""
@@ -84,3 +78,28 @@ class Judge:
         if self.goal is not None and math.dist((x, y, h), self.goal) < self.goal_radius_m:
             return Outcome.GOAL
         return None
+
+
+def pieces_since_last_sample(
+    prev: TrafficState, now: TrafficState, m: int, others: Iterable[int]
+) -> tuple[np.ndarray, np.ndarray]:
+    """The pieces since the last sample along which row ``m`` is judged against each of rows
+    ``others`` (the collision and NMAC tests of the judge and of a fleet's encounters): (own,
+    them), each (2, k, 3), the two rows' positions at each piece's start and end (now).
+
+    A pair whose two aircraft are those of the last sample starts there (both moving linearly
+    in between: a pass-through no sample shows counts); a pair one of whose rows was replaced
+    in between (persistent traffic; or the rows changed in number) starts now, where the
+    newcomer is: it was not there before. The other pairs keep their piece."""
+    rows = list(others)
+    if prev.ids == now.ids:  # most samples: every pair keeps its piece
+        same, start = np.ones(now.n, dtype=bool), prev
+    elif prev.n == now.n:
+        same, start = np.array([a == b for a, b in zip(prev.ids, now.ids, strict=True)]), prev
+    else:
+        same, start = np.zeros(now.n, dtype=bool), now
+    kept = (same[rows] & same[m])[:, None]
+    end_own = np.broadcast_to(now.pos[m], (len(rows), 3))
+    own = np.stack([np.where(kept, start.pos[m], end_own), end_own])
+    them = np.stack([np.where(kept, start.pos[rows], now.pos[rows]), now.pos[rows]])
+    return own, them
