@@ -5,12 +5,12 @@ ceiling's level-off for nothing (the paper's 3-D distance: 1)."""
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pytest
 
 from uavxai.avoidance import Ownship, PlannerConfig
+from uavxai.avoidance.kernel import wall_share
+from uavxai.avoidance.model import EncounterModel
 from uavxai.avoidance.planners import make_planner
 from uavxai.cli import main
 
@@ -37,7 +37,8 @@ def _leaf_values(tree, cfg: PlannerConfig, scale: float) -> tuple[np.ndarray, np
 def test_a_leaf_counts_its_height_off_the_goal_by_the_scale(scale: float) -> None:
     tree, cfg = _tree(scale)
     got, want = _leaf_values(tree, cfg, scale)
-    assert got.size > 20 and np.ptp(tree.state[:, 2]) > 10.0  # leaves at several heights
+    leaf = (tree.depth == tree.depth.max()) & (tree.visits > 0) & (tree.terminal == 0)
+    assert got.size > 20 and np.ptp(tree.state[leaf, 2]) > 10.0  # leaves at several heights
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
 
 
@@ -54,9 +55,37 @@ def test_at_the_legs_height_with_the_papers_actions_nothing_changes() -> None:
         np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
 
 
-def test_exhaustive_keeps_the_papers_distance() -> None:
-    p = make_planner("exhaustive", PlannerConfig(goal_height_scale=8.0))
-    assert p.config.goal_height_scale == 1.0
+def test_a_leaf_farther_than_the_diagonal_is_worth_0_never_less() -> None:
+    # the review's case: near the ceiling, far from a goal at 120 m, a scale of 50 took leaf
+    # values to -1.9, so a line that could no longer turn away from a wall (its value times
+    # 0) outranked every other; the value now stops at 0 before the factors multiply it
+    own = Ownship(x=300.0, y=300.0, h=290.0, speed=20.0, heading=45.0)
+    goal = (1900.0, 1900.0, 120.0)
+    planner = make_planner("mcts_sep", PlannerConfig(goal_height_scale=50.0, backup="best"))
+    tree = planner.plan(own, [], goal).tree
+    cfg, model = planner.config, EncounterModel(planner.config)
+    leaf = (tree.visits > 0) & (tree.terminal == 0) & (tree.depth == tree.depth.max())
+    got = tree.value_sum[leaf] / tree.visits[leaf]
+    rows = tree.state[leaf]
+    d = np.sqrt((rows[:, 0] - goal[0]) ** 2 + (rows[:, 1] - goal[1]) ** 2
+                + (50.0 * (rows[:, 2] - goal[2])) ** 2)  # fmt: skip
+    assert got.size > 20 and (1.0 - d / cfg.d_max).min() < 0.0  # the case arises
+    want = np.maximum(1.0 - d / cfg.d_max, 0.0) * [wall_share(model, r) for r in rows]
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
+    assert got.min() >= 0.0
+
+
+def test_exhaustive_and_mcts_daa_keep_the_papers_distance() -> None:
+    # exhaustive's leaf values at 8 are those at 1 (the setting is dropped from its config)
+    own = Ownship(x=1000.0, y=500.0, h=150.0, speed=20.0, heading=0.0)
+
+    def values(scale: float) -> np.ndarray:
+        cfg = PlannerConfig(goal_height_scale=scale, actions="vertical", depth=2)
+        return make_planner("exhaustive", cfg).plan(own, [], GOAL).tree.value_sum
+
+    np.testing.assert_array_equal(values(1.0), values(8.0))
+    daa = make_planner("mcts_daa", PlannerConfig(goal_height_scale=8.0))
+    assert daa.inner.config.goal_height_scale == 1.0
 
 
 def test_the_scale_is_checked_at_load(tmp_path, capsys) -> None:
@@ -65,4 +94,6 @@ def test_the_scale_is_checked_at_load(tmp_path, capsys) -> None:
     assert main(["validate", str(path)]) == 2
     err = capsys.readouterr().err
     assert "Traceback" not in err and "goal_height_scale" in err
-    assert math.isclose(PlannerConfig().goal_height_scale, 1.0)
+    path.write_text("avoidance:\n  mcts:\n    goal_height_scale: 51\n")
+    assert main(["validate", str(path)]) == 2
+    assert "goal_height_scale" in capsys.readouterr().err

@@ -47,6 +47,7 @@ import numpy as np
 from uavxai.avoidance import PlannerConfig, make_planner
 from uavxai.avoidance.exhaustive import ExhaustivePlanner
 from uavxai.avoidance.types import Ownship, Planner
+from uavxai.errors import UserError
 from uavxai.scenario import default_scenario
 from uavxai.sim.build import open_world
 from uavxai.sim.build import run_kinematic as run_episode
@@ -152,12 +153,15 @@ def episodes(planner: Planner, scenario, n_intruders: int, count: int, first: in
 
 def setup(args, n_intruders: int):
     """(scenario, encounters, planner pairs, warmed) at one traffic density."""
-    scenario = default_scenario(
-        "bench-mcts",
-        intruders={"count": n_intruders},
-        avoidance={"mcts": {"simulations": args.simulations, "depth": args.depth,
-                            "risk": args.risk, **args.mcts}},  # fmt: skip
-    )
+    try:
+        scenario = default_scenario(
+            "bench-mcts",
+            intruders={"count": n_intruders},
+            avoidance={"mcts": {"simulations": args.simulations, "depth": args.depth,
+                                "risk": args.risk, **args.mcts}},  # fmt: skip
+        )
+    except UserError as exc:  # a bad --mcts setting: the scenario's own message, no traceback
+        sys.exit(f"bench_mcts.py: {exc}")
     cfg = PlannerConfig.from_scenario(scenario)
     cases = encounters(scenario, args.encounters, n_intruders, args.track_error)
     planners = pairs(cfg, not args.no_vertical, args.sep)
@@ -250,6 +254,8 @@ def _setting(ap: argparse.ArgumentParser, kv: str) -> tuple[str, object]:
     key, sep, value = kv.partition("=")
     if not sep or not key:
         ap.error(f"--mcts: KEY=VALUE, e.g. backup=best, got {kv!r}")
+    if key in ("simulations", "depth", "risk"):
+        ap.error(f"--mcts {key}=...: give it as --{key}, which the report prints")
     try:
         return key, float(value)
     except ValueError:
@@ -285,6 +291,8 @@ def main() -> None:
     if len(args.track_error) != 2 or min(args.track_error) < 0:
         ap.error("--track-error: two numbers >= 0, position m and velocity m/s (2.9,2.4)")
     args.mcts = dict(_setting(ap, kv) for kv in args.mcts)
+    if args.seed < 0:
+        ap.error(f"--seed: the episodes' first seed, a whole number >= 0, got {args.seed}")
     if args.quick:
         args.encounters, args.episodes, args.repeats = 10, 4, 1
     try:

@@ -528,10 +528,12 @@ def run(tree, bz, brise, bend, bscal, child, tracks, climbs, drift, par, explore
         v = value[node]
         if v != v:  # nan: an open leaf at the depth limit, scored when first reached
             # goal_height_scale: a metre of height off the goal's counts as that many (1: the
-            # paper's 3-D distance)
+            # paper's 3-D distance). Counted so, a leaf may lie farther than the area's
+            # diagonal: its value stops at 0, or the factors below (at most 1: NMAC intrusion,
+            # walls, risk) would reward what they cost. At 1 it never does (d <= d_max).
             d = math.sqrt((state[node, 0] - par[GX]) ** 2 + (state[node, 1] - par[GY]) ** 2
                           + (par[HSCALE] * (state[node, 2] - par[GH])) ** 2)  # fmt: skip
-            v = (1.0 - d / par[DMAX]) * clear[node]
+            v = max(1.0 - d / par[DMAX], 0.0) * clear[node]
             if par[WALLT] > 0:
                 v *= wall_factor(state[node], par)
             if par[RISK] > 0:
