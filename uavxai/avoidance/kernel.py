@@ -33,7 +33,7 @@ BALLRE, BALLIM, BALLR, OWNSTEP = range(4)
 # Entries of ``par``.
 (DMIN, GOALR, XB0, XB1, YB0, YB1, HB0, HB1, CLIMB, DUR, TLEFT, LATE, DMAX, VERT, TDOWN, TLEVEL,
  TUP, GX, GY, GH, CULL, ASPECT, RISK, NMACW, NMACH, NMACV, WALLT, TURNG,
- ROLLT, BEST, GDELAY, VSCALED, HSCALE) = range(33)  # fmt: skip
+ ROLLT, BEST, GDELAY, VSCALED, HSCALE, PINT) = range(34)  # fmt: skip
 _TAU = 2.0 * math.pi
 GOAL_DELAY = 1e-4  # value of reaching the goal one tree level later (a tie-break, goal_delay)
 _NONE, _GOAL, _COLLISION, _OUT, _TIMEOUT = 0, 1, 2, 3, 4
@@ -450,6 +450,40 @@ def wall_factor(row, par):
     return f
 
 
+@njit(cache=True)
+def pinned_factor(row, lvl, tracks, par):
+    """What an open leaf (model state ``row`` at the end of tree level ``lvl``) keeps of its
+    value for the tracks it is pinned by (``pinned_slack_s``, the vertical action set only). A
+    track pins it when the ownship is below it with less room from the track down to the
+    floor's level-off than the track's conflict volume is tall (half-height: ``d_min`` plus
+    its margin, over the spheroid's stretch or the cylinder's aspect), or above it with too
+    little room up to the ceiling's: it can let that track by only sideways. Each pinning
+    track multiplies in the seconds before it could close the horizontal gap left to its
+    volume, both at their speeds head-on, over ``pinned_slack_s``, clipped to [0, 1]."""
+    txy, th, tm, tmargined, tv = tracks[0], tracks[1], tracks[2], tracks[3], tracks[8]
+    n = txy.shape[1] - 1
+    dt = par[DUR] / n
+    x, y, h, v = row[0], row[1], row[2], max(row[3], 0.0)
+    f = 1.0
+    for q in range(txy.shape[2]):
+        tq = th[lvl, n, q]
+        room = tq - par[TDOWN] if h < tq else par[TUP] - tq
+        base = par[DMIN] + (tm[lvl, n, q] if tmargined[lvl] else 0.0)
+        if par[ASPECT] > 0:
+            half = base / par[ASPECT]
+        elif par[VSCALED] > 0:
+            half = base / tv[lvl, n, q]
+        else:
+            half = base
+        if room >= half:
+            continue
+        p = txy[lvl, n, q]
+        gap = math.hypot(x - p.real, y - p.imag) - base
+        closing = max(v + abs(p - txy[lvl, n - 1, q]) / dt, 1e-3)
+        f *= min(max(gap / closing / par[PINT], 0.0), 1.0)
+    return f
+
+
 def wall_share(model: EncounterModel, row: np.ndarray) -> float:
     """:func:`wall_factor` of a model state row outside a search (1 without ``wall_slack_s``):
     0 where the ownship can no longer turn away from a wall."""
@@ -536,6 +570,8 @@ def run(tree, bz, brise, bend, bscal, child, tracks, climbs, drift, par, explore
             v = max(1.0 - d / par[DMAX], 0.0) * clear[node]
             if par[WALLT] > 0:
                 v *= wall_factor(state[node], par)
+            if par[PINT] > 0:
+                v *= pinned_factor(state[node], depth[node] - 1, tracks, par)
             if par[RISK] > 0:
                 v *= surv[node]
             value[node] = v
@@ -668,7 +704,8 @@ def _params(
          cfg.wall_slack_s, G * math.tan(cfg.bank_limit_rad),
          cfg.bank_limit_deg / cfg.roll_rate_limit_deg_s, float(cfg.backup == "best"),
          goal_delay(cfg, len(tracks)),
-         float(any(t.vscale is not None for t in tracks)), cfg.goal_height_scale],  # fmt: skip
+         float(any(t.vscale is not None for t in tracks)), cfg.goal_height_scale,
+         cfg.pinned_slack_s if model.vertical else 0.0],  # fmt: skip
         dtype=float,
     )
 

@@ -200,7 +200,8 @@ class PlannerConfig(SchemaSettings):  # type: ignore[misc,valid-type]
                 f"PlannerConfig.nmac_cost must be in [0, 1) (a line inside the NMAC volume "
                 f"keeps some value: the collision stays the hard conflict), got {self.nmac_cost}."
             )
-        for name in ("late_collision_value", "alert_horizon_s", "alert_hold_s", "wall_slack_s"):
+        for name in ("late_collision_value", "alert_horizon_s", "alert_hold_s", "wall_slack_s",
+                     "pinned_slack_s"):  # fmt: skip
             if not getattr(self, name) >= 0:
                 raise UserError(f"PlannerConfig.{name} must be >= 0, got {getattr(self, name)}.")
         # A time-out through the NMAC volume keeps 0.1 x (1 - nmac_cost) of its value, and a

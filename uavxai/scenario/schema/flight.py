@@ -166,6 +166,16 @@ class MCTSConfig(Section):
     # there or times out above the goal. The ownship's airspeed over its climb rate (20 / 2.5
     # = 8) counts a metre of height as the time it takes. `exhaustive` keeps the paper's.
     goal_height_scale: Annotated[float, Field(ge=1, le=50)] = 1.0
+    # Pinned against the floor or the ceiling (issue 31; docs/results "Pinned under the
+    # layer"), the vertical action set's MCTS planners only: a leaf of the compiled search
+    # below a track with less room under it, down to the floor's level-off, than the track's
+    # conflict volume is tall (or above one with too little room up to the ceiling's) can let
+    # it by only sideways; it keeps the share of its value that the seconds before that track
+    # could close the gap left to its volume (at both speeds) are of pinned_slack_s, each
+    # pinning track's share multiplied in (uavxai.avoidance.kernel.pinned_factor). Where the
+    # floor's level-off lies within the collision distance of the traffic's layer, descending
+    # under a track is a dead end the tree's 16 s horizon does not show. 0: not weighed.
+    pinned_slack_s: Annotated[float, Field(ge=0, le=60)] = 0.0
 
 
 class NMAC(Section):

@@ -1,0 +1,111 @@
+"""Pinned against the floor (`avoidance.mcts.pinned_slack_s`, issue 31): a leaf of the vertical
+action set's compiled search below a track with too little room under it (down to the floor's
+level-off) for the track's conflict volume can let it by only sideways, and keeps the share of
+its value that the seconds before the track could close on it are of the slack."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from uavxai.avoidance import Ownship, PlannerConfig
+from uavxai.avoidance.planners import make_planner
+from uavxai.avoidance.types import Intruder
+from uavxai.cli import main
+
+GOAL = (1000.0, 1900.0, 120.0)
+SLACK = 4.0
+# the ownship near the floor's level-off (world.h 50 + vertical_margin_m 20 = 70 m), 1,400 m
+# short of the goal and far from every wall, due north
+OWN = Ownship(x=1000.0, y=500.0, h=75.0, speed=20.0, heading=0.0)
+
+
+def _config(slack: float) -> PlannerConfig:
+    # the constant-velocity prediction with exact tracks: no margin, the volume is d_min's sphere
+    return PlannerConfig(pinned_slack_s=slack, intruder_model="cv", uncertainty_k=0.0)
+
+
+def _tree(slack: float, intruders: list[Intruder], planner: str = "mcts_vertical"):
+    return make_planner(planner, _config(slack)).plan(OWN, intruders, GOAL).tree
+
+
+def _open_leaves(tree) -> np.ndarray:
+    return (tree.depth == tree.depth.max()) & (tree.visits > 0) & (tree.terminal == 0)
+
+
+def _expected_factor(tree, leaf: np.ndarray, intruders: list[Intruder], cfg: PlannerConfig):
+    """The factor by the docstring's rule, from each leaf's state and the straight tracks."""
+    floor_lo = cfg.h_bounds[0] + cfg.vertical_margin_m
+    ceiling_hi = cfg.h_bounds[1] - cfg.vertical_margin_m
+    x, y, h, v = (tree.state[leaf, i] for i in range(4))
+    t = tree.depth[leaf] * cfg.action_hold_s  # a leaf ends its level: depth x the hold
+    f = np.ones(leaf.sum())
+    for it in intruders:
+        room = np.where(h < it.h, it.h - floor_lo, ceiling_hi - it.h)
+        gap = np.hypot(x - (it.x + it.vx * t), y - (it.y + it.vy * t)) - cfg.d_min_m
+        share = np.clip(gap / (v + math.hypot(it.vx, it.vy)) / SLACK, 0.0, 1.0)
+        f *= np.where(room < cfg.d_min_m, share, 1.0)
+    return f
+
+
+def test_a_leaf_under_a_low_track_keeps_its_share_of_the_slack() -> None:
+    # a track at 105 m crossing ahead: 35 m above the floor's level-off, under d_min (50 m)
+    intruders = [Intruder(id=7, x=700.0, y=800.0, h=105.0, vx=15.0, vy=0.0)]
+    cfg = _config(SLACK)
+    tree = make_planner("mcts_vertical", cfg).plan(OWN, intruders, GOAL).tree
+    leaf = _open_leaves(tree)
+    got = tree.value_sum[leaf] / tree.visits[leaf]
+    x, y, h = (tree.state[leaf, i] for i in range(3))
+    d = np.sqrt((x - GOAL[0]) ** 2 + (y - GOAL[1]) ** 2 + (h - GOAL[2]) ** 2)
+    factor = _expected_factor(tree, leaf, intruders, cfg)
+    assert leaf.sum() > 20
+    assert (factor < 1).sum() > 5 and (factor == 1).sum() > 0  # some pinned, some clear of it
+    np.testing.assert_allclose(got, (1.0 - d / cfg.d_max) * factor, rtol=0, atol=1e-9)
+
+
+def test_a_track_with_room_under_it_pins_nothing() -> None:
+    # 130 m: 60 m above the floor's level-off, more than d_min; and without the key
+    high = [Intruder(id=7, x=700.0, y=800.0, h=130.0, vx=15.0, vy=0.0)]
+    low = [Intruder(id=7, x=700.0, y=800.0, h=105.0, vx=15.0, vy=0.0)]
+    for a, b in ((_tree(SLACK, high), _tree(0.0, high)), (_tree(SLACK, []), _tree(0.0, []))):
+        for name in ("visits", "value_sum", "action"):
+            np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+    assert not np.array_equal(_tree(SLACK, low).value_sum, _tree(0.0, low).value_sum)
+
+
+@pytest.mark.parametrize(("half_height", "pins"), [(25.0, False), (40.0, True)])
+def test_the_room_needed_is_the_conflict_volumes_height(half_height: float, pins: bool) -> None:
+    # the conflict cylinder: 35 m of room under a track at 105 m holds a 25 m half-height,
+    # not a 40 m one
+    low = [Intruder(id=7, x=700.0, y=800.0, h=105.0, vx=15.0, vy=0.0)]
+
+    def tree(slack: float):
+        cfg = PlannerConfig(
+            pinned_slack_s=slack, intruder_model="cv", uncertainty_k=0.0,
+            conflict_volume="cylinder", conflict_half_height_m=half_height,
+        )  # fmt: skip
+        return make_planner("mcts_vertical", cfg).plan(OWN, low, GOAL).tree
+
+    same = np.array_equal(tree(SLACK).value_sum, tree(0.0).value_sum)
+    assert same is not pins
+
+
+def test_only_the_vertical_set_weighs_it_and_not_the_references() -> None:
+    low = [Intruder(id=7, x=700.0, y=800.0, h=105.0, vx=15.0, vy=0.0)]
+    # the paper's nine hold the leg's height: no floor to be pinned against
+    np.testing.assert_array_equal(_tree(SLACK, low, "mcts").value_sum,
+                                  _tree(0.0, low, "mcts").value_sum)  # fmt: skip
+    assert make_planner("exhaustive", _config(SLACK)).config.pinned_slack_s == 0.0
+    assert make_planner("mcts_daa", _config(SLACK)).inner.config.pinned_slack_s == 0.0
+    assert make_planner("mcts_sep", _config(SLACK)).config.pinned_slack_s == SLACK
+
+
+@pytest.mark.parametrize("bad", ["-1", "61", "'four'"])
+def test_the_slack_is_checked_at_load(tmp_path, capsys, bad: str) -> None:
+    path = tmp_path / "s.yaml"
+    path.write_text(f"avoidance:\n  mcts:\n    pinned_slack_s: {bad}\n")
+    assert main(["validate", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "pinned_slack_s" in err
