@@ -22,13 +22,16 @@ SLACK = 4.0
 OWN = Ownship(x=1000.0, y=500.0, h=75.0, speed=20.0, heading=0.0)
 
 
-def _config(slack: float) -> PlannerConfig:
+def _config(slack: float, wind: tuple[float, float] = (0.0, 0.0)) -> PlannerConfig:
     # the constant-velocity prediction with exact tracks: no margin, the volume is d_min's sphere
-    return PlannerConfig(pinned_slack_s=slack, intruder_model="cv", uncertainty_k=0.0)
+    return PlannerConfig(
+        pinned_slack_s=slack, intruder_model="cv", uncertainty_k=0.0, wind_mps=wind
+    )
 
 
-def _tree(slack: float, intruders: list[Intruder], planner: str = "mcts_vertical"):
-    return make_planner(planner, _config(slack)).plan(OWN, intruders, GOAL).tree
+def _tree(slack: float, intruders: list[Intruder], planner: str = "mcts_vertical", *,
+          own: Ownship = OWN, goal: tuple[float, float, float] = GOAL):  # fmt: skip
+    return make_planner(planner, _config(slack)).plan(own, intruders, goal).tree
 
 
 def _open_leaves(tree) -> np.ndarray:
@@ -41,24 +44,35 @@ def _expected_factor(tree, leaf: np.ndarray, intruders: list[Intruder], cfg: Pla
     ceiling_hi = cfg.h_bounds[1] - cfg.vertical_margin_m
     x, y, h, v = (tree.state[leaf, i] for i in range(4))
     t = tree.depth[leaf] * cfg.action_hold_s  # a leaf ends its level: depth x the hold
+    wx, wy = cfg.wind_mps
     f = np.ones(leaf.sum())
     for it in intruders:
         room = np.where(h < it.h, it.h - floor_lo, ceiling_hi - it.h)
         gap = np.hypot(x - (it.x + it.vx * t), y - (it.y + it.vy * t)) - cfg.d_min_m
-        share = np.clip(gap / (v + math.hypot(it.vx, it.vy)) / SLACK, 0.0, 1.0)
+        closing = v + math.hypot(it.vx - wx, it.vy - wy)  # airspeed + the track's air speed
+        share = np.clip(gap / closing / SLACK, 0.0, 1.0)
         f *= np.where(room < cfg.d_min_m, share, 1.0)
     return f
 
 
-def test_a_leaf_under_a_low_track_keeps_its_share_of_the_slack() -> None:
-    # a track at 105 m crossing ahead: 35 m above the floor's level-off, under d_min (50 m)
-    intruders = [Intruder(id=7, x=700.0, y=800.0, h=105.0, vx=15.0, vy=0.0)]
-    cfg = _config(SLACK)
-    tree = make_planner("mcts_vertical", cfg).plan(OWN, intruders, GOAL).tree
+@pytest.mark.parametrize(
+    ("own_h", "track_h", "wind"),
+    [
+        (75.0, 105.0, (0.0, 0.0)),  # under a track 35 m above the floor's level-off (70 m)
+        (265.0, 250.0, (0.0, 0.0)),  # over one 30 m under the ceiling's (280 m)
+        (75.0, 105.0, (-6.0, 3.0)),  # a steady wind: closing in the air mass
+    ],
+)
+def test_a_pinned_leaf_keeps_its_share_of_the_slack(own_h, track_h, wind) -> None:
+    intruders = [Intruder(id=7, x=700.0, y=800.0, h=track_h, vx=15.0, vy=0.0)]
+    cfg = _config(SLACK, wind)
+    own = Ownship(x=OWN.x, y=OWN.y, h=own_h, speed=OWN.speed, heading=OWN.heading)
+    goal = (GOAL[0], GOAL[1], own_h)
+    tree = make_planner("mcts_vertical", cfg).plan(own, intruders, goal).tree
     leaf = _open_leaves(tree)
     got = tree.value_sum[leaf] / tree.visits[leaf]
     x, y, h = (tree.state[leaf, i] for i in range(3))
-    d = np.sqrt((x - GOAL[0]) ** 2 + (y - GOAL[1]) ** 2 + (h - GOAL[2]) ** 2)
+    d = np.sqrt((x - goal[0]) ** 2 + (y - goal[1]) ** 2 + (h - goal[2]) ** 2)
     factor = _expected_factor(tree, leaf, intruders, cfg)
     assert leaf.sum() > 20
     assert (factor < 1).sum() > 5 and (factor == 1).sum() > 0  # some pinned, some clear of it
@@ -94,9 +108,14 @@ def test_the_room_needed_is_the_conflict_volumes_height(half_height: float, pins
 
 def test_only_the_vertical_set_weighs_it_and_not_the_references() -> None:
     low = [Intruder(id=7, x=700.0, y=800.0, h=105.0, vx=15.0, vy=0.0)]
-    # the paper's nine hold the leg's height: no floor to be pinned against
-    np.testing.assert_array_equal(_tree(SLACK, low, "mcts").value_sum,
-                                  _tree(0.0, low, "mcts").value_sum)  # fmt: skip
+    # the paper's nine hold the leg's height, here 80 m under a track at 105 m: every leaf
+    # would be pinned, but they have no climb or descent to be pinned out of
+    goal = (GOAL[0], GOAL[1], 80.0)
+    np.testing.assert_array_equal(_tree(SLACK, low, "mcts", goal=goal).value_sum,
+                                  _tree(0.0, low, "mcts", goal=goal).value_sum)  # fmt: skip
+    # the vertical set's tree is pinned there (the comparison above could fail)
+    assert not np.array_equal(_tree(SLACK, low, goal=goal).value_sum,
+                              _tree(0.0, low, goal=goal).value_sum)  # fmt: skip
     assert make_planner("exhaustive", _config(SLACK)).config.pinned_slack_s == 0.0
     assert make_planner("mcts_daa", _config(SLACK)).inner.config.pinned_slack_s == 0.0
     assert make_planner("mcts_sep", _config(SLACK)).config.pinned_slack_s == SLACK

@@ -451,7 +451,7 @@ def wall_factor(row, par):
 
 
 @njit(cache=True)
-def pinned_factor(row, lvl, tracks, par):
+def pinned_factor(row, lvl, tracks, drift, par):
     """What an open leaf (model state ``row`` at the end of tree level ``lvl``) keeps of its
     value for the tracks it is pinned by (``pinned_slack_s``, the vertical action set only). A
     track pins it when the ownship is below it with less room from the track down to the
@@ -459,7 +459,10 @@ def pinned_factor(row, lvl, tracks, par):
     its margin, over the spheroid's stretch or the cylinder's aspect), or above it with too
     little room up to the ceiling's: it can let that track by only sideways. Each pinning
     track multiplies in the seconds before it could close the horizontal gap left to its
-    volume, both at their speeds head-on, over ``pinned_slack_s``, clipped to [0, 1]."""
+    volume, both at their speeds head-on (the ownship's airspeed against the track's velocity
+    in the air mass, ``drift`` the wind's carry), over ``pinned_slack_s``, clipped to [0, 1].
+    The half-height is the one :func:`_hits` tests the leaf's last chord with (the spheroid's
+    stretch the smaller of the chord's two ends')."""
     txy, th, tm, tmargined, tv = tracks[0], tracks[1], tracks[2], tracks[3], tracks[8]
     n = txy.shape[1] - 1
     dt = par[DUR] / n
@@ -472,14 +475,14 @@ def pinned_factor(row, lvl, tracks, par):
         if par[ASPECT] > 0:
             half = base / par[ASPECT]
         elif par[VSCALED] > 0:
-            half = base / tv[lvl, n, q]
+            half = base / min(tv[lvl, n, q], tv[lvl, n - 1, q])
         else:
             half = base
         if room >= half:
             continue
         p = txy[lvl, n, q]
         gap = math.hypot(x - p.real, y - p.imag) - base
-        closing = max(v + abs(p - txy[lvl, n - 1, q]) / dt, 1e-3)
+        closing = max(v + abs(p - txy[lvl, n - 1, q] - (drift[n] - drift[n - 1])) / dt, 1e-3)
         f *= min(max(gap / closing / par[PINT], 0.0), 1.0)
     return f
 
@@ -571,7 +574,7 @@ def run(tree, bz, brise, bend, bscal, child, tracks, climbs, drift, par, explore
             if par[WALLT] > 0:
                 v *= wall_factor(state[node], par)
             if par[PINT] > 0:
-                v *= pinned_factor(state[node], depth[node] - 1, tracks, par)
+                v *= pinned_factor(state[node], depth[node] - 1, tracks, drift, par)
             if par[RISK] > 0:
                 v *= surv[node]
             value[node] = v
