@@ -128,3 +128,47 @@ def test_the_slack_is_checked_at_load(tmp_path, capsys, bad: str) -> None:
     assert main(["validate", str(path)]) == 2
     err = capsys.readouterr().err
     assert "Traceback" not in err and "pinned_slack_s" in err
+
+
+def test_the_decision_says_which_track_pins_a_line() -> None:
+    # explanation as data: each root option's best line's open end, with the tracks that pin
+    # it and the share each leaves, as the search weighed it; decisions.jsonl and its table
+    from uavxai.xai.explain import decision_record, render_record
+
+    intruders = [Intruder(id=7, x=700.0, y=800.0, h=105.0, vx=15.0, vy=0.0)]
+    cfg = _config(SLACK)
+    decision = make_planner("mcts_vertical", cfg).plan(OWN, intruders, GOAL)
+    tree = decision.tree
+    pinned = [c for c in decision.children if c.pinned]
+    assert pinned and len(pinned) < len(decision.children)
+    for c in decision.children:
+        root_child = int(tree.children_of(0)[c.action])
+        end = tree.best_line(root_child)[-1]
+        leaf = np.zeros(len(tree.depth), dtype=bool)
+        leaf[end] = True
+        want = _expected_factor(tree, leaf, intruders, cfg)[0]
+        if tree.terminal[end] != 0 or want == 1.0:
+            assert c.pinned == ()
+        else:
+            assert c.pinned == ((7, pytest.approx(want, abs=1e-12)),)
+    record = decision_record(0.0, OWN, intruders, decision)
+    by_action = {c["action"]["index"]: c for c in record["children"]}
+    for c in decision.children:
+        assert ("pinned" in by_action[c.action]) == bool(c.pinned)
+    assert "pinned by intruder 7" in render_record(record, 1, 1)
+
+
+def test_why_not_names_the_track_that_pins_the_rejected_line() -> None:
+    from dataclasses import replace
+
+    from uavxai.avoidance.types import ChildStats, Decision
+
+    chosen = ChildStats(0, 0.0, 0.0, 30, 0.9, 300.0, None, None, "")
+    runner = replace(ChildStats(4, 0.0, 0.0, 20, 0.3, 300.0, None, None, ""),
+                     pinned=(("intruder-5", 0.25), (9, 0.6)))  # fmt: skip
+    d = Decision(0.0, 1.0, 0, [chosen, runner], planner="mcts_sep", by_value=True)
+    assert "ends pinned by intruder 5 and 1 more" in d.counterfactual
+    assert "keeps 25 % of its value" in d.counterfactual
+    # a pinned line that the search still ranks higher is not rejected for it
+    d = Decision(0.0, 1.0, 0, [replace(chosen, q=0.2), runner], planner="mcts_sep")
+    assert "pinned" not in d.counterfactual

@@ -453,38 +453,64 @@ def wall_factor(row, par):
 @njit(cache=True)
 def pinned_factor(row, lvl, tracks, drift, par):
     """What an open leaf (model state ``row`` at the end of tree level ``lvl``) keeps of its
-    value for the tracks it is pinned by (``pinned_slack_s``, the vertical action set only). A
-    track pins it when the ownship is below it with less room from the track down to the
-    floor's level-off than the track's conflict volume is tall (half-height: ``d_min`` plus
-    its margin, over the spheroid's stretch or the cylinder's aspect), or above it with too
-    little room up to the ceiling's: it can let that track by only sideways. Each pinning
-    track multiplies in the seconds before it could close the horizontal gap left to its
-    volume, both at their speeds head-on (the ownship's airspeed against the track's velocity
-    in the air mass, ``drift`` the wind's carry), over ``pinned_slack_s``, clipped to [0, 1].
-    The half-height is the one :func:`_hits` tests the leaf's last chord with (the spheroid's
-    stretch the smaller of the chord's two ends')."""
+    value for the tracks it is pinned by (``pinned_slack_s``, the vertical action set only):
+    the product of :func:`pin_share` over the tracks."""
+    f = 1.0
+    for q in range(tracks[0].shape[2]):
+        f *= pin_share(row, lvl, q, tracks, drift, par)
+    return f
+
+
+@njit(cache=True)
+def pin_share(row, lvl, q, tracks, drift, par):
+    """What track ``q`` leaves of a leaf's value (1: it does not pin the leaf). It pins it
+    when the ownship is below it with less room from the track down to the floor's level-off
+    than the track's conflict volume's half-height (``d_min`` plus its margin, over the
+    spheroid's stretch or the cylinder's aspect), or above it with too little room up to the
+    ceiling's: the ownship can let that track by only sideways. Then the share is the seconds
+    before the track could close the horizontal gap left to its volume, both at their speeds
+    head-on (the ownship's airspeed against the track's velocity in the air mass, ``drift``
+    the wind's carry), over ``pinned_slack_s``, clipped to [0, 1]. The half-height is the one
+    :func:`_hits` tests the leaf's last chord with (the spheroid's stretch the smaller of the
+    chord's two ends')."""
     txy, th, tm, tmargined, tv = tracks[0], tracks[1], tracks[2], tracks[3], tracks[8]
     n = txy.shape[1] - 1
+    tq = th[lvl, n, q]
+    room = tq - par[TDOWN] if row[2] < tq else par[TUP] - tq
+    base = par[DMIN] + (tm[lvl, n, q] if tmargined[lvl] else 0.0)
+    if par[ASPECT] > 0:
+        half = base / par[ASPECT]
+    elif par[VSCALED] > 0:
+        half = base / min(tv[lvl, n, q], tv[lvl, n - 1, q])
+    else:
+        half = base
+    if room >= half:
+        return 1.0
+    p = txy[lvl, n, q]
+    gap = math.hypot(row[0] - p.real, row[1] - p.imag) - base
     dt = par[DUR] / n
-    x, y, h, v = row[0], row[1], row[2], max(row[3], 0.0)
-    f = 1.0
-    for q in range(txy.shape[2]):
-        tq = th[lvl, n, q]
-        room = tq - par[TDOWN] if h < tq else par[TUP] - tq
-        base = par[DMIN] + (tm[lvl, n, q] if tmargined[lvl] else 0.0)
-        if par[ASPECT] > 0:
-            half = base / par[ASPECT]
-        elif par[VSCALED] > 0:
-            half = base / min(tv[lvl, n, q], tv[lvl, n - 1, q])
-        else:
-            half = base
-        if room >= half:
-            continue
-        p = txy[lvl, n, q]
-        gap = math.hypot(x - p.real, y - p.imag) - base
-        closing = max(v + abs(p - txy[lvl, n - 1, q] - (drift[n] - drift[n - 1])) / dt, 1e-3)
-        f *= min(max(gap / closing / par[PINT], 0.0), 1.0)
-    return f
+    closing = max(max(row[3], 0.0) + abs(p - txy[lvl, n - 1, q] - (drift[n] - drift[n - 1])) / dt,
+                  1e-3)  # fmt: skip
+    return min(max(gap / closing / par[PINT], 0.0), 1.0)
+
+
+def pinned_by(
+    model: EncounterModel, row: np.ndarray, level: int, tracks: Sequence[Track]
+) -> tuple[tuple[int, float], ...]:
+    """The tracks that pin a line's end (model state ``row`` at the end of tree level
+    ``level``), as (index into the intruders, share of the line's value it leaves), the
+    tightest first (:func:`pin_share`); () when the planner does not weigh pinning."""
+    cfg = model.config
+    if cfg.pinned_slack_s <= 0 or not model.vertical or not tracks:
+        return ()
+    hold = cfg.action_hold_s
+    n = model.substeps(hold)
+    par = _params(model, np.zeros(3), hold, math.inf, tracks)
+    packed, drift = _pack(tracks, n), model.drift(hold, n)
+    row = np.asarray(row, dtype=float)
+    shares = [(q, float(pin_share(row, level, q, packed, drift, par)))
+              for q in range(tracks[0].count)]  # fmt: skip
+    return tuple(sorted(((q, s) for q, s in shares if s < 1.0), key=lambda x: x[1]))
 
 
 def wall_share(model: EncounterModel, row: np.ndarray) -> float:

@@ -44,7 +44,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from uavxai.avoidance.kernel import search, wall_share  # the MCTS loop, compiled
+from uavxai.avoidance.kernel import pinned_by, search, wall_share  # the MCTS loop, compiled
 from uavxai.avoidance.lines import cornered_choice, measured_children
 from uavxai.avoidance.model import (
     COLLISION,
@@ -299,7 +299,8 @@ def decision_from_tree(
     )
     shares, q = (collision_shares(tree) if sampled else None), tree.q
     children = [
-        _child_stats(tree, q, a, line, own, model, goal, None if shares is None else shares[a])
+        _child_stats(tree, q, a, line, own, model, goal, None if shares is None else shares[a],
+                     tracks, ids)  # fmt: skip
         for a, line in lines.items()
     ]
     children, horizons = measured_children(
@@ -434,12 +435,18 @@ def _child_stats(
     model: EncounterModel,
     goal: np.ndarray,
     collision_share: float | None,
+    tracks: Sequence[Track],
+    ids: Sequence[int | str],
 ) -> ChildStats:
     """What the tree says of one root action (``q``: the tree's); the separations along its
     line are left unknown here: :func:`measured_children` measures them exactly."""
     cfg = model.config
     end = line[-1]
     code = int(tree.terminal[end])
+    open_leaf = code == NONE and int(tree.depth[end]) == len(tracks)  # pinning weighs these
+    pinned = (
+        pinned_by(model, tree.state[end], int(tree.depth[end]) - 1, tracks) if open_leaf else ()
+    )
     return ChildStats(
         action=action,
         bank_cmd_rad=float(bank_command(own.bank, action, cfg)),
@@ -453,6 +460,7 @@ def _child_stats(
         collision_share=None if collision_share is None else float(collision_share),
         trapped=code in (NONE, COLLISION) and wall_share(model, tree.state[end]) == 0.0,
         nmac_depth=0.0 if tree.nmac_depth is None else float(tree.nmac_depth[end]),
+        pinned=tuple((ids[i], share) for i, share in pinned),
     )
 
 

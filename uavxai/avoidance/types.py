@@ -373,6 +373,10 @@ class ChildStats:
     # with graded separation (`nmac_cost`): the line's deepest NMAC intrusion as the search
     # graded it (kernel.nmac_depth: 0 none, 1 at d_min_m); 0 for the planners that grade none
     nmac_depth: float = 0.0
+    # with pinning weighed (`avoidance.mcts.pinned_slack_s`): the tracks that pin the line's
+    # open end against the floor or the ceiling, (id, share of the line's value it leaves),
+    # the tightest first (kernel.pin_share); () for a line that ends otherwise or is not pinned
+    pinned: tuple[tuple[int | str, float], ...] = ()
 
     @property
     def flies(self) -> int:
@@ -604,6 +608,9 @@ class Decision:
                     # comes into a track's NMAC cylinder (0 at the rim, 1 at d_min_m); with
                     # mcts_sep_daa a route line with one is not kept, though it meets no one
                     **({"nmac_depth": c.nmac_depth} if c.nmac_depth > 0 else {}),
+                    # planners that weigh pinning (pinned_slack_s > 0): the tracks the line's
+                    # end lies pinned by against the floor or the ceiling, [id, share kept]
+                    **({"pinned": [[who, v] for who, v in c.pinned]} if c.pinned else {}),
                 }
                 for c in self.children
             ],

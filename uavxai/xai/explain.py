@@ -85,7 +85,19 @@ def counterfactual(decision: Decision) -> str:
         reason += f"; it {_keeps(runner, decision)}"
     elif runner.outcome in _ENDS:  # _keeps says it otherwise
         reason += f"; its best line {_ends(runner, chosen)}"
+    if runner.pinned and runner.q < chosen.q:
+        reason += f"; its best line {_pinned(runner)}"
     return f"{head}: {reason}"
+
+
+def _pinned(c: ChildStats) -> str:
+    """How a line's end is pinned (``ChildStats.pinned``, the tightest track)."""
+    who, share = c.pinned[0]
+    more = f" and {len(c.pinned) - 1} more" if len(c.pinned) > 1 else ""
+    return (
+        f"ends pinned by {_name(who)}{more} against the floor or the ceiling, no room to let "
+        f"it pass above or below (keeps {_percent(share)} of its value)"
+    )
 
 
 _ENDS = ("out_of_bounds", "timeout")  # line ends the words name (goal: "reaches the goal")
@@ -568,7 +580,8 @@ def render_record(record: dict[str, Any], index: int, total: int) -> str:
                 f"{_num(sep) + ' m' if sep is not None else 'clear':>10}",
                 f"  {who if who is not None else '-':<12}",
                 f"{_num(when, '.1f') + ' s' if when is not None else '-':>7}",
-                f"  {c.get('outcome') or 'open'}{_TRAPPED if c.get('trapped') else ''}",
+                f"  {c.get('outcome') or 'open'}{_TRAPPED if c.get('trapped') else ''}"
+                f"{_PINNED.format(_name(c['pinned'][0][0])) if c.get('pinned') else ''}",
             ]
             lines.append(f"  {mark} " + "".join(cells))
     return "\n".join(lines)
@@ -577,6 +590,9 @@ def render_record(record: dict[str, Any], index: int, total: int) -> str:
 # decisions.jsonl's `trapped` (planners that weigh the walls): the line stays in the area to its
 # end but can no longer turn away from an edge there, so the cornered rule counts it as leaving.
 _TRAPPED = ", cannot turn from the edge"
+# decisions.jsonl's `pinned` (planners that weigh pinning): the line's open end lies under (or
+# over) a track with no room to let it pass below (above) before the floor (the ceiling).
+_PINNED = ", pinned by {}"
 
 
 def render_overview(records: Sequence[dict[str, Any]]) -> str:
