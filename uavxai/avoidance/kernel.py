@@ -494,23 +494,37 @@ def pin_share(row, lvl, q, tracks, drift, par):
     return min(max(gap / closing / par[PINT], 0.0), 1.0)
 
 
+@njit(cache=True)
+def _pin_shares(rows, lvls, tracks, drift, par):
+    """(R, count): :func:`pin_share` of every track for each of ``rows`` at its level."""
+    count = tracks[0].shape[2]
+    out = np.ones((rows.shape[0], count))
+    for r in range(rows.shape[0]):
+        for q in range(count):
+            out[r, q] = pin_share(rows[r], lvls[r], q, tracks, drift, par)
+    return out
+
+
 def pinned_by(
-    model: EncounterModel, row: np.ndarray, level: int, tracks: Sequence[Track]
-) -> tuple[tuple[int, float], ...]:
-    """The tracks that pin a line's end (model state ``row`` at the end of tree level
-    ``level``), as (index into the intruders, share of the line's value it leaves), the
-    tightest first (:func:`pin_share`); () when the planner does not weigh pinning."""
+    model: EncounterModel, rows: np.ndarray, levels: np.ndarray, tracks: Sequence[Track]
+) -> list[tuple[tuple[int, float], ...]]:
+    """For each line's open end (model state ``rows[r]`` at the end of tree level
+    ``levels[r]``), the tracks that pin it, as (index into the intruders, share of the
+    line's value it leaves), the tightest first (:func:`pin_share`); all () when the planner
+    does not weigh pinning. One compiled call for all of a decision's lines."""
     cfg = model.config
-    if cfg.pinned_slack_s <= 0 or not model.vertical or not tracks:
-        return ()
+    rows = np.atleast_2d(np.asarray(rows, dtype=float))
+    if cfg.pinned_slack_s <= 0 or not model.vertical or not tracks or not tracks[0].count:
+        return [()] * len(rows)
     hold = cfg.action_hold_s
     n = model.substeps(hold)
     par = _params(model, np.zeros(3), hold, math.inf, tracks)
-    packed, drift = _pack(tracks, n), model.drift(hold, n)
-    row = np.asarray(row, dtype=float)
-    shares = [(q, float(pin_share(row, level, q, packed, drift, par)))
-              for q in range(tracks[0].count)]  # fmt: skip
-    return tuple(sorted(((q, s) for q, s in shares if s < 1.0), key=lambda x: x[1]))
+    shares = _pin_shares(rows, np.asarray(levels, dtype=np.int64), _pack(tracks, n),
+                         model.drift(hold, n), par)  # fmt: skip
+    return [
+        tuple(sorted(((q, float(x)) for q, x in enumerate(row) if x < 1.0), key=lambda p: p[1]))
+        for row in shares
+    ]
 
 
 def wall_share(model: EncounterModel, row: np.ndarray) -> float:

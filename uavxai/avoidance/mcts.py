@@ -298,9 +298,10 @@ def decision_from_tree(
         model, tree, [n for line in lines.values() for n in line], goal, tracks
     )
     shares, q = (collision_shares(tree) if sampled else None), tree.q
+    pinned = _pinned_ends(model, tree, lines, tracks, ids)
     children = [
         _child_stats(tree, q, a, line, own, model, goal, None if shares is None else shares[a],
-                     tracks, ids)  # fmt: skip
+                     pinned[a])  # fmt: skip
         for a, line in lines.items()
     ]
     children, horizons = measured_children(
@@ -435,18 +436,13 @@ def _child_stats(
     model: EncounterModel,
     goal: np.ndarray,
     collision_share: float | None,
-    tracks: Sequence[Track],
-    ids: Sequence[int | str],
+    pinned: tuple[tuple[int | str, float], ...] = (),
 ) -> ChildStats:
     """What the tree says of one root action (``q``: the tree's); the separations along its
     line are left unknown here: :func:`measured_children` measures them exactly."""
     cfg = model.config
     end = line[-1]
     code = int(tree.terminal[end])
-    open_leaf = code == NONE and int(tree.depth[end]) == len(tracks)  # pinning weighs these
-    pinned = (
-        pinned_by(model, tree.state[end], int(tree.depth[end]) - 1, tracks) if open_leaf else ()
-    )
     return ChildStats(
         action=action,
         bank_cmd_rad=float(bank_command(own.bank, action, cfg)),
@@ -460,8 +456,34 @@ def _child_stats(
         collision_share=None if collision_share is None else float(collision_share),
         trapped=code in (NONE, COLLISION) and wall_share(model, tree.state[end]) == 0.0,
         nmac_depth=0.0 if tree.nmac_depth is None else float(tree.nmac_depth[end]),
-        pinned=tuple((ids[i], share) for i, share in pinned),
+        pinned=pinned,
     )
+
+
+def _pinned_ends(
+    model: EncounterModel,
+    tree: SearchTree,
+    lines: dict[int, list[int]],
+    tracks: Sequence[Track],
+    ids: Sequence[int | str],
+) -> dict[int, tuple[tuple[int | str, float], ...]]:
+    """Per root action, the tracks that pin its best line's end as the search weighed it
+    (kernel.pin_share): only an open leaf the search scored (at the depth limit, visited)."""
+    out: dict[int, tuple[tuple[int | str, float], ...]] = {a: () for a in lines}
+    ends = {
+        a: line[-1]
+        for a, line in lines.items()
+        if tree.terminal[line[-1]] == NONE
+        and int(tree.depth[line[-1]]) == len(tracks)
+        and tree.visits[line[-1]] > 0
+    }
+    if not ends:
+        return out
+    nodes = np.array(list(ends.values()), dtype=int)
+    found = pinned_by(model, tree.state[nodes], tree.depth[nodes] - 1, tracks)
+    for a, pins in zip(ends, found, strict=True):
+        out[a] = tuple((ids[i], share) for i, share in pins)
+    return out
 
 
 class TreeBuilder:

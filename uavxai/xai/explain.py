@@ -85,18 +85,26 @@ def counterfactual(decision: Decision) -> str:
         reason += f"; it {_keeps(runner, decision)}"
     elif runner.outcome in _ENDS:  # _keeps says it otherwise
         reason += f"; its best line {_ends(runner, chosen)}"
-    if runner.pinned and runner.q < chosen.q:
+    if runner.pinned and runner.q < chosen.q and _pin_kept(runner) < _pin_kept(chosen):
         reason += f"; its best line {_pinned(runner)}"
     return f"{head}: {reason}"
 
 
+def _pin_kept(c: ChildStats) -> float:
+    """The share of its value a line keeps for the tracks pinning its end (their product,
+    as the search weighed it: kernel.pinned_factor)."""
+    return math.prod(share for _, share in c.pinned)
+
+
 def _pinned(c: ChildStats) -> str:
-    """How a line's end is pinned (``ChildStats.pinned``, the tightest track)."""
-    who, share = c.pinned[0]
+    """How a line's end is pinned (``ChildStats.pinned``: the tightest track first)."""
+    who, _ = c.pinned[0]
     more = f" and {len(c.pinned) - 1} more" if len(c.pinned) > 1 else ""
+    kept = _pin_kept(c)
     return (
-        f"ends pinned by {_name(who)}{more} against the floor or the ceiling, no room to let "
-        f"it pass above or below (keeps {_percent(share)} of its value)"
+        f"ends pinned by {_name(who)}{more}: too little room between that track and the "
+        "floor's or the ceiling's level-off to let it pass over or under the ownship "
+        f"(keeps {_percent(kept) if kept > 0 else 'none'} of its value)"
     )
 
 
