@@ -297,13 +297,7 @@ def decision_from_tree(
     samples, t_events = _remeasure(
         model, tree, [n for line in lines.values() for n in line], goal, tracks
     )
-    shares, q = (collision_shares(tree) if sampled else None), tree.q
-    pinned = _pinned_ends(model, tree, lines, tracks, ids)
-    children = [
-        _child_stats(tree, q, a, line, own, model, goal, None if shares is None else shares[a],
-                     pinned[a])  # fmt: skip
-        for a, line in lines.items()
-    ]
+    children = _root_stats(tree, lines, own, model, goal, sampled, tracks, ids)
     children, horizons = measured_children(
         children, lines, tree, samples, t_events, tracks, ids, own, cfg
     )
@@ -425,6 +419,27 @@ def _remeasure(
     return dict(zip(nodes, seg.samples, strict=True)), dict(
         zip(nodes, seg.t_event.tolist(), strict=True)
     )
+
+
+def _root_stats(
+    tree: SearchTree,
+    lines: dict[int, list[int]],
+    own: Ownship,
+    model: EncounterModel,
+    goal: np.ndarray,
+    sampled: bool,
+    tracks: Sequence[Track],
+    ids: Sequence[int | str],
+) -> list[ChildStats]:
+    """:func:`_child_stats` of every root action's best line, with the share of its
+    simulations that collided (``sampled``: MCTS) and the tracks pinning its end."""
+    shares, q = (collision_shares(tree) if sampled else None), tree.q
+    pinned = _pinned_ends(model, tree, lines, tracks, ids)
+    return [
+        _child_stats(tree, q, a, line, own, model, goal, None if shares is None else shares[a],
+                     pinned[a])  # fmt: skip
+        for a, line in lines.items()
+    ]
 
 
 def _child_stats(
