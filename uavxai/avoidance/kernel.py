@@ -682,9 +682,9 @@ def goal_delay(config: PlannerConfig, depth: int) -> float:
     that reaches the goal within the horizon scores 1, so without it a planner may take a line
     that reaches it only at the horizon, and re-planning then puts the goal off forever (the
     exhaustive search orbited the goal in 0.5-2.5 % of campaign episodes). Kept below the gap
-    between the goal and any other leaf (1 - d/d_max with d >= the goal radius), so only ties
-    change."""
-    return min(GOAL_DELAY, 0.5 * config.goal_radius_m / config.d_max / max(depth, 1))
+    between the goal and any other leaf (1 - d/d_max with d >= the radius the tree counts the
+    goal within, PlannerConfig.goal_aim_m), so only ties change."""
+    return min(GOAL_DELAY, 0.5 * config.goal_aim_m / config.d_max / max(depth, 1))
 
 
 @functools.lru_cache(maxsize=8)
@@ -738,7 +738,7 @@ def _params(
     gh = float(goal[2])
     nmac_r = math.hypot(*cfg.nmac_m)  # the sphere holding the NMAC cylinder
     return np.array(
-        [cfg.d_min_m, cfg.goal_radius_m, *cfg.x_bounds, *cfg.y_bounds, *cfg.h_bounds,
+        [cfg.d_min_m, cfg.goal_aim_m, *cfg.x_bounds, *cfg.y_bounds, *cfg.h_bounds,
          cfg.climb_rate_mps, hold_s, time_left_s, cfg.late_collision_value, cfg.d_max,
          float(model.vertical), cfg.height_target(-1, gh), cfg.height_target(0, gh),
          cfg.height_target(1, gh), float(goal[0]), float(goal[1]), gh,

@@ -947,7 +947,7 @@ class EncounterModel:
     def _near_goal(self, box: _Cylinder, goal: np.ndarray) -> bool:
         """Could a path inside ``box`` come within the goal radius?"""
         x, y, h, r_xy, r_h = box
-        return math.dist((x, y, h), goal) <= math.hypot(r_xy, r_h) + self.config.goal_radius_m
+        return math.dist((x, y, h), goal) <= math.hypot(r_xy, r_h) + self.config.goal_aim_m
 
     def _near_wall(self, box: _Cylinder) -> bool:
         """Could a path inside ``box`` leave the flight area?"""
@@ -1162,7 +1162,7 @@ class EncounterModel:
             g_xy = xy - complex(goal[0], goal[1])
             g_h = np.broadcast_to(hs - goal[2], xy.shape)
             g_d2, _ = _closest_on_chords(g_xy, g_h, g_xy.real**2 + g_xy.imag**2 + g_h**2)
-            k_goal = _first_true(g_d2 < cfg.goal_radius_m**2)
+            k_goal = _first_true(g_d2 < cfg.goal_aim_m**2)
 
         # The first event wins; at equal sub-steps collision beats leaving the map beats the
         # goal (the conservative reading of a sub-step that holds two of them).

@@ -283,6 +283,12 @@ class PlannerConfig(SchemaSettings):  # type: ignore[misc,valid-type]
         return 0
 
     @property
+    def goal_aim_m(self) -> float:
+        """The radius within which the tree counts the goal reached: the scenario's
+        ``goal_radius_m`` less ``goal_margin_m`` (the judge counts the whole radius)."""
+        return self.goal_radius_m - self.goal_margin_m
+
+    @property
     def cylinder_aspect(self) -> float | None:
         """The conflict cylinder's radius / half-height, by which the model scales heights
         into its cylinder norm ``max(|r_xy|, aspect |r_h|)``; None: the sphere."""
