@@ -55,7 +55,7 @@ class DirectPlanner:
     """Fly at the goal, ignoring every intruder."""
 
     def __init__(self, config: PlannerConfig | None = None, *, name: str = NAME) -> None:
-        self.config = config or PlannerConfig()
+        self.config = (config or PlannerConfig()).whole_goal()
         self.name = name
         self.model = EncounterModel(self.config)
 

@@ -208,7 +208,8 @@ def _first_out(xy, hs, par):
 
 @njit(cache=True)
 def _first_goal(xy, hs, par):
-    """Per row, the first sub-step that passes within the goal radius (n: none)."""
+    """Per row, the first sub-step that passes within the tree's goal radius (n: none;
+    PlannerConfig.goal_aim_m)."""
     rows, n = xy.shape[0], xy.shape[1] - 1
     out = np.full(rows, n)
     r2 = par[GOALR] ** 2
@@ -276,7 +277,7 @@ def _walls(box, par):
 
 @njit(cache=True)
 def _goal_near(box, par):
-    """_near_goal: could a path inside ``box`` come within the goal radius?"""
+    """_near_goal: could a path inside ``box`` come within the tree's goal radius?"""
     d = math.sqrt((box[0] - par[GX]) ** 2 + (box[1] - par[GY]) ** 2 + (box[2] - par[GH]) ** 2)
     return d <= math.hypot(box[3], box[4]) + par[GOALR]
 

@@ -236,7 +236,7 @@ class LearnedPlanner:
         *,
         name: str | None = None,
     ) -> None:
-        self.config = config or PlannerConfig()
+        self.config = (config or PlannerConfig()).whole_goal()
         self.name = name or self.algo
         self.nets, self.info = load_checkpoint(checkpoint, self.algo)
         self.n_nearest = int(self.info["n_nearest"])

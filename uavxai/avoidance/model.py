@@ -945,7 +945,7 @@ class EncounterModel:
         return -self.config.climb_rate_mps * (duration / n) * np.arange(n + 1)
 
     def _near_goal(self, box: _Cylinder, goal: np.ndarray) -> bool:
-        """Could a path inside ``box`` come within the goal radius?"""
+        """Could a path inside ``box`` come within the tree's goal radius (``goal_aim_m``)?"""
         x, y, h, r_xy, r_h = box
         return math.dist((x, y, h), goal) <= math.hypot(r_xy, r_h) + self.config.goal_aim_m
 

@@ -204,7 +204,7 @@ class MVPPlanner:
     """Modified Voltage Potential conflict resolution (BlueSky) over the 9 actions."""
 
     def __init__(self, config: PlannerConfig | None = None, *, name: str = "mvp") -> None:
-        self.config = config or PlannerConfig()
+        self.config = (config or PlannerConfig()).whole_goal()
         self.name = name
         self.model = EncounterModel(self.config)
         self.lookahead_s = LOOKAHEAD_S

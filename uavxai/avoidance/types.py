@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import numpy as np
@@ -281,6 +281,12 @@ class PlannerConfig(SchemaSettings):  # type: ignore[misc,valid-type]
             if abs(alt_target_m - self.height_target(vertical, math.nan)) < 1e-3:
                 return vertical
         return 0
+
+    def whole_goal(self) -> PlannerConfig:
+        """This config with the goal's whole sphere (``goal_margin_m`` 0): for the planners
+        that do not search toward the goal (`mvp`, `none`, the learned ones), whose
+        evidence (decisions.jsonl) is to show the judge's goal, not a tree's aim."""
+        return replace(self, goal_margin_m=0.0) if self.goal_margin_m else self
 
     @property
     def goal_aim_m(self) -> float:
