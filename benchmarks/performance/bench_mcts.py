@@ -186,7 +186,7 @@ def against_baseline(args, n_intruders: int, cfg: PlannerConfig, cases) -> None:
     """This tree's MCTS planners and ``args.baseline``'s, timed alternately (module doc).
     Each pass, on either side, flies fresh planners warmed on the first encounter only, as
     the child does: the motions of every other encounter are computed, not memoised."""
-    names = [m.name for m, _ in pairs(cfg, not args.no_vertical)]
+    names = [m.name for m, _ in pairs(cfg, not args.no_vertical, args.sep)]
     own = {name: np.full(len(cases), np.inf) for name in names}
     base = {name: np.full(len(cases), np.inf) for name in names}
     argv = [sys.executable, os.path.abspath(__file__), "--child-times", "--intruders",
@@ -195,13 +195,19 @@ def against_baseline(args, n_intruders: int, cfg: PlannerConfig, cases) -> None:
             "--track-error", ",".join(str(e) for e in args.track_error)]  # fmt: skip
     if args.no_vertical:
         argv.append("--no-vertical")
+    if args.sep:
+        argv.append("--sep")
     argv += [f"--mcts={k}={v}" for k, v in args.mcts.items()]
     env = {**os.environ, "PYTHONPATH": os.path.abspath(args.baseline)}
     for _ in range(args.repeats):
-        for mcts, _ in pairs(cfg, not args.no_vertical):
+        for mcts, _ in pairs(cfg, not args.no_vertical, args.sep):
             mcts.plan(*cases[0])
             own[mcts.name] = np.minimum(own[mcts.name], time_decisions(mcts, cases, 1)[0])
-        done = subprocess.run(argv, env=env, capture_output=True, text=True, check=True)
+        done = subprocess.run(argv, env=env, capture_output=True, text=True)
+        if done.returncode:  # the baseline tree's own error (an option it lacks, a bad path)
+            tail = "\n".join(done.stderr.strip().splitlines()[-5:])
+            sys.exit(f"bench_mcts.py: the baseline {args.baseline} failed "
+                     f"(exit {done.returncode}):\n{tail}")  # fmt: skip
         theirs = json.loads(done.stdout.strip().splitlines()[-1])
         for name in base:
             base[name] = np.minimum(base[name], theirs[name])
