@@ -3,15 +3,17 @@
 from __future__ import annotations
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
-from uavxai.dynamics.behaviours import IntruderPilot, make_pilots
-from uavxai.scenario import IntruderSpec, default_scenario
+from uavxai.dynamics.behaviours import IntruderPilot, make_pilots, track_pilot
+from uavxai.scenario import IntruderSpec, aircraft_bank_limit_deg, default_scenario
 
+# the ownship's bank limit is 25 deg; the intruders fly their aircraft's own (uav_fw: 30)
 SC = default_scenario("pilots", avoidance={"bank_limit_deg": 25})
-LIMIT = math.radians(25)
+LIMIT = math.radians(aircraft_bank_limit_deg("uav_fw"))
 
 
 def _spec(behaviour: str, speed: float = 21.0) -> IntruderSpec:
@@ -33,6 +35,7 @@ def test_random_turns_change_within_the_bank_limit() -> None:
     cmds = _commands(IntruderPilot(_spec("random_turns"), np.random.default_rng(0), SC))
     banks = cmds[:, 0]
     assert np.abs(banks).max() <= LIMIT
+    assert np.abs(banks).max() > math.radians(25)  # the ownship's 25 deg does not bound them
     changes = np.count_nonzero(np.diff(banks))
     assert 300 / 20 - 1 <= changes <= 300 / 5 + 1  # one change per 5-20 s hold
     assert (banks > 0).any() and (banks < 0).any() and (banks == 0).any()
@@ -70,3 +73,14 @@ def test_make_pilots_repeats_for_a_seed_and_differs_between_seeds() -> None:
     assert np.array_equal(a, b)
     assert not np.array_equal(a, c)
     assert not np.array_equal(a[0], a[1])  # each intruder has its own stream
+
+
+def test_intruders_fly_their_own_aircrafts_bank_limit_not_the_ownships() -> None:
+    assert math.isclose(LIMIT, math.radians(30.0))
+    pilot = IntruderPilot(_spec("random_turns"), np.random.default_rng(0), SC)
+    assert pilot.bank_limit_rad == LIMIT
+    t = np.array([0.0, 10.0])
+    line = SimpleNamespace(t=t, x=20.0 * t, y=0.0 * t, h=120.0 + 0.0 * t, vx=20.0 + 0.0 * t,
+                           vy=0.0 * t, vh=0.0 * t)  # fmt: skip
+    track = track_pilot(SC, line)
+    assert track.bank_limit_rad == LIMIT

@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 
+from uavxai.dynamics.aircraft import BANK_LIMIT
 from uavxai.dynamics.state import TrafficState
 from uavxai.dynamics.traffic import draw_intruders
 from uavxai.dynamics.world import JSBSimWorld, jsbsim_seed
@@ -144,6 +145,16 @@ def test_ownship_limits_come_from_the_scenario() -> None:
         s = w.state()
         assert math.degrees(s.att[0, 0]) == pytest.approx(20.0, abs=0.5)
         assert w.ownship_command()["speed_target_mps"] == pytest.approx(25.0)
+
+
+def test_intruders_autopilots_keep_their_aircrafts_bank_limit() -> None:
+    # the ownship's 20 deg is the ownship's; an intruder's autopilot keeps its XML's 30
+    sc = _scenario(count=2, avoidance={"bank_limit_deg": 20})
+    with JSBSimWorld(sc) as w:
+        own, *intruders = w.aircraft
+        assert own.fdm[BANK_LIMIT] == pytest.approx(math.radians(20.0))
+        for a in intruders:
+            assert a.fdm[BANK_LIMIT] == pytest.approx(math.radians(30.0))
 
 
 def test_bad_commands_and_speeds_are_user_errors() -> None:

@@ -16,7 +16,13 @@ import numpy as np
 
 from uavxai.dynamics.track_pilot import TrackLike, TrackPilot
 from uavxai.geometry import bearing, wrap_angle
-from uavxai.scenario import IntruderSpec, Scenario, aircraft_height_loop, aircraft_speed_range
+from uavxai.scenario import (
+    IntruderSpec,
+    Scenario,
+    aircraft_height_loop,
+    aircraft_speed_range,
+    flown_bank_limit_rad,
+)
 
 BEHAVIOURS = ("straight", "random_turns", "goal_seeking")
 PILOT_PERIOD_S = 1.0  # how often intruder pilots decide, in every world
@@ -40,7 +46,7 @@ class IntruderPilot:
             raise ValueError(f"unknown intruder behaviour '{behaviour}'; known: {BEHAVIOURS}")
         self.behaviour = behaviour
         self.speed_mps = spec.speed_mps
-        self.bank_limit_rad = math.radians(scenario.avoidance.bank_limit_deg)
+        self.bank_limit_rad = intruder_bank_limit_rad(scenario)
         self._rng = rng
         self._world = scenario.world
         self._bank = 0.0
@@ -86,6 +92,13 @@ class IntruderPilot:
         return float(self._rng.uniform(*self._world.x)), float(self._rng.uniform(*self._world.y))
 
 
+def intruder_bank_limit_rad(scenario: Scenario) -> float:
+    """The bank limit the scenario's intruders fly within: their aircraft's own
+    (``intruders.aircraft``'s autopilot XML), not the ownship's ``avoidance.bank_limit_deg``
+    (the fallback for an aircraft that declares none)."""
+    return flown_bank_limit_rad(scenario.intruders.aircraft, scenario.avoidance.bank_limit_deg)
+
+
 def make_pilots(
     scenario: Scenario,
     specs: Sequence[IntruderSpec],
@@ -115,7 +128,7 @@ def track_pilot(scenario: Scenario, track: TrackLike, t0: float = 0.0) -> TrackP
     gain, _ = aircraft_height_loop(scenario.intruders.aircraft)
     return TrackPilot(
         track,
-        bank_limit_rad=math.radians(scenario.avoidance.bank_limit_deg),
+        bank_limit_rad=intruder_bank_limit_rad(scenario),
         speed_range=(lo, hi),
         t0=t0,
         height_gain_per_s=gain,

@@ -18,7 +18,7 @@ import jsbsim
 import numpy as np
 
 from uavxai.dynamics.aircraft import Aircraft, heading_from_deg
-from uavxai.dynamics.behaviours import make_pilots, newcomer_pilot
+from uavxai.dynamics.behaviours import intruder_bank_limit_rad, make_pilots, newcomer_pilot
 from uavxai.dynamics.environment import EnvironmentConfig
 from uavxai.dynamics.flow import Entry
 from uavxai.dynamics.geodesy import LocalFrame
@@ -156,7 +156,7 @@ class JSBSimWorld(ScheduledWorld):
             self._check_speed(
                 f"intruder {i} speed_mps", spec.speed_mps, sc.intruders.aircraft, a.speed_range
             )
-            a.set_limits(bank_limit_rad=math.radians(sc.avoidance.bank_limit_deg))
+            a.set_limits(bank_limit_rad=intruder_bank_limit_rad(sc))
             if not env.calm:  # the same air for everyone; turbulence seeded per aircraft
                 a.set_environment(env.wind_ne, env.turbulence, jsbsim_seed(self.seed, i))
             a.start(spec.x, spec.y, spec.h, heading_from_deg(spec.heading_deg), spec.speed_mps)

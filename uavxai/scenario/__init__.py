@@ -24,6 +24,7 @@ from uavxai.scenario.aircraft import (
     aircraft_height_loop,
     aircraft_roll_rate_deg_s,
     aircraft_speed_range,
+    flown_bank_limit_rad,
 )
 from uavxai.scenario.loader import (
     MAX_DEPTH,
@@ -53,6 +54,7 @@ __all__ = [
     "aircraft_height_loop",
     "aircraft_roll_rate_deg_s",
     "aircraft_speed_range",
+    "flown_bank_limit_rad",
     "checked",
     "default_scenario",
     "load_scenario",

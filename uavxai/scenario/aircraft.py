@@ -71,3 +71,13 @@ def aircraft_bank_limit_deg(name: str) -> float | None:
     values, _ = _autopilot(name)
     limit = values.get("ap/bank-limit-rad")
     return None if limit is None else round(math.degrees(limit), 3)
+
+
+def flown_bank_limit_rad(name: str, fallback_deg: float) -> float:
+    """The bank limit (rad) an aircraft of model ``name`` is flown within: its autopilot's
+    (:func:`aircraft_bank_limit_deg`), or ``fallback_deg`` (the scenario's
+    ``avoidance.bank_limit_deg``) if its XML declares none. Intruders fly their own limit,
+    not the ownship's setting, so the turn cover the planner gives a track (its emitter
+    category's limit) matches how the intruder turns."""
+    limit = aircraft_bank_limit_deg(name)
+    return math.radians(fallback_deg if limit is None else limit)

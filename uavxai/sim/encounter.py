@@ -34,7 +34,13 @@ from uavxai.encounters import (
 from uavxai.encounters.tracks import MIN_FIXED_WING_SPEED
 from uavxai.errors import UserError
 from uavxai.geometry import bearing
-from uavxai.scenario import IntruderSpec, Scenario, aircraft_height_loop, aircraft_speed_range
+from uavxai.scenario import (
+    IntruderSpec,
+    Scenario,
+    aircraft_height_loop,
+    aircraft_speed_range,
+    flown_bank_limit_rad,
+)
 from uavxai.sim.daa_record import DaaObserver, DaaRecord
 from uavxai.sim.episode import EpisodeResult
 from uavxai.sim.flight_quality import FlightQuality
@@ -70,7 +76,8 @@ def encounter_config(scenario: Scenario) -> EncounterConfig:
         min_speed=max(MIN_FIXED_WING_SPEED, lo),
         max_speed=hi,
         max_vertical_rate=climb,
-        max_bank=TRACK_BANK_SHARE * math.radians(scenario.avoidance.bank_limit_deg),
+        max_bank=TRACK_BANK_SHARE
+        * flown_bank_limit_rad(e.aircraft, scenario.avoidance.bank_limit_deg),
     )
 
 
