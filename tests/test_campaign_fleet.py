@@ -207,6 +207,28 @@ def test_merge_refuses_broken_fleet_files_by_name(shards: list[Path], capsys) ->
     assert not out.exists()
 
 
+def test_merge_copies_run_folders_but_follows_no_link(shards: list[Path], tmp_path: Path) -> None:
+    """A link inside a source's run folder is copied as a link (what it points to is not read
+    into the merged folder); a run folder that is itself a link is not copied, and the rows
+    are merged all the same."""
+    import shutil
+
+    outside = tmp_path / "outside.txt"
+    outside.write_text("not the campaign's")
+    linked = tmp_path / "linked"
+    shutil.copytree(shards[0], linked)
+    run = episode_folder(linked, "mcts", 3, 0)
+    (run / "secret").symlink_to(outside)
+    merge_campaigns([linked], tmp_path / "m1")
+    copied = episode_folder(tmp_path / "m1", "mcts", 3, 0)
+    assert (copied / "secret").is_symlink() and (copied / "trajectory.csv").is_file()
+    shutil.rmtree(run)
+    run.symlink_to(episode_folder(shards[0], "mcts", 3, 0), target_is_directory=True)
+    merge_campaigns([linked], tmp_path / "m2")
+    assert not episode_folder(tmp_path / "m2", "mcts", 3, 0).exists()
+    assert _rows(tmp_path / "m2" / FLEET_EPISODES) == _rows(tmp_path / "m1" / FLEET_EPISODES)
+
+
 def test_the_runs_service_figures_are_recomputed_from_service_csv(runs: dict[int, Path]) -> None:
     sc = load_scenario(runs[7].parent / "short.yaml")
     dt, k, qos = 1.0 / sc.dynamics.trajectory_hz, sc.comms.users.k, sc.comms.qos_rate_bps
