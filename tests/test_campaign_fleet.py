@@ -178,6 +178,8 @@ def test_merged_shards_are_the_campaign_flown_whole(campaign: Path, shards: list
     assert main(["merge", *map(str, shards), "--out", str(merged)]) == 2
     one = campaign.parent / "one-ownship"
     one.mkdir()
+    with pytest.raises(UserError, match="has neither fleet_episodes.csv nor episodes.csv; is it"):
+        merge_campaigns([shards[0], one], campaign.parent / "mixed")
     (one / "episodes.csv").write_text("method\n")
     with pytest.raises(UserError, match=r"a fleet campaign \(fleet_episodes.csv\); .*not one"):
         merge_campaigns([shards[0], one], campaign.parent / "mixed")

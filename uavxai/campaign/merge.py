@@ -47,6 +47,9 @@ def merge_campaigns(sources: Sequence[str | Path], out: str | Path, title: str =
     fleets = [s for s in sources if is_fleet_campaign(s)]
     if fleets and len(fleets) < len(sources):
         one = next(s for s in sources if s not in fleets)
+        if not (one / "episodes.csv").is_file():
+            raise UserError(f"{one}: has neither {FLEET_EPISODES} nor episodes.csv; is it a "
+                            "campaign folder?")  # fmt: skip
         raise UserError(
             f"{fleets[0]}: a fleet campaign ({FLEET_EPISODES}); {one}: not one (one ownship's "
             "campaign has episodes.csv); merge pools campaigns of one kind, fleet campaigns "
