@@ -28,7 +28,9 @@ from uavxai.campaign import (
     run_fleet_episode,
     summarise_fleet,
 )
-from uavxai.campaign.fleet import episode_folder
+from uavxai.campaign.files import as_written
+from uavxai.campaign.fleet import RUNS, episode_folder
+from uavxai.campaign.plots import FLEET_EPISODES_FIGURE, FLEET_RESULTS_FIGURE
 from uavxai.cli import main
 from uavxai.errors import UserError
 from uavxai.journal import JOURNAL
@@ -97,6 +99,9 @@ def test_a_fleet_campaign_writes_one_row_per_episode_and_its_results(campaign: P
         min(float(r["closest_members_m"]) for r in rows), rel=1e-5)  # fmt: skip
     for r in rows:
         assert (episode_folder(campaign, "mcts", 3, int(r["episode"])) / "summary.json").is_file()
+    # computed from the rows as the file holds them: the file alone gives its results again
+    (again,) = as_written(summarise_fleet(rows), FLEET_RESULT_COLUMNS)
+    assert {k: str(v) for k, v in again.items()} == result
 
 
 def test_each_episode_is_the_run_of_its_seed(campaign: Path, runs: dict[int, Path]) -> None:
@@ -123,6 +128,107 @@ def test_each_episode_is_the_run_of_its_seed(campaign: Path, runs: dict[int, Pat
             assert int(r[key]) == len(meet[key])
         assert float(r["closest_members_m"]) == pytest.approx(meet["closest_members_m"], 1e-5)
         assert float(r["closest_intruder_m"]) == pytest.approx(meet["closest_intruder_m"], 1e-5)
+
+
+@pytest.fixture(scope="module")
+def shards(short: Path) -> list[Path]:
+    """The campaign's two seeds flown as two one-episode campaigns (`--seed`), as a campaign
+    split over machines or days is."""
+    out = []
+    for seed in (7, 8):
+        out.append(short.parent / f"shard-{seed}")
+        args = ["evaluate", str(short), *EVALUATE, "--episodes", "1", "--seed", str(seed)]
+        assert main([*args, "--out", str(out[-1])]) == 0
+    return out
+
+
+def _untimed(rows: list[dict]) -> list[dict]:
+    return [{k: v for k, v in r.items() if k not in TIMING_COLUMNS} for r in rows]
+
+
+def test_merged_shards_are_the_campaign_flown_whole(campaign: Path, shards: list[Path],
+                                                    capsys) -> None:  # fmt: skip
+    """`uavxai merge` of the two shards (given in either order) writes the files of the
+    two-episode campaign: fleet_episodes.csv and fleet_results.csv alike cell for cell but for
+    the timing columns, each episode's run folder the same run under the whole campaign's
+    number, and the plots; merged again with a third, it refuses the seeds flown twice."""
+    whole = _rows(campaign / FLEET_EPISODES)[1]
+    assert [r["seed"] for r in whole] == ["7", "8"]  # flown before the resume test's third
+    merged = campaign.parent / "merged"
+    assert main(["merge", str(shards[1]), str(shards[0]), "--out", str(merged)]) == 0
+    printed = capsys.readouterr().out
+    assert "fleet campaign" in printed and "run files of 2 of the 2 episodes" in printed
+    for name in (FLEET_EPISODES, FLEET_RESULTS):
+        (columns, rows), (whole_columns, whole_rows) = _rows(merged / name), _rows(campaign / name)
+        assert columns == whole_columns
+        assert _untimed(rows) == _untimed(whole_rows), name
+    for r in whole:
+        mine = episode_folder(merged, "mcts", 3, int(r["episode"]))
+        theirs = episode_folder(campaign, "mcts", 3, int(r["episode"]))
+        for name in ("trajectory.csv", "service.csv", "users.csv"):
+            assert (mine / name).read_bytes() == (theirs / name).read_bytes(), name
+        assert json.loads((mine / "summary.json").read_text())["seed"] == int(r["seed"])
+    assert sorted(p.name for p in (merged / RUNS).iterdir()) == sorted(
+        p.name for p in (campaign / RUNS).iterdir())  # fmt: skip
+    for figure in (FLEET_RESULTS_FIGURE, FLEET_EPISODES_FIGURE):
+        assert (merged / figure).stat().st_size > 0 and (campaign / figure).stat().st_size > 0
+    # the same seed twice, never over a folder without --force, never a mix of kinds
+    with pytest.raises(UserError, match=r"mcts at 3 intruders, seed 7: flown in both"):
+        merge_campaigns([merged, shards[0]], campaign.parent / "twice")
+    assert main(["merge", *map(str, shards), "--out", str(merged)]) == 2
+    one = campaign.parent / "one-ownship"
+    one.mkdir()
+    with pytest.raises(UserError, match="has neither fleet_episodes.csv nor episodes.csv; is it"):
+        merge_campaigns([shards[0], one], campaign.parent / "mixed")
+    (one / "episodes.csv").write_text("method\n")
+    with pytest.raises(UserError, match=r"a fleet campaign \(fleet_episodes.csv\); .*not one"):
+        merge_campaigns([shards[0], one], campaign.parent / "mixed")
+    assert not (campaign.parent / "twice").exists() and not (campaign.parent / "mixed").exists()
+
+
+def test_merge_refuses_broken_fleet_files_by_name(shards: list[Path], capsys) -> None:
+    """A source whose fleet_episodes.csv is empty, or holds what a campaign never writes: a
+    clear message (exit 2), no traceback, no files."""
+    broken = shards[0].parent / "broken"
+    broken.mkdir()
+    header, row = (shards[0] / FLEET_EPISODES).read_text().splitlines()
+    (broken / FLEET_EPISODES).write_text(header + "\n")
+    out = shards[0].parent / "from-broken"
+    assert main(["merge", str(broken), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "no episodes in their fleet_episodes.csv" in err and "Traceback" not in err
+    assert not (out / FLEET_RESULTS).exists()
+    out = shards[0].parent / "from-broken-python"
+    cells = row.split(",")
+    for column, bad in (("completed", "2"), ("qos_share", "most"), ("seed", "-1")):
+        wrong = list(cells)
+        wrong[FLEET_EPISODE_COLUMNS.index(column)] = bad
+        (broken / FLEET_EPISODES).write_text(header + "\n" + ",".join(wrong) + "\n")
+        with pytest.raises(UserError, match=rf"line 2: {column} '{bad}' is not allowed"):
+            merge_campaigns([broken], out)
+    assert not out.exists()
+
+
+def test_merge_copies_run_folders_but_follows_no_link(shards: list[Path], tmp_path: Path) -> None:
+    """A link inside a source's run folder is copied as a link (what it points to is not read
+    into the merged folder); a run folder that is itself a link is not copied, and the rows
+    are merged all the same."""
+    import shutil
+
+    outside = tmp_path / "outside.txt"
+    outside.write_text("not the campaign's")
+    linked = tmp_path / "linked"
+    shutil.copytree(shards[0], linked)
+    run = episode_folder(linked, "mcts", 3, 0)
+    (run / "secret").symlink_to(outside)
+    merge_campaigns([linked], tmp_path / "m1")
+    copied = episode_folder(tmp_path / "m1", "mcts", 3, 0)
+    assert (copied / "secret").is_symlink() and (copied / "trajectory.csv").is_file()
+    shutil.rmtree(run)
+    run.symlink_to(episode_folder(shards[0], "mcts", 3, 0), target_is_directory=True)
+    merge_campaigns([linked], tmp_path / "m2")
+    assert not episode_folder(tmp_path / "m2", "mcts", 3, 0).exists()
+    assert _rows(tmp_path / "m2" / FLEET_EPISODES) == _rows(tmp_path / "m1" / FLEET_EPISODES)
 
 
 def test_the_runs_service_figures_are_recomputed_from_service_csv(runs: dict[int, Path]) -> None:
@@ -251,15 +357,13 @@ def test_a_fleet_campaign_opens_no_external_link(tmp_path: Path) -> None:
 
 def test_bad_fleet_campaigns_are_user_errors(campaign: Path, capsys) -> None:
     """The kinematic world has no members: refused by name (it flew one ownship to a one-UAV
-    service point before, silently); a count the scenario cannot take; merge of a fleet."""
+    service point before, silently); a count the scenario cannot take."""
     args = ["evaluate", str(FLEET_MISSION), "--methods", "mcts", "--intruders", "20"]
     assert main([*args, "--episodes", "1", "--out", str(campaign.parent / "kinematic")]) == 2
     err = capsys.readouterr().err
     assert "fleet.size = 3" in err and "--dynamics jsbsim" in err and "Traceback" not in err
     with pytest.raises(UserError, match=r"--intruders 501.*\(intruders\.count: "):
         run_campaign(load_scenario(FLEET_MISSION), ["mcts"], [501], 1, dynamics="jsbsim")
-    with pytest.raises(UserError, match="a fleet campaign"):
-        merge_campaigns([campaign], campaign.parent / "merged")
     # what `uavxai run` asks before flying: a learned service planner with no shipped model
     unshipped = {**SHORT, "service": {"planner": "d3qn"},
                  "comms": {**SHORT["comms"], "power_levels": 4}}  # fmt: skip

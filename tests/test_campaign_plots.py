@@ -1,5 +1,7 @@
 """A campaign's figures (uavxai.campaign.plots): an encounter campaign draws its detect-and-
-avoid estimates with their intervals; a campaign without encounters does not."""
+avoid estimates with their intervals; a campaign without encounters does not; a fleet
+campaign draws its headline figures and its episodes (round 12's files, issue 32), and rows
+that are not a fleet campaign's are a clear UserError."""
 
 from __future__ import annotations
 
@@ -9,7 +11,20 @@ from pathlib import Path
 import matplotlib.image
 import pytest
 
-from uavxai.campaign.plots import _STYLE, DAA_FIGURE, DAA_PLOTTED, plot_campaign, plot_daa
+from uavxai.campaign.files import FLEET_RESULT_COLUMNS
+from uavxai.campaign.plots import (
+    _STYLE,
+    DAA_FIGURE,
+    DAA_PLOTTED,
+    FLEET_EPISODE_PLOTTED,
+    FLEET_EPISODES_FIGURE,
+    FLEET_PLOTTED,
+    FLEET_RESULTS_FIGURE,
+    plot_campaign,
+    plot_daa,
+    plot_fleet,
+)
+from uavxai.errors import UserError
 from uavxai.vocabulary import AVOIDANCE_PLANNERS
 
 RESULTS = Path(__file__).resolve().parents[1] / "docs" / "results"
@@ -55,3 +70,68 @@ def test_every_built_in_planner_has_a_style_of_its_own() -> None:
     colours, markers = zip(*_STYLE.values(), strict=True)
     assert len(set(colours)) == len(colours)
     assert len(set(markers)) == len(markers)
+
+
+def _read(name: str) -> list[dict]:
+    with open(RESULTS / "fleet" / name, encoding="utf-8") as fh:
+        return list(csv.DictReader(fh))
+
+
+def _image(path: Path):
+    assert path.stat().st_size > 0
+    return matplotlib.image.imread(path)
+
+
+def test_a_fleet_campaign_draws_its_results_and_its_episodes(tmp_path: Path) -> None:
+    """Round 12's two campaigns (seeds 60-64; the second with a member leaving): one row of
+    panels per method and intruder count, the leave's panel only where an episode has one."""
+    results, episodes = [], []
+    for name in ("round12_seeds60-64", "round12_leave_seeds60-64"):
+        for r in _read(f"{name}_results.csv"):
+            results.append({**r, "method": "mcts" if "leave" not in name else "mcts_sep"})
+        episodes += [{**e, "method": "mcts" if "leave" not in name else "mcts_sep"}
+                     for e in _read(f"{name}_episodes.csv")]  # fmt: skip
+    paths = plot_fleet(results, episodes, tmp_path, "round 12")
+    assert paths == [tmp_path / FLEET_RESULTS_FIGURE, tmp_path / FLEET_EPISODES_FIGURE]
+    image = _image(tmp_path / FLEET_RESULTS_FIGURE)
+    assert image.shape[0] > 100 * len(FLEET_PLOTTED) and image.shape[1] > 400
+    assert image.std() > 0.01  # not a blank page
+    with_leave = _image(tmp_path / FLEET_EPISODES_FIGURE)
+    assert with_leave.std() > 0.01
+    # without a departure, one panel fewer: a shorter figure
+    alone = [e for e in episodes if e["method"] == "mcts"]
+    assert not any(e["leave_qos_share_before"] for e in alone)
+    (tmp_path / "alone").mkdir()
+    plot_fleet(results[:1], alone, tmp_path / "alone")
+    assert _image(tmp_path / "alone" / FLEET_EPISODES_FIGURE).shape[0] < with_leave.shape[0]
+
+
+@pytest.mark.parametrize("key", [k for k, _, _ in FLEET_PLOTTED])
+def test_every_fleet_figure_is_a_results_column(key: str) -> None:
+    worst = {k: w for k, _, w in FLEET_PLOTTED}[key]
+    assert key in FLEET_RESULT_COLUMNS
+    assert worst in ("wilson", "pairs") or worst in FLEET_RESULT_COLUMNS
+    if worst == "wilson":
+        assert {key + "_lo", key + "_hi"} <= set(FLEET_RESULT_COLUMNS)
+
+
+def test_fleet_episode_figures_are_episode_columns() -> None:
+    from uavxai.campaign.files import FLEET_EPISODE_COLUMNS
+
+    assert {k for k, _, _ in FLEET_EPISODE_PLOTTED} <= set(FLEET_EPISODE_COLUMNS)
+
+
+def test_rows_that_are_no_fleet_campaigns_are_refused_by_name(tmp_path: Path) -> None:
+    results, episodes = _read("round12_seeds60-64_results.csv"), _read(
+        "round12_seeds60-64_episodes.csv")  # fmt: skip
+    with pytest.raises(UserError, match="fleet_results: no rows to plot"):
+        plot_fleet([], episodes, tmp_path)
+    with pytest.raises(UserError, match="fleet_episodes: no rows to plot"):
+        plot_fleet(results, [], tmp_path)
+    broken = [{**results[0], "mean_qos_share": "lots"}]
+    with pytest.raises(UserError, match=r"fleet_results row 1: mean_qos_share 'lots' is not a"):
+        plot_fleet(broken, episodes, tmp_path)
+    nameless = [{k: v for k, v in e.items() if k != "method"} for e in episodes]
+    with pytest.raises(UserError, match="fleet_episodes row 1: no method or intruders"):
+        plot_fleet(results, nameless, tmp_path)
+    assert not list(tmp_path.iterdir())  # nothing drawn from them

@@ -717,10 +717,22 @@ def cmd_merge(args: argparse.Namespace) -> int:
     out = prepare_out_dir(args.out, args.force, args.argv)
     from rich.console import Console
 
-    from uavxai.campaign import merge_campaigns, results_table
+    from uavxai.campaign import is_fleet_campaign, merge_campaigns, results_table
+    from uavxai.campaign.fleet import RUNS, fleet_table
+    from uavxai.campaign.plots import FLEET_EPISODES_FIGURE, FLEET_RESULTS_FIGURE
 
     results = merge_campaigns(args.sources, out, f"merged from {len(args.sources)} campaigns")
     console = Console(width=None if sys.stdout.isatty() else 200)
+    if is_fleet_campaign(out):
+        console.print(fleet_table(results))
+        episodes = sum(int(r["episodes"]) for r in results)
+        runs = sum(1 for p in (out / RUNS).glob("*") if p.is_dir())
+        console.print(f"wrote {out / 'fleet_results.csv'}, {out / 'fleet_episodes.csv'}, 2 plots: "
+                      f"{out / FLEET_RESULTS_FIGURE}, {out / FLEET_EPISODES_FIGURE}, and the run "
+                      f"files of {runs} of the {episodes} episodes in {out / RUNS}/ (copied from "
+                      "their sources; a source flown with --ray keeps them on the node that "
+                      "flew them)")  # fmt: skip
+        return EXIT_OK
     console.print(results_table(results))
     console.print(f"wrote {out / 'results.csv'}, {out / 'episodes.csv'} and the plots")
     return EXIT_OK

@@ -42,12 +42,13 @@ The package, one job a module (the layers, top first, are checked by import-lint
 - ``command``: `uavxai evaluate` (progress bar, journal, files of a finished or interrupted
   campaign, the terminal tables);
 - ``runner``: the tasks flown in this process, a local worker pool or Ray; settings checked;
-- ``merge``: `uavxai merge`, campaigns of one scenario pooled into one;
+- ``merge``: `uavxai merge`, campaigns of one scenario pooled into one (one-ownship campaigns,
+  or fleet campaigns with their run folders);
 - ``episode``: one campaign episode flown on the engine -> its ``episodes.csv`` row;
 - ``fleet``: a fleet campaign's episode (the fleet mission `uavxai run` flies, by its code)
-  -> its ``fleet_episodes.csv`` row, and its ``fleet_results.csv`` rows;
+  -> its ``fleet_episodes.csv`` row, its ``fleet_results.csv`` rows, both files written;
 - ``statistics``: the ``results.csv`` rows (rates and intervals, risk ratios, DAA estimates);
-- ``plots``: the figures drawn from the results rows;
+- ``plots``: the figures drawn from the results rows (a fleet's: and its episodes' rows);
 - ``files``: the columns of both files, a CSV written whole, a source's rows read and checked.
 """
 
@@ -70,9 +71,9 @@ from uavxai.campaign.files import (
     columns_of,
     write_csv,
 )
-from uavxai.campaign.fleet import run_fleet_episode, summarise_fleet
-from uavxai.campaign.merge import merge_campaigns
-from uavxai.campaign.plots import plot_campaign
+from uavxai.campaign.fleet import run_fleet_episode, summarise_fleet, write_fleet_campaign
+from uavxai.campaign.merge import is_fleet_campaign, merge_campaigns
+from uavxai.campaign.plots import plot_campaign, plot_fleet
 from uavxai.campaign.runner import DYNAMICS, Task, campaign_tasks, run_campaign
 from uavxai.campaign.statistics import summarise
 
@@ -97,8 +98,10 @@ __all__ = [
     "columns_of",
     "daa_table",
     "evaluate_command",
+    "is_fleet_campaign",
     "merge_campaigns",
     "plot_campaign",
+    "plot_fleet",
     "rerun_row",
     "results_table",
     "run_campaign",
@@ -107,4 +110,5 @@ __all__ = [
     "summarise",
     "summarise_fleet",
     "write_csv",
+    "write_fleet_campaign",
 ]

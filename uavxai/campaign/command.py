@@ -11,16 +11,9 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from uavxai.campaign.episode import planner_for
-from uavxai.campaign.files import (
-    FLEET_EPISODE_COLUMNS,
-    FLEET_EPISODES,
-    FLEET_RESULT_COLUMNS,
-    FLEET_RESULTS,
-    columns_of,
-    write_csv,
-)
-from uavxai.campaign.fleet import RUNS, fleet_table, is_fleet_rows, summarise_fleet
-from uavxai.campaign.plots import plot_campaign
+from uavxai.campaign.files import FLEET_EPISODES, FLEET_RESULTS, columns_of, write_csv
+from uavxai.campaign.fleet import RUNS, fleet_table, is_fleet_rows, write_fleet_campaign
+from uavxai.campaign.plots import plot_campaign, plot_fleet
 from uavxai.campaign.runner import check_campaign, run_campaign, versions
 from uavxai.campaign.statistics import summarise
 from uavxai.outputs import cell_number
@@ -59,8 +52,8 @@ def evaluate_command(
 ) -> dict:
     """The `uavxai evaluate` command: the campaign with a progress bar, each finished episode
     journaled (:mod:`uavxai.journal`), ``results.csv``, ``episodes.csv`` and the plots in
-    ``out`` (a fleet's: ``fleet_results.csv``, ``fleet_episodes.csv`` and each episode's run
-    files under ``fleet-runs/``, no plots; docs/fleet.md, "Fleet campaigns"); a short report
+    ``out`` (a fleet's: ``fleet_results.csv``, ``fleet_episodes.csv``, its plots and each
+    episode's run files under ``fleet-runs/``; docs/fleet.md, "Fleet campaigns"); a short report
     back. ``goal``: see :func:`_campaign_goal`; ``resume``: fly only
     what an interrupted run of the same campaign did not journal in ``out``."""
     import torch
@@ -126,8 +119,9 @@ def _report(rows: list[dict], results: list[dict], plots: list[Path], out: Path,
     """A finished campaign's tables and files, on ``console``."""
     if is_fleet_rows(rows):
         console.print(fleet_table(results))
-        console.print(f"wrote {out / FLEET_RESULTS}, {out / FLEET_EPISODES} and each episode's "
-                      f"run files in {out / RUNS}/")  # fmt: skip
+        console.print(f"wrote {out / FLEET_RESULTS}, {out / FLEET_EPISODES}, each episode's "
+                      f"run files in {out / RUNS}/ and {len(plots)} plots: "
+                      f"{', '.join(str(p) for p in plots)}")  # fmt: skip
         return
     console.print(results_table(results))
     if any(math.isfinite(cell_number(r.get("nmac_prob"))) for r in results):
@@ -138,20 +132,21 @@ def _report(rows: list[dict], results: list[dict], plots: list[Path], out: Path,
 def _save(rows: list[dict], out: Path, title: str) -> tuple[list[dict], list[Path]]:
     """A finished campaign's ``episodes.csv``, ``results.csv`` and plots; a signal that comes
     meanwhile waits for them to be whole. Its results and the plots' paths (a fleet
-    campaign's: fleet_episodes.csv and fleet_results.csv, no plots)."""
+    campaign's: fleet_episodes.csv, fleet_results.csv and its plots)."""
     with interrupts_deferred():
+        if is_fleet_rows(rows):
+            out.mkdir(parents=True, exist_ok=True)
+            rows, results = write_fleet_campaign(rows, out)
+            return results, plot_fleet(results, rows, out, title)
         results = _write_rows(rows, out)
-        return results, [] if is_fleet_rows(rows) else plot_campaign(results, out, title)
+        return results, plot_campaign(results, out, title)
 
 
 def _write_rows(rows: list[dict], out: Path) -> list[dict]:
     """A campaign's two files from its episodes' rows; its results."""
     out.mkdir(parents=True, exist_ok=True)
     if is_fleet_rows(rows):
-        results = summarise_fleet(rows)
-        write_csv(out / FLEET_EPISODES, FLEET_EPISODE_COLUMNS, rows)
-        write_csv(out / FLEET_RESULTS, FLEET_RESULT_COLUMNS, results)
-        return results
+        return write_fleet_campaign(rows, out)[1]
     results = summarise(rows)
     episode_columns, result_columns = columns_of(rows)
     write_csv(out / "episodes.csv", episode_columns, rows)

@@ -138,44 +138,66 @@ def _cell(v):
     return v
 
 
+def as_written(rows: Iterable[dict], columns: Sequence[str]) -> list[dict]:
+    """``rows`` as :func:`write_csv` writes their ``columns`` (numbers to six digits): a
+    summary computed from them is the one computed again from the file (``uavxai merge``)."""
+    return [{c: "" if r[c] is None else _cell(r[c]) for c in columns} for r in rows]
+
+
 MAX_STEPS = 10**7  # decisions in one episode: far beyond any scenario's max_steps
 MAX_SEED = 2**31 - 1
 MAX_INTRUDERS = 10_000
 
 
-def checked_row(r: dict, path: Path, line: int) -> dict:
-    """One ``episodes.csv`` row of a source campaign, every value within what a campaign
-    writes, typed (so that the merged files hold numbers, not the source's text)."""
+class _Cells:
+    """One row of a source campaign's file, read cell by cell: each value within what a
+    campaign writes, or a UserError naming the file, the line, the column and what it allows."""
 
-    def bad(column: str, allowed: str) -> UserError:
-        value = str(r.get(column))
+    def __init__(self, r: dict, path: Path, line: int) -> None:
+        self.r, self.path, self.line = r, path, line
+
+    def bad(self, column: str, allowed: str) -> UserError:
+        value = str(self.r.get(column))
         shown = value if len(value) <= 40 else value[:37] + "..."
         return UserError(
-            f"{path} line {line}: {column} {shown!r} is not allowed; {column} must be {allowed}. "
-            "The file was not written by `uavxai evaluate` as it stands."
+            f"{self.path} line {self.line}: {column} {shown!r} is not allowed; {column} must be "
+            f"{allowed}. The file was not written by `uavxai evaluate` as it stands."
         )
 
-    def number(column: str, lo: float, hi: float, allowed: str, empty=None, whole=False):
-        text = (r.get(column) or "").strip()
+    def number(self, column: str, lo: float, hi: float, allowed: str, empty=None, whole=False):
+        text = (self.r.get(column) or "").strip()
         if text == "" and empty is not None:
             return empty
         try:
             v = float(text)
         except ValueError:
-            raise bad(column, allowed) from None
+            raise self.bad(column, allowed) from None
         if math.isnan(v) or not lo <= v <= hi or (whole and v != int(v)):
-            raise bad(column, allowed)
+            raise self.bad(column, allowed)
         return int(v) if whole else v
 
-    out = dict(r)
-    if r.get("method") not in avoidance_planners():
-        raise bad("method", f"a planner name, one of {', '.join(avoidance_planners())}")
-    if r.get("outcome") not in OUTCOMES:
-        raise bad("outcome", f"one of {', '.join(OUTCOMES)}")
-    out["intruders"] = number("intruders", 0, MAX_INTRUDERS,
-                              f"a whole number from 0 to {MAX_INTRUDERS}", whole=True)  # fmt: skip
-    out["episode"] = number("episode", 0, MAX_SEED, "a whole number >= 0", whole=True)
-    out["seed"] = number("seed", 0, MAX_SEED, f"a whole number from 0 to {MAX_SEED}", whole=True)
+    def keys(self) -> dict:
+        """The row with its method, outcome, intruder count, episode and seed checked, typed."""
+        r, out = self.r, dict(self.r)
+        if r.get("method") not in avoidance_planners():
+            raise self.bad("method", f"a planner name, one of {', '.join(avoidance_planners())}")
+        if r.get("outcome") not in OUTCOMES:
+            raise self.bad("outcome", f"one of {', '.join(OUTCOMES)}")
+        out["intruders"] = self.number("intruders", 0, MAX_INTRUDERS,
+                                       f"a whole number from 0 to {MAX_INTRUDERS}",
+                                       whole=True)  # fmt: skip
+        out["episode"] = self.number("episode", 0, MAX_SEED, "a whole number >= 0", whole=True)
+        out["seed"] = self.number("seed", 0, MAX_SEED, f"a whole number from 0 to {MAX_SEED}",
+                                  whole=True)  # fmt: skip
+        return out
+
+
+def checked_row(r: dict, path: Path, line: int) -> dict:
+    """One ``episodes.csv`` row of a source campaign, every value within what a campaign
+    writes, typed (so that the merged files hold numbers, not the source's text)."""
+    cells = _Cells(r, path, line)
+    number = cells.number
+    out = cells.keys()
     out["steps"] = number("steps", 0, MAX_STEPS, f"a whole number from 0 to {MAX_STEPS}",
                           whole=True)  # fmt: skip
     out["min_separation_m"] = number(
@@ -188,6 +210,26 @@ def checked_row(r: dict, path: Path, line: int) -> dict:
     )
     for column in GOAL_COLUMNS:  # files written before the goal was recorded lack it
         out[column] = number(column, -1e7, 1e7, "a coordinate in metres, or empty", empty="")
+    return out
+
+
+# fleet_episodes.csv's text cells (one value per member, space-separated); every other cell
+# but the keys is a number or empty (not defined)
+FLEET_TEXT_COLUMNS = ("member_outcomes", "member_delivered_bits", "member_energy_wh",
+                      "member_min_separation_m")  # fmt: skip
+
+
+def checked_fleet_row(r: dict, path: Path, line: int) -> dict:
+    """One ``fleet_episodes.csv`` row of a source campaign: its keys checked and typed, its
+    ``completed`` 0 or 1, every other cell but the members' text a number or empty. The
+    numbers are kept as the file's text: written again, the merged file holds them as the
+    source did, and :func:`summarise_fleet` reads them as numbers."""
+    cells = _Cells(r, path, line)
+    out = cells.keys()
+    out["completed"] = cells.number("completed", 0, 1, "0 or 1", whole=True)
+    for column in FLEET_EPISODE_COLUMNS[FLEET_EPISODE_COLUMNS.index("completed") + 1 :]:
+        if column not in FLEET_TEXT_COLUMNS:
+            cells.number(column, -math.inf, math.inf, "a number, or empty", empty="")
     return out
 
 

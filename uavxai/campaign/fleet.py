@@ -22,6 +22,14 @@ from pathlib import Path
 
 import numpy as np
 
+from uavxai.campaign.files import (
+    FLEET_EPISODE_COLUMNS,
+    FLEET_EPISODES,
+    FLEET_RESULT_COLUMNS,
+    FLEET_RESULTS,
+    as_written,
+    write_csv,
+)
 from uavxai.errors import UserError
 from uavxai.outputs import cell_number
 from uavxai.scenario import Scenario
@@ -141,6 +149,19 @@ def is_fleet_rows(rows: Iterable[dict]) -> bool:
     """Rows of a fleet campaign (``fleet_episodes.csv``'s), not one ownship's."""
     rows = list(rows)
     return bool(rows) and all("member_outcomes" in r for r in rows)
+
+
+def write_fleet_campaign(rows: Iterable[dict], out: Path) -> tuple[list[dict], list[dict]]:
+    """A fleet campaign's ``fleet_episodes.csv`` and ``fleet_results.csv`` in ``out`` from its
+    episodes' rows (`uavxai evaluate`'s, or the sources' pooled by `uavxai merge`: one code
+    path). The results are computed from the rows as the file holds them (numbers to six
+    digits), so that a campaign pooled from its files equals the one flown whole. Returns
+    (the rows as written, the results)."""
+    rows = as_written(rows, FLEET_EPISODE_COLUMNS)
+    results = summarise_fleet(rows)
+    write_csv(out / FLEET_EPISODES, FLEET_EPISODE_COLUMNS, rows)
+    write_csv(out / FLEET_RESULTS, FLEET_RESULT_COLUMNS, results)
+    return rows, results
 
 
 def summarise_fleet(rows: Iterable[dict]) -> list[dict]:

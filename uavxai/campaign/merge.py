@@ -1,47 +1,64 @@
 """`uavxai merge`: campaigns of one scenario pooled into one, every results row computed again
-from the pooled episodes.
+from the pooled episodes; one-ownship campaigns (``episodes.csv``) or fleet campaigns
+(``fleet_episodes.csv``, docs/fleet.md "Fleet campaigns"), not a mix.
 """
 
 from __future__ import annotations
 
 import contextlib
 import math
+import shutil
 from collections.abc import Sequence
 from pathlib import Path
 
 from uavxai.campaign.files import (
     DAA_EPISODE_COLUMNS,
     EPISODE_COLUMNS,
+    FLEET_EPISODE_COLUMNS,
     FLEET_EPISODES,
     FLIGHT_COLUMNS,
     GOAL_COLUMNS,
     RESULT_COLUMNS,
+    checked_fleet_row,
     checked_row,
     columns_of,
     has_daa_columns,
     read_rows,
     write_csv,
 )
-from uavxai.campaign.plots import plot_campaign
+from uavxai.campaign.fleet import episode_folder, write_fleet_campaign
+from uavxai.campaign.plots import plot_campaign, plot_fleet
 from uavxai.campaign.statistics import summarise
 from uavxai.errors import UserError
 from uavxai.outputs import cell_number
 from uavxai.processes import interrupts_deferred
 
 
-def _episodes_file(src: Path) -> Path:
-    """A source campaign's episodes.csv; a fleet campaign's folder refused by name (its files
-    are not these)."""
-    if (src / FLEET_EPISODES).is_file() and not (src / "episodes.csv").exists():
-        raise UserError(
-            f"{src}: a fleet campaign ({FLEET_EPISODES}); merge pools one-ownship campaigns "
-            "only. Pooling fleet campaigns is not built: fly one campaign with every seed, "
-            "or read the sources' fleet_episodes.csv together (docs/fleet.md)."
-        )
-    return src / "episodes.csv"
+def is_fleet_campaign(src: Path) -> bool:
+    """A campaign folder of a fleet (``fleet_episodes.csv``, no ``episodes.csv``)."""
+    return (src / FLEET_EPISODES).is_file() and not (src / "episodes.csv").exists()
 
 
 def merge_campaigns(sources: Sequence[str | Path], out: str | Path, title: str = "") -> list[dict]:
+    """One campaign from several of the same scenario: one-ownship campaigns
+    (:func:`merge_ownship`) or fleet campaigns (:func:`merge_fleet`), refused when mixed (their
+    episodes are not the same thing). Its results rows."""
+    sources = [Path(s) for s in sources]
+    fleets = [s for s in sources if is_fleet_campaign(s)]
+    if fleets and len(fleets) < len(sources):
+        one = next(s for s in sources if s not in fleets)
+        if not (one / "episodes.csv").is_file():
+            raise UserError(f"{one}: has neither {FLEET_EPISODES} nor episodes.csv; is it a "
+                            "campaign folder?")  # fmt: skip
+        raise UserError(
+            f"{fleets[0]}: a fleet campaign ({FLEET_EPISODES}); {one}: not one (one ownship's "
+            "campaign has episodes.csv); merge pools campaigns of one kind, fleet campaigns "
+            "together or one-ownship campaigns together."
+        )
+    return (merge_fleet if fleets else merge_ownship)(sources, out, title)
+
+
+def merge_ownship(sources: Sequence[Path], out: str | Path, title: str = "") -> list[dict]:
     """One campaign from several of the same scenario and dynamics: other methods, other
     intruder counts, or more seeds of the same ones (a campaign extended later, or split over
     machines). The episodes are pooled and every ``results.csv`` row is computed again from
@@ -57,7 +74,7 @@ def merge_campaigns(sources: Sequence[str | Path], out: str | Path, title: str =
     goals: dict[tuple[str, ...], Path] = {}
     for src in map(Path, sources):
         # files written before the goal was recorded lack its columns, and are taken on trust
-        rows = read_rows(_episodes_file(src), EPISODE_COLUMNS[: -len(GOAL_COLUMNS)])
+        rows = read_rows(src / "episodes.csv", EPISODE_COLUMNS[: -len(GOAL_COLUMNS)])
         rows = [checked_row(r, src / "episodes.csv", i) for i, r in enumerate(rows, start=2)]
         for i, r in enumerate(rows, start=2):
             try:
@@ -74,14 +91,7 @@ def merge_campaigns(sources: Sequence[str | Path], out: str | Path, title: str =
         for r in rows:
             for column in FLIGHT_COLUMNS:  # not in files written before they existed
                 r.setdefault(column, "")
-            key = (r["method"], r["intruders"], r["seed"])
-            if key in flown_by:
-                raise UserError(
-                    f"{key[0]} at {key[1]} intruders, seed {key[2]}: flown in both "
-                    f"{flown_by[key]} and {src}; merge campaigns of different seeds, methods or "
-                    "intruder counts."
-                )
-            flown_by[key] = src
+            _flown_once(r, src, flown_by)
             goal = tuple(r[k] for k in GOAL_COLUMNS)
             if any(g != "" for g in goal):
                 goals.setdefault(goal, src)
@@ -120,4 +130,56 @@ def merge_campaigns(sources: Sequence[str | Path], out: str | Path, title: str =
         write_csv(out / "results.csv", result_columns, results)
         write_csv(out / "episodes.csv", episode_columns, episodes)
         plot_campaign(results, out, title)
+    return results
+
+
+def _flown_once(r: dict, src: Path, flown_by: dict[tuple[str, int, int], Path]) -> None:
+    """Record that ``src`` flew row ``r``'s (method, intruders, seed); the same in two sources
+    is an error: it would count twice."""
+    key = (r["method"], r["intruders"], r["seed"])
+    if key in flown_by:
+        raise UserError(
+            f"{key[0]} at {key[1]} intruders, seed {key[2]}: flown in both {flown_by[key]} and "
+            f"{src}; merge campaigns of different seeds, methods or intruder counts."
+        )
+    flown_by[key] = src
+
+
+def merge_fleet(sources: Sequence[Path], out: str | Path, title: str = "") -> list[dict]:
+    """One fleet campaign from several of the same scenario (docs/fleet.md, "Fleet campaigns"):
+    their ``fleet_episodes.csv`` rows pooled, ``fleet_results.csv`` and the plots computed
+    again from them by `uavxai evaluate`'s own code (:func:`write_fleet_campaign`), so a
+    campaign flown in shards (other seeds, methods or intruder counts) merges into the one
+    flown whole. Each method and intruder count's episodes are numbered again 0.. in seed
+    order (each source numbers its own from 0), and each episode's run folder (``fleet-runs/``)
+    is copied from its source under its new number, where the source has it (a campaign flown
+    with ``--ray`` keeps it on the node that flew it). Its results rows."""
+    out = Path(out)
+    pooled: list[tuple[dict, Path]] = []
+    flown_by: dict[tuple[str, int, int], Path] = {}
+    for src in sources:
+        path = src / FLEET_EPISODES
+        rows = read_rows(path, FLEET_EPISODE_COLUMNS)
+        for r in (checked_fleet_row(r, path, i) for i, r in enumerate(rows, start=2)):
+            _flown_once(r, src, flown_by)
+            pooled.append((r, episode_folder(src, r["method"], r["intruders"], r["episode"])))
+    if not pooled:
+        raise UserError(f"{', '.join(map(str, sources))}: no episodes in their {FLEET_EPISODES} "
+                        "to merge.")  # fmt: skip
+    groups: dict[tuple[str, int], list[tuple[dict, Path]]] = {}
+    for r, run in pooled:
+        groups.setdefault((r["method"], r["intruders"]), []).append((r, run))
+    episodes, runs = [], []
+    for group in groups.values():
+        for k, (r, run) in enumerate(sorted(group, key=lambda rr: rr[0]["seed"])):
+            episodes.append({**r, "episode": k})
+            runs.append((run, episode_folder(out, r["method"], r["intruders"], k)))
+    out.mkdir(parents=True, exist_ok=True)
+    for run, there in runs:
+        # a real folder only: a link in a source is not followed out of it
+        if run.is_dir() and not run.is_symlink():
+            shutil.copytree(run, there, symlinks=True, dirs_exist_ok=True)
+    with interrupts_deferred():  # a signal now waits for the files: they end whole
+        episodes, results = write_fleet_campaign(episodes, out)
+        plot_fleet(results, episodes, out, title)
     return results
