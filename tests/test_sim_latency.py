@@ -10,6 +10,8 @@ from __future__ import annotations
 import json
 import math
 import os
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -119,6 +121,22 @@ def test_companion_plans_what_the_planner_plans_in_process() -> None:
             )
             assert [c.q for c in a.children] == [c.q for c in b.children]
             assert b.explanation == a.explanation
+
+
+def test_the_companion_loads_the_compiled_search_before_the_episode() -> None:
+    """A process's first search loads the compiled kernel (0.3-0.6 s, issue 31); the
+    companion does it as it starts (warm_up, a planner of its own), not at the first
+    decision. In a fresh interpreter: nothing loaded before, the kernel after."""
+    code = (
+        "from uavxai.avoidance import kernel\n"
+        "from uavxai.avoidance.types import PlannerConfig\n"
+        "from uavxai.sim.companion import warm_up\n"
+        "before = len(kernel.run.signatures)\n"
+        "warm_up('mcts', PlannerConfig(), None)\n"
+        "print(before, len(kernel.run.signatures))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["0", "1"]
 
 
 def test_companion_reports_failures_by_name() -> None:
