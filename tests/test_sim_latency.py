@@ -185,8 +185,13 @@ def test_the_companion_decodes_and_tracks_as_the_simulation_would() -> None:
             here.on_sample(None, state)  # type: ignore[arg-type] - the picture needs no episode
             there.on_sample(None, state)  # type: ignore[arg-type]
             if k % 10 == 9:
+                # a period's frames wait for the next request, to go in one write (issue 31;
+                # the first reports arrive after the first second: measured, then delayed)
+                posted = [call[0] for call in companion._worker._posted]
+                assert set(posted) == ({"receive"} if k > 10 else set())
                 beliefs = here(state)
                 assert there(state) == beliefs
+                assert not companion._worker._posted  # sent with it, decoded before it
                 seen = max(seen, len(beliefs))
         assert seen >= 5  # the intruders really were tracked, over there as here
         # Planning from its own picture (no round trip for the beliefs) plans from the same
