@@ -17,7 +17,35 @@ decision latency (`avoidance.decision_latency_s: 0`, the default and the paper's
 decision: the ownship waits for every search, while the world flies the intruders through
 the period meanwhile) and with one (`--latency`, default 0.5 s: the search overlaps
 everyone's flight, as on a UAV whose companion computer plans beside the
-autopilot). `--profile FILE` writes a cProfile of one run for `python -m pstats FILE`.
+autopilot). `--profile FILE` writes a cProfile of one run for `python -m pstats FILE`;
+`--phases` times the episode loop's phases in one more run (CPU seconds of the simulation
+process, and the companion's and the recorder's CPU over the loop: figures that a loaded
+machine leaves readable, unlike its wall seconds), and the bare loops' CPU is printed beside
+their wall time.
+
+Measured again (issue 31, branch speed33, docs/results/README.md "Issue 31's co-simulation
+speed, again"): 60 s simulated, median of 5, the base tree's and the branch's benchmark one
+after the other at load 4.6-5.4 on 2 CPUs (three campaign processes at normal priority): run /
+plain JSBSim 0.75 without latency and 0.72 with 0.5 s (before: 0.63 and 0.67), the run's loop
+5.51 s against 7.01 s; not met on that machine, expected about 0.85 on a quiet one (to be
+measured there). What changed: the companion warms its planner up as it starts (its first
+search loaded the compiled kernel, 0.3-0.6 s, inside the loop: the ownship waited for it at
+its first decision, with or without a latency, which is why the 0.5 s latency did not help),
+and the ADS-B frames go to it a decision period at a time. ``--phases`` after it, load 4.6-5.4:
+
+| the simulation process's CPU over the episode loop (2.06 s; 5.60 s wall) | |
+|---|---|
+| the intruders' JSBSim flight (lookahead, 20 x 120 ticks a decision) | 65 % |
+| the ownship's JSBSim flight, the pilots, 11 newcomers loaded and trimmed (world.step) | 13 % |
+| MAVLink telemetry (bridge) | 4.6 % |
+| ADS-B: surveillance, frames packed and posted to the companion (picture) | 4.1 % |
+| the judge (closest approach between samples) | 2.9 % |
+| states read (world.state) | 2.1 % |
+| decisions.jsonl, trajectory.csv, rerun posts | 1.9, 1.6, 1.5 % |
+| the rest (battery, commands, throughput, trust, the companion's answers) | 4 % |
+
+The companion used 0.48 s of CPU over the loop (0.97 s before: its first search's kernel
+load), the recorder 0.24 s; the simulation waited 0.12 s wall for decisions (0.92 s before).
 
 Measured (issue 31): 20 intruders, 30 s simulated, no latency, median of 5 at load 6 on 2
 CPUs (two campaigns running): run / plain JSBSim 1.00, run / bare world 0.94 (plain JSBSim
