@@ -25,13 +25,14 @@ their wall time.
 
 Measured again (issue 31, branch speed33, docs/results/README.md "Issue 31's co-simulation
 speed, again"): 60 s simulated, median of 5, the base tree's and the branch's benchmark one
-after the other at load 4.6-5.4 on 2 CPUs (three campaign processes at normal priority): run /
-plain JSBSim 0.75 without latency and 0.72 with 0.5 s (before: 0.63 and 0.67), the run's loop
-5.51 s against 7.01 s; not met on that machine, expected about 0.85 on a quiet one (to be
-measured there). What changed: the companion warms its planner up as it starts (its first
-search loaded the compiled kernel, 0.3-0.6 s, inside the loop: the ownship waited for it at
-its first decision, with or without a latency, which is why the 0.5 s latency did not help),
-and the ADS-B frames go to it a decision period at a time. ``--phases`` after it, load 4.6-5.4:
+after the other at load 4.6-5.9 on 2 CPUs (three campaign processes at normal priority), twice:
+run / plain JSBSim 0.75 and 0.66 without latency, 0.72 and 0.65 with 0.5 s (before: 0.63 and
+0.56, 0.67 and 0.67), the run's loop 5.51 and 7.22 s against 7.01 and 10.53 s; not met on that
+machine, expected about 0.85 on a quiet one (to be measured there). What changed: the
+companion warms its planner up as it starts (its first search loaded the compiled kernel,
+0.3-0.6 s, inside the loop: the ownship waited for it at its first decision, with or without a
+latency, which is why the 0.5 s latency did not help), and the ADS-B frames go to it a
+decision period at a time. ``--phases`` after it, load 4.6-5.4:
 
 | the simulation process's CPU over the episode loop (2.06 s; 5.60 s wall) | |
 |---|---|
