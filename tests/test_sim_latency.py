@@ -10,6 +10,8 @@ from __future__ import annotations
 import json
 import math
 import os
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -121,6 +123,22 @@ def test_companion_plans_what_the_planner_plans_in_process() -> None:
             assert b.explanation == a.explanation
 
 
+def test_the_companion_loads_the_compiled_search_before_the_episode() -> None:
+    """A process's first search loads the compiled kernel (0.3-0.6 s, issue 31); the
+    companion does it as it starts (warm_up, a planner of its own), not at the first
+    decision. In a fresh interpreter: nothing loaded before, the kernel after."""
+    code = (
+        "from uavxai.avoidance import kernel\n"
+        "from uavxai.avoidance.types import PlannerConfig\n"
+        "from uavxai.sim.companion import warm_up\n"
+        "before = len(kernel.run.signatures)\n"
+        "warm_up('mcts', PlannerConfig(), None)\n"
+        "print(before, len(kernel.run.signatures))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["0", "1"]
+
+
 def test_companion_reports_failures_by_name() -> None:
     with pytest.raises(UserError, match="unknown avoidance planner 'nope'"):
         Companion("nope", PlannerConfig()).reset(0)
@@ -167,8 +185,13 @@ def test_the_companion_decodes_and_tracks_as_the_simulation_would() -> None:
             here.on_sample(None, state)  # type: ignore[arg-type] - the picture needs no episode
             there.on_sample(None, state)  # type: ignore[arg-type]
             if k % 10 == 9:
+                # a period's frames wait for the next request, to go in one write (issue 31;
+                # the first reports arrive after the first second: measured, then delayed)
+                posted = [call[0] for call in companion._worker._posted]
+                assert set(posted) == ({"receive"} if k > 10 else set())
                 beliefs = here(state)
                 assert there(state) == beliefs
+                assert not companion._worker._posted  # sent with it, decoded before it
                 seen = max(seen, len(beliefs))
         assert seen >= 5  # the intruders really were tracked, over there as here
         # Planning from its own picture (no round trip for the beliefs) plans from the same

@@ -11,8 +11,9 @@ cores. Without a latency (the paper's instant decision) the ownship must wait fo
 command, but the intruders need not: the world flies them through the period ahead while
 the companion searches (:meth:`uavxai.dynamics.world.JSBSimWorld.lookahead`, the same
 flight to the bit). The ADS-B receiver and the tracker run there too (:class:`Onboard`), as
-on the UAV: the simulation sends the ADSB_VEHICLE frames as they arrive and the companion
-decodes and tracks them on its own core; the beliefs come back at each decision.
+on the UAV: the simulation sends the ADSB_VEHICLE frames (a decision period's with the next
+request, :class:`_RemoteReceiver`) and the companion decodes and tracks them on its own core,
+in the order they arrived; the beliefs come back at each decision.
 
 What is flown does not depend on where the planner runs: the picture is fixed at t, the
 planner and the tracker are seeded and fed the same requests in the same order, and the
@@ -34,9 +35,38 @@ from uavxai.sim.seat import Seat
 from uavxai.worker import Worker
 
 
+def warm_up(name: str, config: PlannerConfig, checkpoint: str | None) -> None:
+    """One decision of a planner of its own, on a made-up encounter, thrown away.
+
+    Why: a process's first search loads what the search is compiled to (numba's cached
+    kernels) and imports what it needs: 0.3-0.6 s, against 3-15 ms for every later decision
+    (issue 31, measured in ``uavxai run``'s companion, where that first decision held the
+    ownship up for half a second of a one-minute flight). Done when the companion starts, it
+    overlaps the world's loading of its aircraft. A planner of its own, so the episode's
+    planner keeps no trace of it (its generator, its memo): the flight is the same to the bit.
+    Only the registered planners: a plugin's is not asked to plan what nobody flies."""
+    from uavxai.avoidance.planners import PLANNERS, make_planner
+
+    if name not in PLANNERS:
+        return
+    planner = make_planner(name, config, checkpoint=checkpoint)
+    planner.reset(config.seed)
+    (x0, x1), (y0, y1), (h0, h1) = config.x_bounds, config.y_bounds, config.h_bounds
+    x, y, h = (x0 + x1) / 2, (y0 + y1) / 2, (h0 + h1) / 2
+    v = sum(config.speed_mps) / 2
+    own = Ownship(x, y, h, speed=v, heading=0.0, ground_velocity=(0.0, v))
+    traffic = [  # head-on, and crossing from the right a little above: the search works
+        Intruder(1, x, y + 15 * v, h, 0.0, -v, sigma_m=5.0, sigma_v=1.0),
+        Intruder(2, x + 12 * v, y + 12 * v, h + 10, -v, 0.0, turn_rate=0.02,
+                 sigma_h_m=2.0, sigma_vh=0.3, bank_limit_deg=20.0),  # fmt: skip
+    ]
+    planner.plan(own, traffic, (x, y + 0.4 * (y1 - y0), h))
+
+
 class Onboard:
     """What runs on the companion computer: the avoidance planner and, given the scenario,
-    the surveillance :class:`~uavxai.sim.picture.Receiver` (ADS-B decoding and tracking)."""
+    the surveillance :class:`~uavxai.sim.picture.Receiver` (ADS-B decoding and tracking).
+    Its planner is warmed up as it is built (:func:`warm_up`)."""
 
     def __init__(
         self, name: str, config: PlannerConfig, checkpoint: str | None, scenario: Scenario | None
@@ -45,6 +75,7 @@ class Onboard:
 
         self.planner = make_planner(name, config, checkpoint=checkpoint)
         self.receiver = Receiver(scenario) if scenario is not None else None
+        warm_up(name, config, checkpoint)
 
     def reset(self, seed: int) -> None:
         self.planner.reset(seed)
@@ -67,15 +98,20 @@ class Onboard:
 
 
 class _RemoteReceiver:
-    """The companion's receiver seen from the simulation: frames go out at once (it decodes
-    and tracks while the world flies on), beliefs come back when asked."""
+    """The companion's receiver seen from the simulation: frames go out with the next request
+    (a decision, a picture), all of a decision period's in one pipe write, and are decoded and
+    tracked there before it, in the order they came; beliefs come back when asked.
+
+    Why not each sample's at once: every write wakes the companion, and on a busy machine the
+    woken process took the simulation's core from it (issue 31: 0.25 s of a one-minute run
+    waiting in 600 writes of 0.3 ms of work each). The companion decodes a period's frames
+    (~3 ms) while the world flies the intruders ahead, beside the search."""
 
     def __init__(self, worker: Worker) -> None:
         self._worker = worker
 
     def receive(self, frames: bytes, onboard: Sequence, t: float) -> None:
         self._worker.post("receive", frames, list(onboard), t)
-        self._worker.flush()
 
     def beliefs(self, t: float) -> list[Intruder]:
         return self._worker.call("beliefs", t)
@@ -88,8 +124,9 @@ class Companion(Seat):
     on while it plans). Given the ``scenario``, the process also decodes and tracks the
     traffic: :attr:`receiver` is the episode's picture's receiver.
 
-    Starting the process costs about a second once, while the world loads its aircraft, and
-    is waited for at the first call (``reset``, before the episode's clock starts).
+    Starting the process costs about a second once (the planner warmed up: :func:`warm_up`),
+    while the world loads its aircraft, and is waited for at the first call (``reset``,
+    before the episode's clock starts).
     """
 
     def __init__(
