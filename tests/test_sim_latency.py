@@ -18,13 +18,14 @@ import numpy as np
 import pytest
 from engine_runs import run_and_evaluate
 
+from uavxai.avoidance.mcts import MCTSPlanner
 from uavxai.avoidance.planners import make_planner
 from uavxai.avoidance.types import Intruder, Ownship, PlannerConfig
 from uavxai.errors import UserError
 from uavxai.scenario import default_scenario
 from uavxai.sim.build import fly
 from uavxai.sim.clock import Clock
-from uavxai.sim.companion import Companion
+from uavxai.sim.companion import Companion, uses_compiled_search, warm_up
 from uavxai.sim.episode import Observer
 from uavxai.sim.spec import episode_spec
 
@@ -123,20 +124,39 @@ def test_companion_plans_what_the_planner_plans_in_process() -> None:
             assert b.explanation == a.explanation
 
 
-def test_the_companion_loads_the_compiled_search_before_the_episode() -> None:
+@pytest.mark.parametrize("name", ["mcts", "mcts_daa", "mcts_route", "mcts_sep_daa"])
+def test_the_companion_loads_the_compiled_search_before_the_episode(name: str) -> None:
     """A process's first search loads the compiled kernel (0.3-0.6 s, issue 31); the
     companion does it as it starts (warm_up, a planner of its own), not at the first
-    decision. In a fresh interpreter: nothing loaded before, the kernel after."""
+    decision. In a fresh interpreter, building what the companion process builds (Onboard):
+    nothing loaded before, the kernel after, and the episode's planner never asked to plan.
+    (mcts_daa: its alerting stage must alert on the made-up encounter, or nothing warms.)"""
     code = (
         "from uavxai.avoidance import kernel\n"
         "from uavxai.avoidance.types import PlannerConfig\n"
-        "from uavxai.sim.companion import warm_up\n"
+        "from uavxai.sim.companion import Onboard\n"
         "before = len(kernel.run.signatures)\n"
-        "warm_up('mcts', PlannerConfig(), None)\n"
+        f"onboard = Onboard({name!r}, PlannerConfig(), None, None)\n"
         "print(before, len(kernel.run.signatures))\n"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.split() == ["0", "1"]
+
+
+def test_only_the_compiled_search_is_warmed_and_a_failure_says_where(monkeypatch) -> None:
+    # exhaustive, mvp and none have no compiled kernel: their warm-up plans nothing
+    for name in ("exhaustive", "mvp", "none"):
+        assert not uses_compiled_search(make_planner(name, PlannerConfig()))
+    assert uses_compiled_search(make_planner("mcts_daa", PlannerConfig()))
+    # a planner that fails on the made-up encounter would fail in flight; the message says
+    # the failure came from the warm-up, not from an intruder the user never had
+    def broken(self, *args, **kwargs):
+        raise ValueError("no search today")
+
+    monkeypatch.setattr(MCTSPlanner, "plan", broken)
+    with pytest.raises(RuntimeError, match="warm-up's made-up encounter.*no search today"):
+        warm_up("mcts", PlannerConfig(), None)
+    warm_up("exhaustive", PlannerConfig(), None)  # not warmed, so not asked to plan
 
 
 def test_companion_reports_failures_by_name() -> None:

@@ -35,21 +35,34 @@ from uavxai.sim.seat import Seat
 from uavxai.worker import Worker
 
 
+def uses_compiled_search(planner: object) -> bool:
+    """Does ``planner`` search with the compiled MCTS kernel (itself, or the tree it wraps:
+    `mcts_daa`'s alerting stage, `mcts_route`'s route layer)? Those are the planners whose
+    first decision in a process loads it (:func:`warm_up`)."""
+    from uavxai.avoidance.mcts import MCTSPlanner
+
+    return isinstance(getattr(planner, "inner", planner), MCTSPlanner)
+
+
 def warm_up(name: str, config: PlannerConfig, checkpoint: str | None) -> None:
     """One decision of a planner of its own, on a made-up encounter, thrown away.
 
-    Why: a process's first search loads what the search is compiled to (numba's cached
-    kernels) and imports what it needs: 0.3-0.6 s, against 3-15 ms for every later decision
-    (issue 31, measured in ``uavxai run``'s companion, where that first decision held the
-    ownship up for half a second of a one-minute flight). Done when the companion starts, it
-    overlaps the world's loading of its aircraft. A planner of its own, so the episode's
-    planner keeps no trace of it (its generator, its memo): the flight is the same to the bit.
-    Only the registered planners: a plugin's is not asked to plan what nobody flies."""
+    Why: a process's first MCTS search loads the compiled kernel from numba's cache: 0.3-0.6 s,
+    against 3-15 ms for every later decision (issue 31, measured in ``uavxai run``'s companion,
+    where that first decision held the ownship up for half a second of a one-minute flight).
+    Done when the companion starts, it overlaps the world's loading of its aircraft. A
+    planner of its own, so the episode's planner keeps no trace of it (its generator, its
+    memo): the flight is the same to the bit. Only the registered planners that search with
+    the compiled kernel (:func:`uses_compiled_search`; the others' first decision costs what
+    every later one does, and a plugin's is not asked to plan what nobody flies).
+    A planner that fails here would fail in flight: the error says it came from here."""
     from uavxai.avoidance.planners import PLANNERS, make_planner
 
     if name not in PLANNERS:
         return
     planner = make_planner(name, config, checkpoint=checkpoint)
+    if not uses_compiled_search(planner):
+        return
     planner.reset(config.seed)
     (x0, x1), (y0, y1), (h0, h1) = config.x_bounds, config.y_bounds, config.h_bounds
     x, y, h = (x0 + x1) / 2, (y0 + y1) / 2, (h0 + h1) / 2
@@ -60,7 +73,13 @@ def warm_up(name: str, config: PlannerConfig, checkpoint: str | None) -> None:
         Intruder(2, x + 12 * v, y + 12 * v, h + 10, -v, 0.0, turn_rate=0.02,
                  sigma_h_m=2.0, sigma_vh=0.3, bank_limit_deg=20.0),  # fmt: skip
     ]
-    planner.plan(own, traffic, (x, y + 0.4 * (y1 - y0), h))
+    try:
+        planner.plan(own, traffic, (x, y + 0.4 * (y1 - y0), h))
+    except Exception as exc:
+        raise RuntimeError(
+            f"planner {name!r} failed on the warm-up's made-up encounter (a head-on and a "
+            f"crossing, uavxai.sim.companion.warm_up): {type(exc).__name__}: {exc}"
+        ) from exc
 
 
 class Onboard:
@@ -99,7 +118,8 @@ class Onboard:
 
 class _RemoteReceiver:
     """The companion's receiver seen from the simulation: frames go out with the next request
-    (a decision, a picture), all of a decision period's in one pipe write, and are decoded and
+    (a decision, a picture), a decision period's in one pipe write (at most the worker's batch,
+    64 posts, a write: more samples a period than that go in several), and are decoded and
     tracked there before it, in the order they came; beliefs come back when asked.
 
     Why not each sample's at once: every write wakes the companion, and on a busy machine the

@@ -246,12 +246,17 @@ def fleet_placement(sc: Scenario, users: np.ndarray):
 
 
 def _member_planner(sc: Scenario):
-    """Fleet member j's own planner, in this process, seeded apart from the others'."""
+    """Fleet member j's own planner, in this process, seeded apart from the others'. The
+    compiled search is loaded here, at set-up (:func:`uavxai.sim.companion.warm_up`), not at
+    the first member's first decision in flight."""
     from uavxai.avoidance.planners import make_planner
     from uavxai.avoidance.types import PlannerConfig
+    from uavxai.sim.companion import warm_up
+
+    av = sc.avoidance
+    warm_up(av.planner, PlannerConfig.from_scenario(sc), av.checkpoint)
 
     def planner(j: int):
-        av = sc.avoidance
         p = make_planner(av.planner, PlannerConfig.from_scenario(sc), checkpoint=av.checkpoint)
         p.reset(int(np.random.SeedSequence([sc.seed, j]).generate_state(1)[0]))
         return p
