@@ -200,7 +200,13 @@ def test_merge_refuses_broken_fleet_files_by_name(shards: list[Path], capsys) ->
     assert not (out / FLEET_RESULTS).exists()
     out = shards[0].parent / "from-broken-python"
     cells = row.split(",")
-    for column, bad in (("completed", "2"), ("qos_share", "most"), ("seed", "-1")):
+    # what a campaign never writes: counts below 0, empty or 'inf' (summed, they crashed the
+    # merge or merged as nonsense), shares above 1, a closest approach below 0
+    for column, bad in (("completed", "2"), ("qos_share", "most"), ("seed", "-1"),
+                        ("member_collisions", "-3"), ("member_collisions", ""),
+                        ("intruder_nmacs", "inf"), ("departures", "1.5"), ("qos_share", "7"),
+                        ("jain_fairness", "-0.1"), ("leave_qos_share_after", "1.2"),
+                        ("delivered_bits", "-1"), ("closest_members_m", "-1")):  # fmt: skip
         wrong = list(cells)
         wrong[FLEET_EPISODE_COLUMNS.index(column)] = bad
         (broken / FLEET_EPISODES).write_text(header + "\n" + ",".join(wrong) + "\n")
