@@ -10,6 +10,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import shutil
 from pathlib import Path
 
 import pytest
@@ -219,8 +220,6 @@ def test_merge_copies_run_folders_but_follows_no_link(shards: list[Path], tmp_pa
     """A link inside a source's run folder is copied as a link (what it points to is not read
     into the merged folder); a run folder that is itself a link is not copied, and the rows
     are merged all the same."""
-    import shutil
-
     outside = tmp_path / "outside.txt"
     outside.write_text("not the campaign's")
     linked = tmp_path / "linked"
@@ -235,6 +234,36 @@ def test_merge_copies_run_folders_but_follows_no_link(shards: list[Path], tmp_pa
     merge_campaigns([linked], tmp_path / "m2")
     assert not episode_folder(tmp_path / "m2", "mcts", 3, 0).exists()
     assert _rows(tmp_path / "m2" / FLEET_EPISODES) == _rows(tmp_path / "m1" / FLEET_EPISODES)
+
+
+def _shard_copy(shard: Path, to: Path) -> tuple[Path, Path]:
+    """A copy of a one-episode shard and its run folder's summary.json."""
+    shutil.copytree(shard, to)
+    return to, episode_folder(to, "mcts", 3, 0) / "summary.json"
+
+
+def test_merge_force_never_empties_a_source_nor_a_merge_it_refuses(
+    shards: list[Path], tmp_path: Path, capsys
+) -> None:
+    """--force over a folder that holds a source is refused (it emptied the folder, source
+    and all, before reading it); a source refused leaves the previous merge as it was."""
+    merged = tmp_path / "merged"
+    assert main(["merge", *map(str, shards), "--out", str(merged)]) == 0
+    inner, _ = _shard_copy(shards[0], merged / "inner")
+    assert main(["merge", str(inner), str(shards[1]), "--out", str(merged), "--force"]) == 2
+    assert "holds the source" in capsys.readouterr().err
+    assert (inner / FLEET_EPISODES).is_file()
+    shutil.rmtree(inner)
+    broken, _ = _shard_copy(shards[1], tmp_path / "broken")
+    header, row = (broken / FLEET_EPISODES).read_text().splitlines()
+    cells = row.split(",")
+    cells[FLEET_EPISODE_COLUMNS.index("qos_share")] = "7"
+    (broken / FLEET_EPISODES).write_text(header + "\n" + ",".join(cells) + "\n")
+    before = {p.name: p.read_bytes() for p in merged.iterdir() if p.is_file()}
+    assert main(["merge", str(shards[0]), str(broken), "--out", str(merged), "--force"]) == 2
+    assert "qos_share '7' is not allowed" in capsys.readouterr().err
+    assert {p.name: p.read_bytes() for p in merged.iterdir() if p.is_file()} == before
+    assert len(list((merged / RUNS).iterdir())) == 2
 
 
 def test_the_runs_service_figures_are_recomputed_from_service_csv(runs: dict[int, Path]) -> None:

@@ -8,7 +8,7 @@ from __future__ import annotations
 import contextlib
 import math
 import shutil
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from uavxai.campaign.files import (
@@ -43,6 +43,17 @@ def merge_campaigns(sources: Sequence[str | Path], out: str | Path, title: str =
     """One campaign from several of the same scenario: one-ownship campaigns
     (:func:`merge_ownship`) or fleet campaigns (:func:`merge_fleet`), refused when mixed (their
     episodes are not the same thing). Its results rows."""
+    return read_merge(sources)(Path(out), title)
+
+
+Writer = Callable[[Path, str], list[dict]]
+
+
+def read_merge(sources: Sequence[str | Path]) -> Writer:
+    """Every source read and checked, nothing written: the function that then writes the
+    merged campaign into a folder (with a title for its plots) and returns its results rows.
+    `uavxai merge` reads first, so that a source it refuses leaves ``--out`` (and the previous
+    merge in it, under ``--force``) as it was."""
     sources = [Path(s) for s in sources]
     fleets = [s for s in sources if is_fleet_campaign(s)]
     if fleets and len(fleets) < len(sources):
@@ -55,19 +66,19 @@ def merge_campaigns(sources: Sequence[str | Path], out: str | Path, title: str =
             "campaign has episodes.csv); merge pools campaigns of one kind, fleet campaigns "
             "together or one-ownship campaigns together."
         )
-    return (merge_fleet if fleets else merge_ownship)(sources, out, title)
+    return (merge_fleet if fleets else merge_ownship)(sources)
 
 
-def merge_ownship(sources: Sequence[Path], out: str | Path, title: str = "") -> list[dict]:
-    """One campaign from several of the same scenario and dynamics: other methods, other
-    intruder counts, or more seeds of the same ones (a campaign extended later, or split over
-    machines). The episodes are pooled and every ``results.csv`` row is computed again from
-    them, so a risk ratio pairs a method with ``none`` on every seed both flew, whichever source
-    flew it. The same (method, intruders, seed) in two sources is an error: it would count twice.
+def merge_ownship(sources: Sequence[Path]) -> Writer:
+    """The writer (:func:`read_merge`) of one campaign from several of the same scenario and
+    dynamics: other methods, other intruder counts, or more seeds of the same ones (a campaign
+    extended later, or split over machines). The episodes are pooled and every ``results.csv``
+    row is computed again from them, so a risk ratio pairs a method with ``none`` on every seed
+    both flew, whichever source flew it. The same (method, intruders, seed) in two sources is an
+    error: it would count twice.
 
     ``decision_ms_p50`` is the source's when one source flew the whole row; a pooled row has
     only each episode's median to go on and takes the median of those."""
-    out = Path(out)
     episodes: list[dict] = []
     flown_by: dict[tuple[str, int, int], Path] = {}
     p50: dict[tuple[str, int], float] = {}
@@ -124,13 +135,17 @@ def merge_ownship(sources: Sequence[Path], out: str | Path, title: str = "") -> 
     for r in results:
         if len(sources_of[(r["method"], r["intruders"])]) == 1:
             r["decision_ms_p50"] = p50.get((r["method"], r["intruders"]), r["decision_ms_p50"])
-    with interrupts_deferred():  # a signal now waits for the files: they end whole
-        out.mkdir(parents=True, exist_ok=True)
-        episode_columns, result_columns = columns_of(episodes)
-        write_csv(out / "results.csv", result_columns, results)
-        write_csv(out / "episodes.csv", episode_columns, episodes)
-        plot_campaign(results, out, title)
-    return results
+
+    def write(out: Path, title: str) -> list[dict]:
+        with interrupts_deferred():  # a signal now waits for the files: they end whole
+            out.mkdir(parents=True, exist_ok=True)
+            episode_columns, result_columns = columns_of(episodes)
+            write_csv(out / "results.csv", result_columns, results)
+            write_csv(out / "episodes.csv", episode_columns, episodes)
+            plot_campaign(results, out, title)
+        return results
+
+    return write
 
 
 def _flown_once(r: dict, src: Path, flown_by: dict[tuple[str, int, int], Path]) -> None:
@@ -145,24 +160,27 @@ def _flown_once(r: dict, src: Path, flown_by: dict[tuple[str, int, int], Path]) 
     flown_by[key] = src
 
 
-def merge_fleet(sources: Sequence[Path], out: str | Path, title: str = "") -> list[dict]:
-    """One fleet campaign from several of the same scenario (docs/fleet.md, "Fleet campaigns"):
-    their ``fleet_episodes.csv`` rows pooled, ``fleet_results.csv`` and the plots computed
-    again from them by `uavxai evaluate`'s own code (:func:`write_fleet_campaign`), so a
-    campaign flown in shards (other seeds, methods or intruder counts) merges into the one
-    flown whole. Each method and intruder count's episodes are numbered again 0.. in seed
-    order (each source numbers its own from 0), and each episode's run folder (``fleet-runs/``)
-    is copied from its source under its new number, where the source has it (a campaign flown
-    with ``--ray`` keeps it on the node that flew it). Its results rows."""
-    out = Path(out)
+def merge_fleet(sources: Sequence[Path]) -> Writer:
+    """The writer (:func:`read_merge`) of one fleet campaign from several of the same scenario
+    (docs/fleet.md, "Fleet campaigns"): their ``fleet_episodes.csv`` rows pooled,
+    ``fleet_results.csv`` and the plots computed again from them by `uavxai evaluate`'s own code
+    (:func:`write_fleet_campaign`), so a campaign flown in shards (other seeds, methods or
+    intruder counts) merges into the one flown whole. Each method and intruder count's episodes
+    are numbered again 0.. in seed order (each source numbers its own from 0), and each
+    episode's run folder (``fleet-runs/``) is copied from its source under its new number, where
+    the source has it (a campaign flown with ``--ray`` keeps it on the node that flew it).
+
+    Refused: the same (method, intruders, seed) in two sources."""
     pooled: list[tuple[dict, Path]] = []
     flown_by: dict[tuple[str, int, int], Path] = {}
     for src in sources:
         path = src / FLEET_EPISODES
         rows = read_rows(path, FLEET_EPISODE_COLUMNS)
-        for r in (checked_fleet_row(r, path, i) for i, r in enumerate(rows, start=2)):
+        for i, r in enumerate(rows, start=2):
+            r = checked_fleet_row(r, path, i)
             _flown_once(r, src, flown_by)
-            pooled.append((r, episode_folder(src, r["method"], r["intruders"], r["episode"])))
+            run = episode_folder(src, r["method"], r["intruders"], r["episode"])
+            pooled.append((r, run))
     if not pooled:
         raise UserError(f"{', '.join(map(str, sources))}: no episodes in their {FLEET_EPISODES} "
                         "to merge.")  # fmt: skip
@@ -173,13 +191,17 @@ def merge_fleet(sources: Sequence[Path], out: str | Path, title: str = "") -> li
     for group in groups.values():
         for k, (r, run) in enumerate(sorted(group, key=lambda rr: rr[0]["seed"])):
             episodes.append({**r, "episode": k})
-            runs.append((run, episode_folder(out, r["method"], r["intruders"], k)))
-    out.mkdir(parents=True, exist_ok=True)
-    for run, there in runs:
-        # a real folder only: a link in a source is not followed out of it
-        if run.is_dir() and not run.is_symlink():
-            shutil.copytree(run, there, symlinks=True, dirs_exist_ok=True)
-    with interrupts_deferred():  # a signal now waits for the files: they end whole
-        episodes, results = write_fleet_campaign(episodes, out)
-        plot_fleet(results, episodes, out, title)
-    return results
+            runs.append((run, episode_folder(Path(), r["method"], r["intruders"], k)))
+
+    def write(out: Path, title: str) -> list[dict]:
+        out.mkdir(parents=True, exist_ok=True)
+        for run, there in runs:
+            # a real folder only: a link in a source is not followed out of it
+            if run.is_dir() and not run.is_symlink():
+                shutil.copytree(run, out / there, symlinks=True, dirs_exist_ok=True)
+        with interrupts_deferred():  # a signal now waits for the files: they end whole
+            rows, results = write_fleet_campaign(episodes, out)
+            plot_fleet(results, rows, out, title)
+        return results
+
+    return write
