@@ -234,6 +234,12 @@ def test_merge_copies_run_folders_but_follows_no_link(shards: list[Path], tmp_pa
     merge_campaigns([linked], tmp_path / "m2")
     assert not episode_folder(tmp_path / "m2", "mcts", 3, 0).exists()
     assert _rows(tmp_path / "m2" / FLEET_EPISODES) == _rows(tmp_path / "m1" / FLEET_EPISODES)
+    # nor is a fleet-runs folder that is itself a link (its run folders are real ones)
+    shutil.rmtree(linked / RUNS)
+    (linked / RUNS).symlink_to(shards[0] / RUNS, target_is_directory=True)
+    merge_campaigns([linked], tmp_path / "m3")
+    assert not (tmp_path / "m3" / RUNS).exists()
+    assert _rows(tmp_path / "m3" / FLEET_EPISODES) == _rows(tmp_path / "m1" / FLEET_EPISODES)
 
 
 def _shard_copy(shard: Path, to: Path) -> tuple[Path, Path]:

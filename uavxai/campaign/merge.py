@@ -26,7 +26,7 @@ from uavxai.campaign.files import (
     read_rows,
     write_csv,
 )
-from uavxai.campaign.fleet import episode_folder, write_fleet_campaign
+from uavxai.campaign.fleet import RUNS, episode_folder, write_fleet_campaign
 from uavxai.campaign.plots import plot_campaign, plot_fleet
 from uavxai.campaign.statistics import summarise
 from uavxai.errors import UserError
@@ -171,7 +171,7 @@ def merge_fleet(sources: Sequence[Path]) -> Writer:
     the source has it (a campaign flown with ``--ray`` keeps it on the node that flew it).
 
     Refused: the same (method, intruders, seed) in two sources."""
-    pooled: list[tuple[dict, Path]] = []
+    pooled: list[tuple[dict, Path | None]] = []
     flown_by: dict[tuple[str, int, int], Path] = {}
     for src in sources:
         path = src / FLEET_EPISODES
@@ -179,29 +179,41 @@ def merge_fleet(sources: Sequence[Path]) -> Writer:
         for i, r in enumerate(rows, start=2):
             r = checked_fleet_row(r, path, i)
             _flown_once(r, src, flown_by)
-            run = episode_folder(src, r["method"], r["intruders"], r["episode"])
+            run = _run_of(src, r)
             pooled.append((r, run))
     if not pooled:
         raise UserError(f"{', '.join(map(str, sources))}: no episodes in their {FLEET_EPISODES} "
                         "to merge.")  # fmt: skip
-    groups: dict[tuple[str, int], list[tuple[dict, Path]]] = {}
+    groups: dict[tuple[str, int], list[tuple[dict, Path | None]]] = {}
     for r, run in pooled:
         groups.setdefault((r["method"], r["intruders"]), []).append((r, run))
     episodes, runs = [], []
     for group in groups.values():
         for k, (r, run) in enumerate(sorted(group, key=lambda rr: rr[0]["seed"])):
             episodes.append({**r, "episode": k})
-            runs.append((run, episode_folder(Path(), r["method"], r["intruders"], k)))
+            if run is not None:
+                runs.append((run, episode_folder(Path(), r["method"], r["intruders"], k)))
 
     def write(out: Path, title: str) -> list[dict]:
         out.mkdir(parents=True, exist_ok=True)
         for run, there in runs:
-            # a real folder only: a link in a source is not followed out of it
-            if run.is_dir() and not run.is_symlink():
-                shutil.copytree(run, out / there, symlinks=True, dirs_exist_ok=True)
+            shutil.copytree(run, out / there, symlinks=True, dirs_exist_ok=True)
         with interrupts_deferred():  # a signal now waits for the files: they end whole
             rows, results = write_fleet_campaign(episodes, out)
             plot_fleet(results, rows, out, title)
         return results
 
     return write
+
+
+def _run_of(src: Path, r: dict) -> Path | None:
+    """Row ``r``'s run folder in ``src``: None when the source has none to copy (flown with
+    --ray, removed, or a link: a link, ``fleet-runs`` itself or the run folder, is not followed
+    out of the source)."""
+    runs = src / RUNS
+    run = episode_folder(src, r["method"], r["intruders"], r["episode"])
+    if runs.is_symlink() or not runs.is_dir() or run.is_symlink() or not run.is_dir():
+        return None
+    if not run.resolve().is_relative_to(runs.resolve()):
+        return None
+    return run
