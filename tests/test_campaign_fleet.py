@@ -10,6 +10,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import os
 import shutil
 from pathlib import Path
 
@@ -35,6 +36,7 @@ from uavxai.campaign.plots import FLEET_EPISODES_FIGURE, FLEET_RESULTS_FIGURE
 from uavxai.cli import main
 from uavxai.errors import UserError
 from uavxai.journal import JOURNAL
+from uavxai.outputs import OutputError
 from uavxai.scenario import Scenario, load_scenario
 
 FLEET_MISSION = Path(__file__).resolve().parents[1] / "scenarios" / "fleet-mission.yaml"
@@ -246,6 +248,25 @@ def _shard_copy(shard: Path, to: Path) -> tuple[Path, Path]:
     """A copy of a one-episode shard and its run folder's summary.json."""
     shutil.copytree(shard, to)
     return to, episode_folder(to, "mcts", 3, 0) / "summary.json"
+
+
+def test_merge_copies_only_files_and_names_what_it_cannot_copy(shards: list[Path],
+                                                               tmp_path: Path) -> None:  # fmt: skip
+    """A FIFO in a run folder is left out (it failed the whole copy, as "internal error");
+    a run folder that cannot be copied is an OutputError naming it, and what was in --out
+    before stays."""
+    src, _ = _shard_copy(shards[0], tmp_path / "fifo")
+    os.mkfifo(episode_folder(src, "mcts", 3, 0) / "pipe")
+    merge_campaigns([src], tmp_path / "m")
+    copied = episode_folder(tmp_path / "m", "mcts", 3, 0)
+    assert (copied / "summary.json").is_file() and not os.path.lexists(copied / "pipe")
+    there = episode_folder(tmp_path / "taken", "mcts", 3, 0)
+    there.mkdir(parents=True)
+    (there / "mine").write_text("kept")
+    with pytest.raises(OutputError, match=r"cannot copy .* it exists") as err:
+        merge_campaigns([shards[0]], tmp_path / "taken")
+    assert err.value.folder == tmp_path / "taken"
+    assert [p.name for p in there.iterdir()] == ["mine"]
 
 
 def test_merge_force_never_empties_a_source_nor_a_merge_it_refuses(

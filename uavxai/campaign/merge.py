@@ -7,7 +7,9 @@ from __future__ import annotations
 
 import contextlib
 import math
+import os
 import shutil
+import stat
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
@@ -30,7 +32,7 @@ from uavxai.campaign.fleet import RUNS, episode_folder, write_fleet_campaign
 from uavxai.campaign.plots import plot_campaign, plot_fleet
 from uavxai.campaign.statistics import summarise
 from uavxai.errors import UserError
-from uavxai.outputs import cell_number
+from uavxai.outputs import NO_SPACE, OutputError, cell_number, output_error
 from uavxai.processes import interrupts_deferred
 
 
@@ -197,7 +199,7 @@ def merge_fleet(sources: Sequence[Path]) -> Writer:
     def write(out: Path, title: str) -> list[dict]:
         out.mkdir(parents=True, exist_ok=True)
         for run, there in runs:
-            shutil.copytree(run, out / there, symlinks=True, dirs_exist_ok=True)
+            _copy_run(run, out / there, out)
         with interrupts_deferred():  # a signal now waits for the files: they end whole
             rows, results = write_fleet_campaign(episodes, out)
             plot_fleet(results, rows, out, title)
@@ -217,3 +219,56 @@ def _run_of(src: Path, r: dict) -> Path | None:
     if not run.resolve().is_relative_to(runs.resolve()):
         return None
     return run
+
+
+def _special_files(folder: str, names: list[str]) -> set[str]:
+    """What a run folder's copy leaves out: anything but files, folders and links (a FIFO
+    would block the copy, a device or socket is no run file)."""
+    keep = (stat.S_ISREG, stat.S_ISDIR, stat.S_ISLNK)
+    skip = set()
+    for name in names:
+        try:
+            mode = os.lstat(os.path.join(folder, name)).st_mode
+        except OSError:
+            skip.add(name)
+            continue
+        if not any(kind(mode) for kind in keep):
+            skip.add(name)
+    return skip
+
+
+def _copy_run(run: Path, there: Path, out: Path) -> None:
+    """Copy a source's run folder (its files, folders and links as links) to ``there``; a
+    failure removes the part copied and is an :class:`OutputError` naming the file (the merged
+    folder's marker says it is incomplete)."""
+
+    def full(path: Path, exc: OSError) -> OutputError:  # the disk's message, out's marker
+        return OutputError(str(output_error(path, exc)), out)
+
+    def copy(a: str, b: str) -> object:
+        try:
+            return shutil.copy2(a, b)
+        except OSError as exc:  # a full disk keeps its own message (copytree would lose it)
+            if exc.errno in NO_SPACE:
+                raise full(Path(b), exc) from None
+            raise
+
+    if os.path.lexists(there):  # not ours to replace, nor to remove on failure
+        raise OutputError(f"cannot copy {run} to {there}: it exists; merge into an empty "
+                          "folder.", out)  # fmt: skip
+    try:
+        shutil.copytree(run, there, symlinks=True, ignore=_special_files, copy_function=copy)
+    except OutputError:
+        shutil.rmtree(there, ignore_errors=True)
+        raise
+    except (shutil.Error, OSError) as exc:
+        shutil.rmtree(there, ignore_errors=True)
+        if isinstance(exc, OSError) and exc.errno in NO_SPACE:
+            raise full(there, exc) from None
+        failed = exc.args[0][0] if isinstance(exc, shutil.Error) else (exc.filename, "", exc)
+        raise OutputError(
+            f"cannot copy {failed[0]} into {there} ({failed[2]}); the merged campaign in {out} "
+            "is incomplete: make the source's run files readable (or remove that run folder) "
+            "and merge again.",
+            out,
+        ) from None
