@@ -269,6 +269,35 @@ def test_merge_copies_only_files_and_names_what_it_cannot_copy(shards: list[Path
     assert [p.name for p in there.iterdir()] == ["mine"]
 
 
+def test_merge_refuses_run_folders_that_are_not_their_rows(shards: list[Path],
+                                                           tmp_path: Path) -> None:  # fmt: skip
+    """A run folder whose summary.json is another episode's (seed, planner, intruder count)
+    or missing, an episode numbered twice in one source: refused naming both sides (they were
+    merged as the row's before)."""
+    for key, value, says in (("seed", 99, "seed 99, planner mcts"),
+                             ("avoidance_planner", "none", "planner none"),
+                             ("intruders", 9, "8 intruders")):  # fmt: skip
+        src, summary_file = _shard_copy(shards[0], tmp_path / f"wrong-{key}")
+        summary = json.loads(summary_file.read_text())
+        summary[key] = value
+        summary_file.write_text(json.dumps(summary))
+        with pytest.raises(UserError, match=rf"{says}.*but its row .* is seed 7, planner mcts, "
+                                            r"3 intruders, 2 members"):  # fmt: skip
+            merge_campaigns([src], tmp_path / "out")
+    summary_file.unlink()
+    with pytest.raises(UserError, match=r"summary.json: cannot read it as the summary"):
+        merge_campaigns([src], tmp_path / "out")
+    # the same episode number twice in one source (another seed: not caught as a seed twice)
+    src, _ = _shard_copy(shards[0], tmp_path / "twice")
+    header, row = (src / FLEET_EPISODES).read_text().splitlines()
+    cells = row.split(",")
+    cells[FLEET_EPISODE_COLUMNS.index("seed")] = "8"
+    (src / FLEET_EPISODES).write_text("\n".join([header, row, ",".join(cells)]) + "\n")
+    with pytest.raises(UserError, match=r"line 3: mcts at 3 intruders, episode 0 again \(line 2"):
+        merge_campaigns([src], tmp_path / "out")
+    assert not (tmp_path / "out").exists()
+
+
 def test_merge_force_never_empties_a_source_nor_a_merge_it_refuses(
     shards: list[Path], tmp_path: Path, capsys
 ) -> None:

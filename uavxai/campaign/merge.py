@@ -6,6 +6,7 @@ from the pooled episodes; one-ownship campaigns (``episodes.csv``) or fleet camp
 from __future__ import annotations
 
 import contextlib
+import json
 import math
 import os
 import shutil
@@ -172,16 +173,26 @@ def merge_fleet(sources: Sequence[Path]) -> Writer:
     episode's run folder (``fleet-runs/``) is copied from its source under its new number, where
     the source has it (a campaign flown with ``--ray`` keeps it on the node that flew it).
 
-    Refused: the same (method, intruders, seed) in two sources."""
+    Refused: the same (method, intruders, seed) in two sources, an episode numbered twice in
+    one, a run folder whose summary.json is not its row's (seed, planner, intruder count,
+    members)."""
     pooled: list[tuple[dict, Path | None]] = []
     flown_by: dict[tuple[str, int, int], Path] = {}
     for src in sources:
         path = src / FLEET_EPISODES
         rows = read_rows(path, FLEET_EPISODE_COLUMNS)
+        numbered: dict[tuple[str, int, int], int] = {}
         for i, r in enumerate(rows, start=2):
             r = checked_fleet_row(r, path, i)
+            key = (r["method"], r["intruders"], r["episode"])
+            if key in numbered:
+                raise UserError(
+                    f"{path} line {i}: {key[0]} at {key[1]} intruders, episode {key[2]} again "
+                    f"(line {numbered[key]}); a campaign writes each episode once."
+                )
+            numbered[key] = i
             _flown_once(r, src, flown_by)
-            run = _run_of(src, r)
+            run, _ = _run_of(src, r, path, i)
             pooled.append((r, run))
     if not pooled:
         raise UserError(f"{', '.join(map(str, sources))}: no episodes in their {FLEET_EPISODES} "
@@ -208,17 +219,40 @@ def merge_fleet(sources: Sequence[Path]) -> Writer:
     return write
 
 
-def _run_of(src: Path, r: dict) -> Path | None:
-    """Row ``r``'s run folder in ``src``: None when the source has none to copy (flown with
-    --ray, removed, or a link: a link, ``fleet-runs`` itself or the run folder, is not followed
-    out of the source)."""
+def _run_of(src: Path, r: dict, path: Path, line: int) -> tuple[Path | None, dict | None]:
+    """Row ``r``'s run folder in ``src`` and its summary: (None, None) when the source has none
+    to copy (flown with --ray, removed, or a link: a link, ``fleet-runs`` itself or the run
+    folder, is not followed out of the source). A run folder that is not the row's (its
+    summary.json missing, unreadable, or of another seed, planner, intruder count or fleet
+    size) is refused, naming both."""
     runs = src / RUNS
     run = episode_folder(src, r["method"], r["intruders"], r["episode"])
     if runs.is_symlink() or not runs.is_dir() or run.is_symlink() or not run.is_dir():
-        return None
+        return None, None
     if not run.resolve().is_relative_to(runs.resolve()):
-        return None
-    return run
+        return None, None
+    file = run / "summary.json"
+    try:
+        if file.is_symlink() or not file.is_file():
+            raise OSError("not a plain file")
+        summary = json.loads(file.read_text())
+        flown = (summary["seed"], summary["avoidance_planner"],
+                 summary["intruders"] - (len(summary["fleet"]) - 1), len(summary["fleet"]))
+    except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError) as exc:
+        raise UserError(
+            f"{file}: cannot read it as the summary of a fleet run ({exc}); the run folder of "
+            f"{path} line {line} must hold the summary.json `uavxai run` wrote (remove {run} "
+            "to merge the row without its run files)."
+        ) from None
+    row = (r["seed"], r["method"], r["intruders"], len(r["member_outcomes"].split()))
+    if flown != row:
+        show = "seed {}, planner {}, {} intruders, {} members"
+        raise UserError(
+            f"{file}: a run of {show.format(*flown)}, but its row ({path} line {line}) is "
+            f"{show.format(*row)}; the run folder is not that episode's (remove it, or "
+            "restore the campaign's own)."
+        )
+    return run, summary
 
 
 def _special_files(folder: str, names: list[str]) -> set[str]:
