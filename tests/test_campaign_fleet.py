@@ -298,6 +298,27 @@ def test_merge_refuses_run_folders_that_are_not_their_rows(shards: list[Path],
     assert not (tmp_path / "out").exists()
 
 
+def test_merge_refuses_fleets_of_other_sizes_or_scenarios(shards: list[Path],
+                                                          tmp_path: Path) -> None:  # fmt: skip
+    """Rows of a fleet of three beside a fleet of two, runs of another scenario: refused
+    naming both (they were pooled before)."""
+    three, _ = _shard_copy(shards[1], tmp_path / "three")
+    shutil.rmtree(three / RUNS)  # no run folder to tell: the rows alone
+    header, row = (three / FLEET_EPISODES).read_text().splitlines()
+    cells = row.split(",")
+    cells[FLEET_EPISODE_COLUMNS.index("member_outcomes")] += " completed"
+    (three / FLEET_EPISODES).write_text(header + "\n" + ",".join(cells) + "\n")
+    with pytest.raises(UserError, match=r"fleets of different sizes \(members: .*: 2; .*: 3\)"):
+        merge_campaigns([shards[0], three], tmp_path / "out")
+    other, summary_file = _shard_copy(shards[1], tmp_path / "other")
+    summary = json.loads(summary_file.read_text())
+    summary["scenario"] = "another"
+    summary_file.write_text(json.dumps(summary))
+    with pytest.raises(UserError, match=r"different scenarios or dynamics .*fleet-short.*another"):
+        merge_campaigns([shards[0], other], tmp_path / "out")
+    assert not (tmp_path / "out").exists()
+
+
 def test_merge_force_never_empties_a_source_nor_a_merge_it_refuses(
     shards: list[Path], tmp_path: Path, capsys
 ) -> None:

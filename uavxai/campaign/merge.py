@@ -174,10 +174,12 @@ def merge_fleet(sources: Sequence[Path]) -> Writer:
     the source has it (a campaign flown with ``--ray`` keeps it on the node that flew it).
 
     Refused: the same (method, intruders, seed) in two sources, an episode numbered twice in
-    one, a run folder whose summary.json is not its row's (seed, planner, intruder count,
-    members)."""
+    one, rows of other member counts, a run folder whose summary.json is not its row's (seed,
+    planner, intruder count, members) or runs of other scenarios."""
     pooled: list[tuple[dict, Path | None]] = []
     flown_by: dict[tuple[str, int, int], Path] = {}
+    members: dict[int, str] = {}
+    scenarios: dict[tuple[str, str], Path] = {}
     for src in sources:
         path = src / FLEET_EPISODES
         rows = read_rows(path, FLEET_EPISODE_COLUMNS)
@@ -192,11 +194,23 @@ def merge_fleet(sources: Sequence[Path]) -> Writer:
                 )
             numbered[key] = i
             _flown_once(r, src, flown_by)
-            run, _ = _run_of(src, r, path, i)
+            members.setdefault(len(r["member_outcomes"].split()), f"{path} line {i}")
+            run, summary = _run_of(src, r, path, i)
+            if summary is not None:
+                scenarios.setdefault((str(summary.get("scenario")),
+                                      str(summary.get("dynamics"))), run)  # fmt: skip
             pooled.append((r, run))
     if not pooled:
         raise UserError(f"{', '.join(map(str, sources))}: no episodes in their {FLEET_EPISODES} "
                         "to merge.")  # fmt: skip
+    if len(members) > 1:
+        what = "; ".join(f"{where}: {n}" for n, where in members.items())
+        raise UserError(f"these campaigns flew fleets of different sizes (members: {what}); "
+                        "merge campaigns of the same scenario.")  # fmt: skip
+    if len(scenarios) > 1:
+        what = "; ".join(f"{run}: {scen}, {dyn}" for (scen, dyn), run in scenarios.items())
+        raise UserError(f"these campaigns' runs flew different scenarios or dynamics ({what}); "
+                        "pooling them would mix missions that are not the same.")  # fmt: skip
     groups: dict[tuple[str, int], list[tuple[dict, Path | None]]] = {}
     for r, run in pooled:
         groups.setdefault((r["method"], r["intruders"]), []).append((r, run))
