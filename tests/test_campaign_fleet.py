@@ -107,6 +107,24 @@ def test_a_fleet_campaign_writes_one_row_per_episode_and_its_results(campaign: P
     assert {k: str(v) for k, v in again.items()} == result
 
 
+def test_the_committed_fleet_results_are_what_their_episodes_give() -> None:
+    """Every fleet_results file under docs/results/fleet is what write_fleet_campaign computes
+    from its episodes file, cell for cell (round 12's leave copy had been computed from the
+    runs' unrounded numbers: mean_jain_fairness differed in the sixth digit)."""
+    folder = Path(__file__).resolve().parents[1] / "docs" / "results" / "fleet"
+    checked = 0
+    for episodes_file in sorted(folder.glob("*_episodes.csv")):
+        columns, rows = _rows(episodes_file)
+        if tuple(columns) != FLEET_EPISODE_COLUMNS:
+            continue  # a one-ownship campaign's
+        _, results = _rows(episodes_file.with_name(
+            episodes_file.name.replace("_episodes.csv", "_results.csv")))  # fmt: skip
+        again = as_written(summarise_fleet(rows), FLEET_RESULT_COLUMNS)
+        assert [{k: str(v) for k, v in r.items()} for r in again] == results, episodes_file
+        checked += 1
+    assert checked >= 2
+
+
 def test_each_episode_is_the_run_of_its_seed(campaign: Path, runs: dict[int, Path]) -> None:
     """The same code path: the campaign's episode folder holds the run's own files, and the
     row is the run's summary."""
