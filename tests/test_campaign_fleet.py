@@ -168,43 +168,64 @@ def _untimed(rows: list[dict]) -> list[dict]:
 
 
 def test_merged_shards_are_the_campaign_flown_whole(campaign: Path, shards: list[Path],
-                                                    capsys) -> None:  # fmt: skip
-    """`uavxai merge` of the two shards (given in either order) writes the files of the
+                                                    tmp_path: Path, capsys) -> None:  # fmt: skip
+    """`uavxai merge` of the two shards, given in either order, writes the files of the
     two-episode campaign: fleet_episodes.csv and fleet_results.csv alike cell for cell but for
     the timing columns, each episode's run folder the same run under the whole campaign's
-    number, and the plots; merged again with a third, it refuses the seeds flown twice."""
+    number, and the figures the whole campaign's rows draw, pixel for pixel; merged again with
+    a third, it refuses the seeds flown twice; a source without its run folders merges, and
+    the command says how many it copied."""
+    import matplotlib.image
+
+    from uavxai.campaign.plots import plot_fleet
+
     whole = _rows(campaign / FLEET_EPISODES)[1]
-    assert [r["seed"] for r in whole] == ["7", "8"]  # flown before the resume test's third
-    merged = campaign.parent / "merged"
-    assert main(["merge", str(shards[1]), str(shards[0]), "--out", str(merged)]) == 0
-    printed = capsys.readouterr().out
-    assert "fleet campaign" in printed and "run files of 2 of the 2 episodes" in printed
-    for name in (FLEET_EPISODES, FLEET_RESULTS):
-        (columns, rows), (whole_columns, whole_rows) = _rows(merged / name), _rows(campaign / name)
-        assert columns == whole_columns
-        assert _untimed(rows) == _untimed(whole_rows), name
-    for r in whole:
-        mine = episode_folder(merged, "mcts", 3, int(r["episode"]))
-        theirs = episode_folder(campaign, "mcts", 3, int(r["episode"]))
-        for name in ("trajectory.csv", "service.csv", "users.csv"):
-            assert (mine / name).read_bytes() == (theirs / name).read_bytes(), name
-        assert json.loads((mine / "summary.json").read_text())["seed"] == int(r["seed"])
-    assert sorted(p.name for p in (merged / RUNS).iterdir()) == sorted(
-        p.name for p in (campaign / RUNS).iterdir())  # fmt: skip
-    for figure in (FLEET_RESULTS_FIGURE, FLEET_EPISODES_FIGURE):
-        assert (merged / figure).stat().st_size > 0 and (campaign / figure).stat().st_size > 0
+    assert [r["seed"] for r in whole] == ["7", "8"]
+    # the figures of the whole campaign's own rows, under the title merge gives its figures
+    drawn = tmp_path / "drawn"
+    drawn.mkdir()
+    plot_fleet(_rows(campaign / FLEET_RESULTS)[1], whole, drawn, "merged from 2 campaigns")
+    for order in (shards[::-1], shards):
+        merged = tmp_path / "-".join(p.name for p in order)
+        assert main(["merge", *map(str, order), "--out", str(merged)]) == 0
+        printed = " ".join(capsys.readouterr().out.split())  # as the terminal wraps it
+        assert "fleet campaign" in printed and "run files of 2 of the 2 episodes" in printed
+        for name in (FLEET_EPISODES, FLEET_RESULTS):
+            (columns, rows), (whole_columns, whole_rows) = (_rows(merged / name),
+                                                            _rows(campaign / name))  # fmt: skip
+            assert columns == whole_columns
+            assert _untimed(rows) == _untimed(whole_rows), name
+        for r in whole:
+            mine = episode_folder(merged, "mcts", 3, int(r["episode"]))
+            theirs = episode_folder(campaign, "mcts", 3, int(r["episode"]))
+            for name in ("trajectory.csv", "service.csv", "users.csv"):
+                assert (mine / name).read_bytes() == (theirs / name).read_bytes(), name
+            assert json.loads((mine / "summary.json").read_text())["seed"] == int(r["seed"])
+        assert sorted(p.name for p in (merged / RUNS).iterdir()) == sorted(
+            p.name for p in (campaign / RUNS).iterdir())  # fmt: skip
+        for figure in (FLEET_RESULTS_FIGURE, FLEET_EPISODES_FIGURE):
+            image = matplotlib.image.imread(merged / figure)
+            assert image.std() > 0.01  # not a blank page
+            assert (image == matplotlib.image.imread(drawn / figure)).all(), figure
+    # a source whose run folders stayed on the node that flew them (--ray): its rows merge
+    bare = tmp_path / "bare"
+    shutil.copytree(shards[1], bare, ignore=shutil.ignore_patterns(RUNS))
+    assert main(["merge", str(shards[0]), str(bare), "--out", str(tmp_path / "part")]) == 0
+    assert "run files of 1 of the 2 episodes" in " ".join(capsys.readouterr().out.split())
+    assert [p.name for p in (tmp_path / "part" / RUNS).iterdir()] == [
+        episode_folder(Path(), "mcts", 3, 0).name]  # seed 7's, from the source that has it
     # the same seed twice, never over a folder without --force, never a mix of kinds
     with pytest.raises(UserError, match=r"mcts at 3 intruders, seed 7: flown in both"):
-        merge_campaigns([merged, shards[0]], campaign.parent / "twice")
+        merge_campaigns([merged, shards[0]], tmp_path / "twice")
     assert main(["merge", *map(str, shards), "--out", str(merged)]) == 2
-    one = campaign.parent / "one-ownship"
+    one = tmp_path / "one-ownship"
     one.mkdir()
     with pytest.raises(UserError, match="has neither fleet_episodes.csv nor episodes.csv; is it"):
-        merge_campaigns([shards[0], one], campaign.parent / "mixed")
+        merge_campaigns([shards[0], one], tmp_path / "mixed")
     (one / "episodes.csv").write_text("method\n")
     with pytest.raises(UserError, match=r"a fleet campaign \(fleet_episodes.csv\); .*not one"):
-        merge_campaigns([shards[0], one], campaign.parent / "mixed")
-    assert not (campaign.parent / "twice").exists() and not (campaign.parent / "mixed").exists()
+        merge_campaigns([shards[0], one], tmp_path / "mixed")
+    assert not (tmp_path / "twice").exists() and not (tmp_path / "mixed").exists()
 
 
 def test_merge_refuses_broken_fleet_files_by_name(shards: list[Path], capsys) -> None:
@@ -410,9 +431,12 @@ def test_the_members_encounters_hold_what_trajectory_csv_shows(runs: dict[int, P
         assert seen <= nmacs
 
 
-def test_resume_and_workers_give_the_same_rows(short: Path, campaign: Path) -> None:
+def test_resume_and_workers_give_the_same_rows(short: Path, campaign: Path,
+                                               tmp_path: Path) -> None:  # fmt: skip
     """--resume with one more episode flies only it (the journaled rows kept, their wall time
-    too); two workers fly the first two to the same rows."""
+    too); two workers fly the first two to the same rows. Resumed in a copy: the module's
+    campaign stays the two-episode one the other tests read, whatever their order."""
+    campaign = shutil.copytree(campaign, tmp_path / "campaign")
     before = _rows(campaign / FLEET_EPISODES)[1]
     args = ["evaluate", str(short), *EVALUATE, "--episodes", "3", "--out", str(campaign)]
     assert main([*args, "--resume"]) == 0
@@ -420,12 +444,8 @@ def test_resume_and_workers_give_the_same_rows(short: Path, campaign: Path) -> N
     assert after[:2] == before and after[2]["seed"] == "9"
     journal = [json.loads(line) for line in (campaign / JOURNAL).read_text().splitlines()[1:]]
     assert [r["episode"] for r in journal] == [0, 1, 2]  # none flown twice
-
-    def seeded(rows: list[dict]) -> list[dict]:
-        return [{k: v for k, v in r.items() if k not in TIMING_COLUMNS} for r in rows]
-
     pooled = run_campaign(load_scenario(short), ["mcts"], [3], 2, dynamics="jsbsim", workers=2)
-    assert seeded(pooled) == seeded(sorted(journal, key=lambda r: r["episode"])[:2])
+    assert _untimed(pooled) == _untimed(sorted(journal, key=lambda r: r["episode"])[:2])
 
 
 def test_a_member_leaving_early_fills_the_leave_columns(tmp_path: Path) -> None:
@@ -479,8 +499,7 @@ def test_a_fleet_campaign_opens_no_external_link(tmp_path: Path) -> None:
     assert not list((tmp_path / "linked").rglob("*.tlog"))
     assert json.loads((tmp_path / "linked" / "summary.json").read_text())["bridge"] is not None
     alone = run_fleet_episode(load_scenario(plain), "mcts", 3, 7, tmp_path / "plain")
-    untimed = [{k: v for k, v in r.items() if k not in TIMING_COLUMNS} for r in (row, alone)]
-    assert untimed[0] == untimed[1]
+    assert _untimed([row]) == _untimed([alone])
     for name in ("trajectory.csv", "service.csv"):
         assert (tmp_path / "linked" / name).read_bytes() == (tmp_path / "plain" / name).read_bytes()
 
