@@ -155,12 +155,19 @@ def _flown_once(r: dict, src: Path, flown_by: dict[tuple[str, int, int], Path]) 
     """Record that ``src`` flew row ``r``'s (method, intruders, seed); the same in two sources
     is an error: it would count twice."""
     key = (r["method"], r["intruders"], r["seed"])
-    if key in flown_by:
+    if (first := _seen_before(flown_by, key, src)) is not None:
         raise UserError(
-            f"{key[0]} at {key[1]} intruders, seed {key[2]}: flown in both {flown_by[key]} and "
+            f"{key[0]} at {key[1]} intruders, seed {key[2]}: flown in both {first} and "
             f"{src}; merge campaigns of different seeds, methods or intruder counts."
         )
-    flown_by[key] = src
+
+
+def _seen_before(seen: dict, key: tuple, where: object) -> object | None:
+    """Where ``key`` was seen before; None the first time, when it is recorded at ``where``."""
+    if key in seen:
+        return seen[key]
+    seen[key] = where
+    return None
 
 
 def merge_fleet(sources: Sequence[Path]) -> Writer:
@@ -187,12 +194,10 @@ def merge_fleet(sources: Sequence[Path]) -> Writer:
         for i, r in enumerate(rows, start=2):
             r = checked_fleet_row(r, path, i)
             key = (r["method"], r["intruders"], r["episode"])
-            if key in numbered:
-                raise UserError(
-                    f"{path} line {i}: {key[0]} at {key[1]} intruders, episode {key[2]} again "
-                    f"(line {numbered[key]}); a campaign writes each episode once."
-                )
-            numbered[key] = i
+            if (first := _seen_before(numbered, key, i)) is not None:
+                raise UserError(f"{path} line {i}: {key[0]} at {key[1]} intruders, episode "
+                                f"{key[2]} again (line {first}); a campaign writes each episode "
+                                "once.")  # fmt: skip
             _flown_once(r, src, flown_by)
             members.setdefault(len(r["member_outcomes"].split()), f"{path} line {i}")
             run, summary = _run_of(src, r, path, i)
