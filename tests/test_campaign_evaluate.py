@@ -7,6 +7,7 @@ import csv
 import json
 import math
 import os
+import shutil
 import sys
 from pathlib import Path
 
@@ -279,6 +280,21 @@ def test_merge_through_the_cli(tmp_path: Path, capsys: pytest.CaptureFixture[str
     assert main(["merge", str(tmp_path / "one"), "--out", str(tmp_path / "one"), "--force"]) == 2
     assert (tmp_path / "one" / "episodes.csv").is_file()
     assert main(["merge", str(tmp_path / "one"), "--out", str(out)]) == 2
+    # --force never empties a folder that holds a source (it was gone before it was read),
+    # and a merge that refuses its sources leaves the previous output as it was
+    inner = out / "inner"
+    shutil.copytree(tmp_path / "one", inner)
+    assert main(["merge", str(inner), "--out", str(out), "--force"]) == 2
+    assert "holds the source" in capsys.readouterr().err
+    assert (inner / "episodes.csv").is_file() and (out / "results.csv").is_file()
+    shutil.rmtree(inner)
+    broken = tmp_path / "broken"
+    shutil.copytree(tmp_path / "one", broken)
+    (broken / "episodes.csv").write_text("method\n")
+    before = {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()}
+    assert main(["merge", str(broken), "--out", str(out), "--force"]) == 2
+    assert "lacks the columns" in capsys.readouterr().err
+    assert {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()} == before
     # a campaign of other dynamics is not the same encounters
     other = tmp_path / "jsb"
     other.mkdir()

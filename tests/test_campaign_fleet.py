@@ -10,6 +10,8 @@ from __future__ import annotations
 import csv
 import json
 import math
+import os
+import shutil
 from pathlib import Path
 
 import pytest
@@ -34,6 +36,7 @@ from uavxai.campaign.plots import FLEET_EPISODES_FIGURE, FLEET_RESULTS_FIGURE
 from uavxai.cli import main
 from uavxai.errors import UserError
 from uavxai.journal import JOURNAL
+from uavxai.outputs import OutputError
 from uavxai.scenario import Scenario, load_scenario
 
 FLEET_MISSION = Path(__file__).resolve().parents[1] / "scenarios" / "fleet-mission.yaml"
@@ -104,6 +107,24 @@ def test_a_fleet_campaign_writes_one_row_per_episode_and_its_results(campaign: P
     assert {k: str(v) for k, v in again.items()} == result
 
 
+def test_the_committed_fleet_results_are_what_their_episodes_give() -> None:
+    """Every fleet_results file under docs/results/fleet is what write_fleet_campaign computes
+    from its episodes file, cell for cell (round 12's leave copy had been computed from the
+    runs' unrounded numbers: mean_jain_fairness differed in the sixth digit)."""
+    folder = Path(__file__).resolve().parents[1] / "docs" / "results" / "fleet"
+    checked = 0
+    for episodes_file in sorted(folder.glob("*_episodes.csv")):
+        columns, rows = _rows(episodes_file)
+        if tuple(columns) != FLEET_EPISODE_COLUMNS:
+            continue  # a one-ownship campaign's
+        _, results = _rows(episodes_file.with_name(
+            episodes_file.name.replace("_episodes.csv", "_results.csv")))  # fmt: skip
+        again = as_written(summarise_fleet(rows), FLEET_RESULT_COLUMNS)
+        assert [{k: str(v) for k, v in r.items()} for r in again] == results, episodes_file
+        checked += 1
+    assert checked >= 2
+
+
 def test_each_episode_is_the_run_of_its_seed(campaign: Path, runs: dict[int, Path]) -> None:
     """The same code path: the campaign's episode folder holds the run's own files, and the
     row is the run's summary."""
@@ -147,43 +168,64 @@ def _untimed(rows: list[dict]) -> list[dict]:
 
 
 def test_merged_shards_are_the_campaign_flown_whole(campaign: Path, shards: list[Path],
-                                                    capsys) -> None:  # fmt: skip
-    """`uavxai merge` of the two shards (given in either order) writes the files of the
+                                                    tmp_path: Path, capsys) -> None:  # fmt: skip
+    """`uavxai merge` of the two shards, given in either order, writes the files of the
     two-episode campaign: fleet_episodes.csv and fleet_results.csv alike cell for cell but for
     the timing columns, each episode's run folder the same run under the whole campaign's
-    number, and the plots; merged again with a third, it refuses the seeds flown twice."""
+    number, and the figures the whole campaign's rows draw, pixel for pixel; merged again with
+    a third, it refuses the seeds flown twice; a source without its run folders merges, and
+    the command says how many it copied."""
+    import matplotlib.image
+
+    from uavxai.campaign.plots import plot_fleet
+
     whole = _rows(campaign / FLEET_EPISODES)[1]
-    assert [r["seed"] for r in whole] == ["7", "8"]  # flown before the resume test's third
-    merged = campaign.parent / "merged"
-    assert main(["merge", str(shards[1]), str(shards[0]), "--out", str(merged)]) == 0
-    printed = capsys.readouterr().out
-    assert "fleet campaign" in printed and "run files of 2 of the 2 episodes" in printed
-    for name in (FLEET_EPISODES, FLEET_RESULTS):
-        (columns, rows), (whole_columns, whole_rows) = _rows(merged / name), _rows(campaign / name)
-        assert columns == whole_columns
-        assert _untimed(rows) == _untimed(whole_rows), name
-    for r in whole:
-        mine = episode_folder(merged, "mcts", 3, int(r["episode"]))
-        theirs = episode_folder(campaign, "mcts", 3, int(r["episode"]))
-        for name in ("trajectory.csv", "service.csv", "users.csv"):
-            assert (mine / name).read_bytes() == (theirs / name).read_bytes(), name
-        assert json.loads((mine / "summary.json").read_text())["seed"] == int(r["seed"])
-    assert sorted(p.name for p in (merged / RUNS).iterdir()) == sorted(
-        p.name for p in (campaign / RUNS).iterdir())  # fmt: skip
-    for figure in (FLEET_RESULTS_FIGURE, FLEET_EPISODES_FIGURE):
-        assert (merged / figure).stat().st_size > 0 and (campaign / figure).stat().st_size > 0
+    assert [r["seed"] for r in whole] == ["7", "8"]
+    # the figures of the whole campaign's own rows, under the title merge gives its figures
+    drawn = tmp_path / "drawn"
+    drawn.mkdir()
+    plot_fleet(_rows(campaign / FLEET_RESULTS)[1], whole, drawn, "merged from 2 campaigns")
+    for order in (shards[::-1], shards):
+        merged = tmp_path / "-".join(p.name for p in order)
+        assert main(["merge", *map(str, order), "--out", str(merged)]) == 0
+        printed = " ".join(capsys.readouterr().out.split())  # as the terminal wraps it
+        assert "fleet campaign" in printed and "run files of 2 of the 2 episodes" in printed
+        for name in (FLEET_EPISODES, FLEET_RESULTS):
+            (columns, rows), (whole_columns, whole_rows) = (_rows(merged / name),
+                                                            _rows(campaign / name))  # fmt: skip
+            assert columns == whole_columns
+            assert _untimed(rows) == _untimed(whole_rows), name
+        for r in whole:
+            mine = episode_folder(merged, "mcts", 3, int(r["episode"]))
+            theirs = episode_folder(campaign, "mcts", 3, int(r["episode"]))
+            for name in ("trajectory.csv", "service.csv", "users.csv"):
+                assert (mine / name).read_bytes() == (theirs / name).read_bytes(), name
+            assert json.loads((mine / "summary.json").read_text())["seed"] == int(r["seed"])
+        assert sorted(p.name for p in (merged / RUNS).iterdir()) == sorted(
+            p.name for p in (campaign / RUNS).iterdir())  # fmt: skip
+        for figure in (FLEET_RESULTS_FIGURE, FLEET_EPISODES_FIGURE):
+            image = matplotlib.image.imread(merged / figure)
+            assert image.std() > 0.01  # not a blank page
+            assert (image == matplotlib.image.imread(drawn / figure)).all(), figure
+    # a source whose run folders stayed on the node that flew them (--ray): its rows merge
+    bare = tmp_path / "bare"
+    shutil.copytree(shards[1], bare, ignore=shutil.ignore_patterns(RUNS))
+    assert main(["merge", str(shards[0]), str(bare), "--out", str(tmp_path / "part")]) == 0
+    assert "run files of 1 of the 2 episodes" in " ".join(capsys.readouterr().out.split())
+    assert [p.name for p in (tmp_path / "part" / RUNS).iterdir()] == [
+        episode_folder(Path(), "mcts", 3, 0).name]  # seed 7's, from the source that has it
     # the same seed twice, never over a folder without --force, never a mix of kinds
     with pytest.raises(UserError, match=r"mcts at 3 intruders, seed 7: flown in both"):
-        merge_campaigns([merged, shards[0]], campaign.parent / "twice")
+        merge_campaigns([merged, shards[0]], tmp_path / "twice")
     assert main(["merge", *map(str, shards), "--out", str(merged)]) == 2
-    one = campaign.parent / "one-ownship"
+    one = tmp_path / "one-ownship"
     one.mkdir()
     with pytest.raises(UserError, match="has neither fleet_episodes.csv nor episodes.csv; is it"):
-        merge_campaigns([shards[0], one], campaign.parent / "mixed")
+        merge_campaigns([shards[0], one], tmp_path / "mixed")
     (one / "episodes.csv").write_text("method\n")
     with pytest.raises(UserError, match=r"a fleet campaign \(fleet_episodes.csv\); .*not one"):
-        merge_campaigns([shards[0], one], campaign.parent / "mixed")
-    assert not (campaign.parent / "twice").exists() and not (campaign.parent / "mixed").exists()
+        merge_campaigns([shards[0], one], tmp_path / "mixed")
+    assert not (tmp_path / "twice").exists() and not (tmp_path / "mixed").exists()
 
 
 def test_merge_refuses_broken_fleet_files_by_name(shards: list[Path], capsys) -> None:
@@ -200,7 +242,13 @@ def test_merge_refuses_broken_fleet_files_by_name(shards: list[Path], capsys) ->
     assert not (out / FLEET_RESULTS).exists()
     out = shards[0].parent / "from-broken-python"
     cells = row.split(",")
-    for column, bad in (("completed", "2"), ("qos_share", "most"), ("seed", "-1")):
+    # what a campaign never writes: counts below 0, empty or 'inf' (summed, they crashed the
+    # merge or merged as nonsense), shares above 1, a closest approach below 0
+    for column, bad in (("completed", "2"), ("qos_share", "most"), ("seed", "-1"),
+                        ("member_collisions", "-3"), ("member_collisions", ""),
+                        ("intruder_nmacs", "inf"), ("departures", "1.5"), ("qos_share", "7"),
+                        ("jain_fairness", "-0.1"), ("leave_qos_share_after", "1.2"),
+                        ("delivered_bits", "-1"), ("closest_members_m", "-1")):  # fmt: skip
         wrong = list(cells)
         wrong[FLEET_EPISODE_COLUMNS.index(column)] = bad
         (broken / FLEET_EPISODES).write_text(header + "\n" + ",".join(wrong) + "\n")
@@ -213,8 +261,6 @@ def test_merge_copies_run_folders_but_follows_no_link(shards: list[Path], tmp_pa
     """A link inside a source's run folder is copied as a link (what it points to is not read
     into the merged folder); a run folder that is itself a link is not copied, and the rows
     are merged all the same."""
-    import shutil
-
     outside = tmp_path / "outside.txt"
     outside.write_text("not the campaign's")
     linked = tmp_path / "linked"
@@ -229,6 +275,111 @@ def test_merge_copies_run_folders_but_follows_no_link(shards: list[Path], tmp_pa
     merge_campaigns([linked], tmp_path / "m2")
     assert not episode_folder(tmp_path / "m2", "mcts", 3, 0).exists()
     assert _rows(tmp_path / "m2" / FLEET_EPISODES) == _rows(tmp_path / "m1" / FLEET_EPISODES)
+    # nor is a fleet-runs folder that is itself a link (its run folders are real ones)
+    shutil.rmtree(linked / RUNS)
+    (linked / RUNS).symlink_to(shards[0] / RUNS, target_is_directory=True)
+    merge_campaigns([linked], tmp_path / "m3")
+    assert not (tmp_path / "m3" / RUNS).exists()
+    assert _rows(tmp_path / "m3" / FLEET_EPISODES) == _rows(tmp_path / "m1" / FLEET_EPISODES)
+
+
+def _shard_copy(shard: Path, to: Path) -> tuple[Path, Path]:
+    """A copy of a one-episode shard and its run folder's summary.json."""
+    shutil.copytree(shard, to)
+    return to, episode_folder(to, "mcts", 3, 0) / "summary.json"
+
+
+def test_merge_copies_only_files_and_names_what_it_cannot_copy(shards: list[Path],
+                                                               tmp_path: Path) -> None:  # fmt: skip
+    """A FIFO in a run folder is left out (it failed the whole copy, as "internal error");
+    a run folder that cannot be copied is an OutputError naming it, and what was in --out
+    before stays."""
+    src, _ = _shard_copy(shards[0], tmp_path / "fifo")
+    os.mkfifo(episode_folder(src, "mcts", 3, 0) / "pipe")
+    merge_campaigns([src], tmp_path / "m")
+    copied = episode_folder(tmp_path / "m", "mcts", 3, 0)
+    assert (copied / "summary.json").is_file() and not os.path.lexists(copied / "pipe")
+    there = episode_folder(tmp_path / "taken", "mcts", 3, 0)
+    there.mkdir(parents=True)
+    (there / "mine").write_text("kept")
+    with pytest.raises(OutputError, match=r"cannot copy .* it exists") as err:
+        merge_campaigns([shards[0]], tmp_path / "taken")
+    assert err.value.folder == tmp_path / "taken"
+    assert [p.name for p in there.iterdir()] == ["mine"]
+
+
+def test_merge_refuses_run_folders_that_are_not_their_rows(shards: list[Path],
+                                                           tmp_path: Path) -> None:  # fmt: skip
+    """A run folder whose summary.json is another episode's (seed, planner, intruder count)
+    or missing, an episode numbered twice in one source: refused naming both sides (they were
+    merged as the row's before)."""
+    for key, value, says in (("seed", 99, "seed 99, planner mcts"),
+                             ("avoidance_planner", "none", "planner none"),
+                             ("intruders", 9, "8 intruders")):  # fmt: skip
+        src, summary_file = _shard_copy(shards[0], tmp_path / f"wrong-{key}")
+        summary = json.loads(summary_file.read_text())
+        summary[key] = value
+        summary_file.write_text(json.dumps(summary))
+        with pytest.raises(UserError, match=rf"{says}.*but its row .* is seed 7, planner mcts, "
+                                            r"3 intruders, 2 members"):  # fmt: skip
+            merge_campaigns([src], tmp_path / "out")
+    summary_file.unlink()
+    with pytest.raises(UserError, match=r"summary.json: cannot read it as the summary"):
+        merge_campaigns([src], tmp_path / "out")
+    # the same episode number twice in one source (another seed: not caught as a seed twice)
+    src, _ = _shard_copy(shards[0], tmp_path / "twice")
+    header, row = (src / FLEET_EPISODES).read_text().splitlines()
+    cells = row.split(",")
+    cells[FLEET_EPISODE_COLUMNS.index("seed")] = "8"
+    (src / FLEET_EPISODES).write_text("\n".join([header, row, ",".join(cells)]) + "\n")
+    with pytest.raises(UserError, match=r"line 3: mcts at 3 intruders, episode 0 again \(line 2"):
+        merge_campaigns([src], tmp_path / "out")
+    assert not (tmp_path / "out").exists()
+
+
+def test_merge_refuses_fleets_of_other_sizes_or_scenarios(shards: list[Path],
+                                                          tmp_path: Path) -> None:  # fmt: skip
+    """Rows of a fleet of three beside a fleet of two, runs of another scenario: refused
+    naming both (they were pooled before)."""
+    three, _ = _shard_copy(shards[1], tmp_path / "three")
+    shutil.rmtree(three / RUNS)  # no run folder to tell: the rows alone
+    header, row = (three / FLEET_EPISODES).read_text().splitlines()
+    cells = row.split(",")
+    cells[FLEET_EPISODE_COLUMNS.index("member_outcomes")] += " completed"
+    (three / FLEET_EPISODES).write_text(header + "\n" + ",".join(cells) + "\n")
+    with pytest.raises(UserError, match=r"fleets of different sizes \(members: .*: 2; .*: 3\)"):
+        merge_campaigns([shards[0], three], tmp_path / "out")
+    other, summary_file = _shard_copy(shards[1], tmp_path / "other")
+    summary = json.loads(summary_file.read_text())
+    summary["scenario"] = "another"
+    summary_file.write_text(json.dumps(summary))
+    with pytest.raises(UserError, match=r"different scenarios or dynamics .*fleet-short.*another"):
+        merge_campaigns([shards[0], other], tmp_path / "out")
+    assert not (tmp_path / "out").exists()
+
+
+def test_merge_force_never_empties_a_source_nor_a_merge_it_refuses(
+    shards: list[Path], tmp_path: Path, capsys
+) -> None:
+    """--force over a folder that holds a source is refused (it emptied the folder, source
+    and all, before reading it); a source refused leaves the previous merge as it was."""
+    merged = tmp_path / "merged"
+    assert main(["merge", *map(str, shards), "--out", str(merged)]) == 0
+    inner, _ = _shard_copy(shards[0], merged / "inner")
+    assert main(["merge", str(inner), str(shards[1]), "--out", str(merged), "--force"]) == 2
+    assert "holds the source" in capsys.readouterr().err
+    assert (inner / FLEET_EPISODES).is_file()
+    shutil.rmtree(inner)
+    broken, _ = _shard_copy(shards[1], tmp_path / "broken")
+    header, row = (broken / FLEET_EPISODES).read_text().splitlines()
+    cells = row.split(",")
+    cells[FLEET_EPISODE_COLUMNS.index("qos_share")] = "7"
+    (broken / FLEET_EPISODES).write_text(header + "\n" + ",".join(cells) + "\n")
+    before = {p.name: p.read_bytes() for p in merged.iterdir() if p.is_file()}
+    assert main(["merge", str(shards[0]), str(broken), "--out", str(merged), "--force"]) == 2
+    assert "qos_share '7' is not allowed" in capsys.readouterr().err
+    assert {p.name: p.read_bytes() for p in merged.iterdir() if p.is_file()} == before
+    assert len(list((merged / RUNS).iterdir())) == 2
 
 
 def test_the_runs_service_figures_are_recomputed_from_service_csv(runs: dict[int, Path]) -> None:
@@ -280,9 +431,12 @@ def test_the_members_encounters_hold_what_trajectory_csv_shows(runs: dict[int, P
         assert seen <= nmacs
 
 
-def test_resume_and_workers_give_the_same_rows(short: Path, campaign: Path) -> None:
+def test_resume_and_workers_give_the_same_rows(short: Path, campaign: Path,
+                                               tmp_path: Path) -> None:  # fmt: skip
     """--resume with one more episode flies only it (the journaled rows kept, their wall time
-    too); two workers fly the first two to the same rows."""
+    too); two workers fly the first two to the same rows. Resumed in a copy: the module's
+    campaign stays the two-episode one the other tests read, whatever their order."""
+    campaign = shutil.copytree(campaign, tmp_path / "campaign")
     before = _rows(campaign / FLEET_EPISODES)[1]
     args = ["evaluate", str(short), *EVALUATE, "--episodes", "3", "--out", str(campaign)]
     assert main([*args, "--resume"]) == 0
@@ -290,12 +444,8 @@ def test_resume_and_workers_give_the_same_rows(short: Path, campaign: Path) -> N
     assert after[:2] == before and after[2]["seed"] == "9"
     journal = [json.loads(line) for line in (campaign / JOURNAL).read_text().splitlines()[1:]]
     assert [r["episode"] for r in journal] == [0, 1, 2]  # none flown twice
-
-    def seeded(rows: list[dict]) -> list[dict]:
-        return [{k: v for k, v in r.items() if k not in TIMING_COLUMNS} for r in rows]
-
     pooled = run_campaign(load_scenario(short), ["mcts"], [3], 2, dynamics="jsbsim", workers=2)
-    assert seeded(pooled) == seeded(sorted(journal, key=lambda r: r["episode"])[:2])
+    assert _untimed(pooled) == _untimed(sorted(journal, key=lambda r: r["episode"])[:2])
 
 
 def test_a_member_leaving_early_fills_the_leave_columns(tmp_path: Path) -> None:
@@ -349,8 +499,7 @@ def test_a_fleet_campaign_opens_no_external_link(tmp_path: Path) -> None:
     assert not list((tmp_path / "linked").rglob("*.tlog"))
     assert json.loads((tmp_path / "linked" / "summary.json").read_text())["bridge"] is not None
     alone = run_fleet_episode(load_scenario(plain), "mcts", 3, 7, tmp_path / "plain")
-    untimed = [{k: v for k, v in r.items() if k not in TIMING_COLUMNS} for r in (row, alone)]
-    assert untimed[0] == untimed[1]
+    assert _untimed([row]) == _untimed([alone])
     for name in ("trajectory.csv", "service.csv"):
         assert (tmp_path / "linked" / name).read_bytes() == (tmp_path / "plain" / name).read_bytes()
 

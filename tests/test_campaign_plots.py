@@ -135,3 +135,49 @@ def test_rows_that_are_no_fleet_campaigns_are_refused_by_name(tmp_path: Path) ->
     with pytest.raises(UserError, match="fleet_episodes row 1: no method or intruders"):
         plot_fleet(results, nameless, tmp_path)
     assert not list(tmp_path.iterdir())  # nothing drawn from them
+
+
+def test_fleet_figures_draw_counts_as_counts_and_name_what_is_not_defined(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The collision pairs panel draws two counts as two markers, not a line between them that
+    reads as an interval, on a whole-number axis from 0 (all zeros drew -0.02 to 0.05); a row
+    whose every value is not defined says so (it was an empty row); intruder and episode
+    counts that are not whole numbers are refused by name (they crashed the labels)."""
+    from uavxai.campaign import plots
+
+    figures: dict = {}  # each figure drawn, by file name, to read its panels
+    write = plots.write_figure
+
+    def keep(path: Path, fig) -> Path:  # the figure, then its file
+        figures[Path(path).name] = fig
+        return write(path, fig)
+
+    monkeypatch.setattr(plots, "write_figure", keep)
+    results, episodes = _read("round12_seeds60-64_results.csv"), _read(
+        "round12_seeds60-64_episodes.csv")  # fmt: skip
+    assert results[0]["member_collisions"] == results[0]["intruder_collisions"] == "0"
+    unserved = {**results[0], "method": "none", "mean_qos_share": "", "min_qos_share": ""}
+    crashed = {**results[0], "method": "mcts_sep", "intruder_collisions": "2"}
+    rows = [results[0], unserved, crashed]
+    plot_fleet(rows, [*episodes, *({**e, "method": "none", "qos_share": ""} for e in episodes),
+                      *({**e, "method": "mcts_sep"} for e in episodes)], tmp_path)  # fmt: skip
+    panels = figures[FLEET_RESULTS_FIGURE].axes
+    pairs = panels[[k for k, _, _ in FLEET_PLOTTED].index("member_collisions")]
+    assert pairs.get_xlim() == (-0.5, 2.5)  # 0 and 2 pairs, whole numbers, from 0
+    assert all(len(set(line.get_xdata())) == 1 for line in pairs.get_lines())
+    assert [t.get_text() for t in pairs.texts] == []
+    qos = panels[[k for k, _, _ in FLEET_PLOTTED].index("mean_qos_share")]
+    assert [(t.get_text(), t.xy[1]) for t in qos.texts] == [("not defined", 1)]
+    per_episode = figures[FLEET_EPISODES_FIGURE].axes
+    qos = per_episode[[k for k, _, _ in FLEET_EPISODE_PLOTTED].index("qos_share")]
+    assert [(t.get_text(), t.xy[1]) for t in qos.texts] == [("not defined", 1)]
+    # all zeros: from 0 to 1, not -0.02 to 0.05
+    plot_fleet(results, episodes, tmp_path)
+    pairs = figures[FLEET_RESULTS_FIGURE].axes[[k for k, _, _ in FLEET_PLOTTED].index(
+        "member_collisions")]  # fmt: skip
+    assert pairs.get_xlim() == (-0.5, 1.5)
+    for column, bad in (("intruders", "20.5"), ("episodes", "five")):
+        with pytest.raises(UserError, match=rf"fleet_results row 1: {column} '{bad}' is not a "
+                                            "whole number"):  # fmt: skip
+            plot_fleet([{**results[0], column: bad}], episodes, tmp_path / "no")

@@ -285,6 +285,35 @@ def test_a_full_disk_says_no_space_left_and_marks_the_folder_incomplete(
     assert _snapshot(tmp_path, skip=tiny_disk) == before
 
 
+def test_a_full_disk_while_merge_copies_a_fleet_run_says_no_space_left(
+    tmp_path: Path, tiny_disk: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A fleet source (round 12's rows; episode 0's run folder holding its summary and a
+    200 kB trajectory.csv) merged onto a 64 kB disk: "no space left" naming the file (copytree
+    turned it into "internal error"), the run folder's part copied removed, the marker saying
+    incomplete; the source untouched."""
+    from uavxai.campaign.fleet import episode_folder
+
+    src = tmp_path / "fleet"
+    src.mkdir()
+    rows = Path(__file__).resolve().parents[1] / "docs" / "results" / "fleet"
+    shutil.copy(rows / "round12_seeds60-64_episodes.csv", src / "fleet_episodes.csv")
+    run = episode_folder(src, "mcts", 20, 0)
+    run.mkdir(parents=True)
+    summary = {"scenario": "fleet-mission", "dynamics": "jsbsim", "seed": 60,
+               "avoidance_planner": "mcts", "intruders": 22, "fleet": [{}, {}, {}]}  # fmt: skip
+    (run / "summary.json").write_text(json.dumps(summary))
+    (run / "trajectory.csv").write_text("t,id,x,y,h\n" + "0.0,ownship-0,1.0,2.0,3.0\n" * 8000)
+    before = _snapshot(tmp_path, skip=tiny_disk)
+    out = tiny_disk / "merged"
+    assert main(["merge", str(src), "--out", str(out)]) == 2
+    err = _refused(capsys, "no space left on", "trajectory.csv", "incomplete")
+    assert "bug" not in err
+    assert "no space left" in json.loads((out / MARKER).read_text())["incomplete"]
+    assert not episode_folder(out, "mcts", 20, 0).exists()
+    assert _snapshot(tmp_path, skip=tiny_disk) == before
+
+
 def test_an_unwritable_output_is_a_clear_error_not_a_bug(tmp_path: Path) -> None:
     """The same error path without a tiny disk: a folder where an output file goes."""
     from uavxai.outputs import OutputError

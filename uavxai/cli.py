@@ -711,17 +711,23 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
 
 def cmd_merge(args: argparse.Namespace) -> int:
-    if args.out.resolve() in {s.resolve() for s in args.sources}:
-        raise UserError(f"--out {args.out}: is one of the sources; merge into a new folder.")
+    # --force empties --out before the merge writes: a source in it would be gone unread
+    for src in args.sources:
+        if src.resolve().is_relative_to(args.out.resolve()):
+            what = "is" if src.resolve() == args.out.resolve() else "holds"
+            raise UserError(f"--out {args.out}: {what} the source {src}; merge into a folder "
+                            "of its own, outside every source.")  # fmt: skip
     _same_campaign(args.sources)
-    out = prepare_out_dir(args.out, args.force, args.argv)
     from rich.console import Console
 
-    from uavxai.campaign import is_fleet_campaign, merge_campaigns, results_table
+    from uavxai.campaign import is_fleet_campaign, read_merge, results_table
     from uavxai.campaign.fleet import RUNS, fleet_table
     from uavxai.campaign.plots import FLEET_EPISODES_FIGURE, FLEET_RESULTS_FIGURE
 
-    results = merge_campaigns(args.sources, out, f"merged from {len(args.sources)} campaigns")
+    # every source read and checked before --out is touched: one refused leaves it as it was
+    write = read_merge(args.sources)
+    out = prepare_out_dir(args.out, args.force, args.argv)
+    results = write(out, f"merged from {len(args.sources)} campaigns")
     console = Console(width=None if sys.stdout.isatty() else 200)
     if is_fleet_campaign(out):
         console.print(fleet_table(results))

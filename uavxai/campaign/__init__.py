@@ -72,7 +72,7 @@ from uavxai.campaign.files import (
     write_csv,
 )
 from uavxai.campaign.fleet import run_fleet_episode, summarise_fleet, write_fleet_campaign
-from uavxai.campaign.merge import is_fleet_campaign, merge_campaigns
+from uavxai.campaign.merge import is_fleet_campaign, merge_campaigns, read_merge
 from uavxai.campaign.plots import plot_campaign, plot_fleet
 from uavxai.campaign.runner import DYNAMICS, Task, campaign_tasks, run_campaign
 from uavxai.campaign.statistics import summarise
@@ -102,6 +102,7 @@ __all__ = [
     "merge_campaigns",
     "plot_campaign",
     "plot_fleet",
+    "read_merge",
     "rerun_row",
     "results_table",
     "run_campaign",

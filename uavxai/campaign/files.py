@@ -219,17 +219,44 @@ FLEET_TEXT_COLUMNS = ("member_outcomes", "member_delivered_bits", "member_energy
                       "member_min_separation_m")  # fmt: skip
 
 
+MAX_COUNT = 10**9  # events, departures or bits a row counts: far beyond any mission's
+MAX_BITS = 10**18
+# Each fleet_episodes.csv number column after ``completed`` as a campaign writes it (fleet_row):
+# (lowest, highest, what it allows, whether empty is allowed, whether whole). A count is never
+# empty (summarise_fleet sums it); a share is 0-1 or empty (not defined); a closest approach is
+# 'inf' when nothing came near.
+_FLEET_NUMBERS: dict[str, tuple[float, float, str, bool, bool]] = {
+    "flight_time_s": (0, 1e9, "a time >= 0 in seconds", False, False),
+    "delivered_bits": (0, MAX_BITS, "a whole number of bits >= 0", False, True),
+    "qos_share": (0, 1, "a share from 0 to 1, or empty", True, False),
+    "jain_fairness": (0, 1, "a fairness from 0 to 1, or empty", True, False),
+    "energy_wh": (0, 1e9, "an energy >= 0 in Wh, or empty", True, False),
+    **{k: (0, MAX_COUNT, f"a whole number from 0 to {MAX_COUNT}", False, True) for k in (
+        "member_collisions", "intruder_collisions", "member_nmacs", "intruder_nmacs",
+        "departures")},
+    **{k: (0, math.inf, "a distance >= 0 in metres ('inf': none came near)", False, False)
+       for k in ("closest_members_m", "closest_intruder_m")},
+    "leave_uav": (0, MAX_COUNT, "a member's index (a whole number >= 0), or empty", True, True),
+    "leave_t_s": (0, 1e9, "a time >= 0 in seconds, or empty", True, False),
+    **{f"leave_{k}": (0, 1, "a share from 0 to 1, or empty", True, False) for k in (
+        "qos_share_before", "qos_share_after", "crowd_qos_share_before",
+        "crowd_qos_share_after")},
+    "leave_recovered_after_s": (0, 1e9, "a time >= 0 in seconds, or empty", True, False),
+    "decision_ms_p50": (0, 1e9, "a time >= 0 in milliseconds, or empty", True, False),
+    "wall_s": (0, 1e9, "a time >= 0 in seconds, or empty", True, False),
+}  # fmt: skip
+
+
 def checked_fleet_row(r: dict, path: Path, line: int) -> dict:
     """One ``fleet_episodes.csv`` row of a source campaign: its keys checked and typed, its
-    ``completed`` 0 or 1, every other cell but the members' text a number or empty. The
-    numbers are kept as the file's text: written again, the merged file holds them as the
+    ``completed`` 0 or 1, every other number within what a campaign writes (``_FLEET_NUMBERS``).
+    The numbers are kept as the file's text: written again, the merged file holds them as the
     source did, and :func:`summarise_fleet` reads them as numbers."""
     cells = _Cells(r, path, line)
     out = cells.keys()
     out["completed"] = cells.number("completed", 0, 1, "0 or 1", whole=True)
-    for column in FLEET_EPISODE_COLUMNS[FLEET_EPISODE_COLUMNS.index("completed") + 1 :]:
-        if column not in FLEET_TEXT_COLUMNS:
-            cells.number(column, -math.inf, math.inf, "a number, or empty", empty="")
+    for column, (lo, hi, allowed, empty, whole) in _FLEET_NUMBERS.items():
+        cells.number(column, lo, hi, allowed, empty="" if empty else None, whole=whole)
     return out
 
 

@@ -215,7 +215,8 @@ def plot_fleet(results: Sequence[dict], episodes: Sequence[dict], out: Path,
 
 
 def _check_plotted(rows: Sequence[dict], columns: Sequence[str], what: str) -> None:
-    """Rows a fleet figure can be drawn from: some, and every number a number or empty."""
+    """Rows a fleet figure can be drawn from: some, every number a number or empty, and the
+    intruder and episode counts the labels name whole numbers."""
     if not rows:
         raise UserError(f"{what}: no rows to plot (a campaign with no episodes?); fly at least "
                         "one episode, or merge campaigns that have some.")  # fmt: skip
@@ -228,6 +229,12 @@ def _check_plotted(rows: Sequence[dict], columns: Sequence[str], what: str) -> N
                                 "cannot plot it.") from None  # fmt: skip
         if "method" not in r or "intruders" not in r:
             raise UserError(f"{what} row {i}: no method or intruders; not a fleet campaign's.")
+        for c in ("intruders", "episodes") if "episodes" in r else ("intruders",):
+            try:
+                int(str(r[c]))
+            except ValueError:
+                raise UserError(f"{what} row {i}: {c} {str(r[c])[:40]!r} is not a whole number; "
+                                "cannot label it.") from None  # fmt: skip
 
 
 def _figure(panels: int, rows: int):
@@ -260,12 +267,16 @@ def _fleet_results_figure(results: Sequence[dict], out: Path, title: str) -> Pat
                 _point_and_range(ax, y, look, v, lo, hi)
                 continue
             other = cell_number(r.get("intruder_collisions" if kind == "pairs" else kind)) * scale
-            _point_and_range(ax, y, look, v, *sorted((v, other)))
+            # a mean to its worst case is a range; two counts of other pairs are not one
+            _point_and_range(ax, y, look, v, *(sorted((v, other)) if kind != "pairs"
+                                               else (math.nan, math.nan)))  # fmt: skip
             if math.isfinite(other):
                 ax.plot([other], [y], color=look[0], marker=look[1], markersize=8,
                         markerfacecolor="none")  # fmt: skip
+            if not math.isfinite(v) and not math.isfinite(other):
+                _undefined(ax, y)
         _rows_axis(ax, _row_labels(results), label)
-        _fit(ax, "rate" if kind == "wilson" else key)
+        _fit(ax, "rate" if kind == "wilson" else kind if kind == "pairs" else key)
     return _save_figure(fig, out / FLEET_RESULTS_FIGURE, title)
 
 
@@ -280,6 +291,7 @@ def _fleet_episodes_figure(results: Sequence[dict], episodes: Sequence[dict], ou
     for ax, (key, label, scale) in zip(axes[:, 0], plotted, strict=True):
         for y, (r, group) in enumerate(zip(results, groups, strict=True)):
             colour, marker = _look(r["method"], y)
+            drawn = False
             for k, e in enumerate(group):
                 # the episodes spread over the row's height, in their order: each one seen
                 at = y + (0.0 if len(group) == 1 else 0.6 * (k / (len(group) - 1) - 0.5))
@@ -287,6 +299,7 @@ def _fleet_episodes_figure(results: Sequence[dict], episodes: Sequence[dict], ou
                     v = cell_number(e.get(key)) * scale
                     if math.isfinite(v):
                         ax.plot([v], [at], color=colour, marker=marker, markersize=5, alpha=0.8)
+                        drawn = True
                     continue
                 before, after = (cell_number(e.get(f"leave_qos_share_{w}"))
                                  for w in ("before", "after"))  # fmt: skip
@@ -295,16 +308,34 @@ def _fleet_episodes_figure(results: Sequence[dict], episodes: Sequence[dict], ou
                     ax.plot([before], [at], color=colour, marker=marker, markersize=5)
                     ax.plot([after], [at], color=colour, marker=marker, markersize=5,
                             markerfacecolor="none")  # fmt: skip
+                    drawn = True
+            if not drawn:
+                _undefined(ax, y)
         _rows_axis(ax, _row_labels(results), label)
         _fit(ax, key)
     return _save_figure(fig, out / FLEET_EPISODES_FIGURE, title)
 
 
+def _undefined(ax, y: float) -> None:
+    """Say so on a row with nothing to draw (every episode's value not defined: e.g. no
+    departure, or no user served), rather than leave it empty."""
+    ax.annotate("not defined", (0.01, y), xycoords=("axes fraction", "data"), fontsize=7,
+                va="center", color="0.4")  # fmt: skip
+
+
 def _fit(ax, key: str) -> None:
-    """A share or a rate from 0 to 1; any other number from 0 with room for the largest
-    marker."""
+    """A share or a rate from 0 to 1; pair counts from 0 in whole numbers (at least to 1, so
+    that zeros do not draw an axis of -0.02 to 0.05); any other number from 0 with room for
+    the largest marker."""
     if any(w in key for w in ("rate", "share", "fairness", "leave")):
         ax.set_xlim(-0.02, 1.02)
+        return
+    if key == "pairs":
+        from matplotlib.ticker import MaxNLocator
+
+        drawn = [float(x) for line in ax.get_lines() for x in line.get_xdata()]
+        ax.set_xlim(-0.5, max([1.0, *(x for x in drawn if math.isfinite(x))]) + 0.5)
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
         return
     lo, hi = ax.get_xlim()
     ax.set_xlim(lo, hi + 0.04 * (hi - lo))
