@@ -19,13 +19,13 @@ import pytest
 from engine_runs import run_and_evaluate
 
 from uavxai.avoidance.mcts import MCTSPlanner
-from uavxai.avoidance.planners import make_planner
+from uavxai.avoidance.planners import make_planner, uses_compiled_search
 from uavxai.avoidance.types import Intruder, Ownship, PlannerConfig
 from uavxai.errors import UserError
 from uavxai.scenario import default_scenario
 from uavxai.sim.build import fly
 from uavxai.sim.clock import Clock
-from uavxai.sim.companion import Companion, uses_compiled_search, warm_up
+from uavxai.sim.companion import Companion, warm_up
 from uavxai.sim.episode import Observer
 from uavxai.sim.spec import episode_spec
 

@@ -164,6 +164,15 @@ for _name in LEARNED:
 register(direct.NAME)(lambda config, checkpoint: DirectPlanner(config))
 
 
+def uses_compiled_search(planner: Planner) -> bool:
+    """Does ``planner`` search with the compiled MCTS kernel, itself or through the tree it
+    wraps (`mcts_daa`'s alerting stage, `mcts_route`'s route layer)? Its first decision in a
+    process loads the kernel (uavxai.sim.companion.warm_up)."""
+    if isinstance(planner, AlertingPlanner | RoutedPlanner):
+        planner = planner.inner
+    return isinstance(planner, MCTSPlanner)
+
+
 def make_planner(
     name: str, config: PlannerConfig | None = None, checkpoint: str | Path | None = None
 ) -> Planner:

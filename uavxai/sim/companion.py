@@ -35,15 +35,6 @@ from uavxai.sim.seat import Seat
 from uavxai.worker import Worker
 
 
-def uses_compiled_search(planner: object) -> bool:
-    """Does ``planner`` search with the compiled MCTS kernel (itself, or the tree it wraps:
-    `mcts_daa`'s alerting stage, `mcts_route`'s route layer)? Those are the planners whose
-    first decision in a process loads it (:func:`warm_up`)."""
-    from uavxai.avoidance.mcts import MCTSPlanner
-
-    return isinstance(getattr(planner, "inner", planner), MCTSPlanner)
-
-
 def warm_up(name: str, config: PlannerConfig, checkpoint: str | None) -> None:
     """One decision of a planner of its own, on a made-up encounter, thrown away.
 
@@ -53,10 +44,11 @@ def warm_up(name: str, config: PlannerConfig, checkpoint: str | None) -> None:
     Done when the companion starts, it overlaps the world's loading of its aircraft. A
     planner of its own, so the episode's planner keeps no trace of it (its generator, its
     memo): the flight is the same to the bit. Only the registered planners that search with
-    the compiled kernel (:func:`uses_compiled_search`; the others' first decision costs what
-    every later one does, and a plugin's is not asked to plan what nobody flies).
+    the compiled kernel (:func:`uavxai.avoidance.planners.uses_compiled_search`; the others'
+    first decision costs what every later one does, and a plugin's is not asked to plan
+    what nobody flies).
     A planner that fails here would fail in flight: the error says it came from here."""
-    from uavxai.avoidance.planners import PLANNERS, make_planner
+    from uavxai.avoidance.planners import PLANNERS, make_planner, uses_compiled_search
 
     if name not in PLANNERS:
         return
