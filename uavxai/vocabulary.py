@@ -99,6 +99,11 @@ RISK_MODELS = ("margin", "probability")
 # through it, the most visited root action taken (the paper); "best", the best value a walk
 # through it scored, the root action with the best Q taken (as the exhaustive search does).
 BACKUPS = ("mean", "best")
+# How a tree planner picks when every option's line conflicts (`avoidance.mcts.cornered_rule`,
+# uavxai.avoidance.lines.cornered_key): "latest", the latest meeting, then the widest miss of
+# the intruder met; "widest", the widest predicted closest approach to any intruder (up to
+# twice the collision distance), then the latest meeting.
+CORNERED_RULES = ("latest", "widest")
 N_ACTIONS = ACTION_SETS["paper"]  # the paper's nine: the learned planners' output size
 HOLD = 4  # hold the bank command, hold speed: the reference every other option is compared to
 CLIMB, DESCEND = (next(a.index for a in ACTIONS if a.climb == c) for c in (+1, -1))

@@ -75,12 +75,12 @@ class ExhaustivePlanner(TreePlanner):
         # Risk as a probability weighs the values MCTS backs up (avoidance.mcts.risk); the
         # exhaustive reference keeps the k-sigma wall, whatever the scenario asks of MCTS.
         # Likewise mcts_sep's NMAC cost and walls, the vertical margin, the goal's height
-        # scale, the pinning and the aim inside the goal are the MCTS planners' only: the
-        # reference values lines without them, and its config says so.
+        # scale, the pinning, the aim inside the goal and the cornered rule are the MCTS
+        # planners' only: the reference values lines without them, and its config says so.
         config = dataclasses.replace(
             config or PlannerConfig(), risk="margin", nmac_cost=0.0, wall_slack_s=0.0,
             vertical_reach_mps=None, goal_height_scale=1.0, pinned_slack_s=0.0,
-            goal_margin_m=0.0,
+            goal_margin_m=0.0, cornered_rule="latest",
         )
         super().__init__(config, name=name)
 

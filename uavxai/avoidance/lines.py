@@ -354,23 +354,54 @@ def search_key(c: ChildStats, by_value: bool = False) -> tuple:
     return (c.q, c.visits, -c.action) if by_value else (c.visits, c.q, -c.action)
 
 
-def cornered_key(c: ChildStats, by_value: bool = False) -> tuple:
-    """How a cornered planner ranks options: a line that stays in the area before one that
-    leaves it or ends unable to turn away from a wall (``trapped``; leaving is a failure for
-    certain, a predicted meeting may still be turned into a miss by re-planning), then the
-    latest meeting, then the largest predicted miss, then the search's preference
+def cornered_key(
+    c: ChildStats, by_value: bool = False, rule: str = "latest", d_min_m: float = math.nan
+) -> tuple:
+    """How a cornered planner ranks options (``rule``, `avoidance.mcts.cornered_rule`): a line
+    that stays in the area before one that leaves it or ends unable to turn away from a wall
+    (``trapped``; leaving is a failure for certain, a predicted meeting may still be turned
+    into a miss by re-planning); then, "latest", the latest meeting, then the largest predicted
+    miss of the intruder met; "widest", the widest predicted closest approach to any intruder
+    along the line (no margins) up to :data:`WIDE_ENOUGH` x ``d_min_m`` (:func:`pass_width`),
+    then the latest meeting, then the widest approach; then the search's preference
     (:func:`search_key`)."""
     m = c.meets
+    when = -math.inf if m is None else round(m.time_s, 6)
+    if rule == "widest":
+        sep = c.predicted_min_separation_m
+        return (not leaves(c), pass_width(c, d_min_m), when, sep, *search_key(c, by_value))
     return (
         not leaves(c),
-        -math.inf if m is None else round(m.time_s, 6),
+        when,
         -math.inf if m is None else m.miss_m,
         *search_key(c, by_value),
     )
 
 
-def cornered_choice(children: Sequence[ChildStats], by_value: bool = False) -> ChildStats | None:
+# The cornered rule "widest" ranks lines by their closest approach up to this many times the
+# collision distance: a line predicted to pass everyone that wide is as good as any other such
+# line, and the latest meeting decides between them as under "latest". Below it the wider the
+# better (a graze is a line that passed one intruder wide and another just inside d_min).
+# Without the cap (every width counted) the development flights timed out twice as often
+# among vague tracks near the goal, where the widest line stays high above the layer.
+WIDE_ENOUGH = 2.0
+
+
+def pass_width(c: ChildStats, d_min_m: float) -> float:
+    """The option's predicted closest approach to any intruder (m), counted up to
+    :data:`WIDE_ENOUGH` x the collision distance ``d_min_m`` (the rule "widest")."""
+    if not d_min_m > 0:
+        raise ValueError(f"the cornered rule 'widest' needs the collision distance, got {d_min_m}")
+    return min(c.predicted_min_separation_m, WIDE_ENOUGH * d_min_m)
+
+
+def cornered_choice(
+    children: Sequence[ChildStats],
+    by_value: bool = False,
+    rule: str = "latest",
+    d_min_m: float = math.nan,
+) -> ChildStats | None:
     """When every option's line conflicts, the one to take (:func:`cornered_key`), else None."""
     if not children or not all(conflicts(c) for c in children):
         return None
-    return max(children, key=lambda c: cornered_key(c, by_value))
+    return max(children, key=lambda c: cornered_key(c, by_value, rule, d_min_m))

@@ -301,7 +301,9 @@ def decision_from_tree(
     children, horizons = measured_children(
         children, lines, tree, samples, t_events, tracks, ids, own, cfg
     )
-    action, cornered, route_kept = _final_action(children, action, route_action, tree.by_value)
+    action, cornered, route_kept = _final_action(
+        children, action, route_action, tree.by_value, cfg.cornered_rule, cfg.d_min_m
+    )
 
     chosen_line = lines[action]
     plan = [np.array([[own.x, own.y, own.h]])]
@@ -344,19 +346,26 @@ def decision_from_tree(
         planner=name,
         by_value=tree.by_value,
         d_min_m=cfg.d_min_m,
+        cornered_rule=cfg.cornered_rule,
     )
 
 
 def _final_action(
-    children: Sequence[ChildStats], action: int, route_action: int | None, by_value: bool = False
+    children: Sequence[ChildStats],
+    action: int,
+    route_action: int | None,
+    by_value: bool = False,
+    rule: str = "latest",
+    d_min_m: float = math.nan,
 ) -> tuple[int, bool, bool]:
     """The action taken, and whether the cornered rule or the route rule (rather than the
     search) chose it: every option conflicts, the rule words can state
     (:func:`cornered_choice`); else the route's when its line has no conflict
     (``route_action`` given; :attr:`ChildStats.clear`: no meeting, and no NMAC intrusion where
     the search grades one); else the search's ``action``. ``by_value``: the search ranks
-    by Q first (:func:`uavxai.avoidance.lines.search_key`)."""
-    cornered = cornered_choice(children, by_value)
+    by Q first (:func:`uavxai.avoidance.lines.search_key`); ``rule``: the cornered rule
+    (`avoidance.mcts.cornered_rule`), ``d_min_m`` the collision distance it may weigh."""
+    cornered = cornered_choice(children, by_value, rule, d_min_m)
     if cornered is not None:
         return cornered.action, True, False
     if route_action is not None:

@@ -87,10 +87,11 @@ def _daa_config(config: PlannerConfig) -> PlannerConfig:
     # walls; walls in its tree would be a new planner, to be judged as one. So too the
     # best-value backup (avoidance.mcts.backup): its campaigns were flown with the mean, and
     # the paper's goal distance (avoidance.mcts.goal_height_scale), with no pinning weighed
-    # (avoidance.mcts.pinned_slack_s) and the goal's whole sphere (avoidance.mcts.goal_margin_m).
+    # (avoidance.mcts.pinned_slack_s), the goal's whole sphere (avoidance.mcts.goal_margin_m)
+    # and the cornered rule it was judged with (avoidance.mcts.cornered_rule).
     config = dataclasses.replace(
         config, nmac_cost=0.0, wall_slack_s=0.0, backup="mean", goal_height_scale=1.0,
-        pinned_slack_s=0.0, goal_margin_m=0.0,
+        pinned_slack_s=0.0, goal_margin_m=0.0, cornered_rule="latest",
     )
     if config.conflict_volume == "cylinder":
         return dataclasses.replace(

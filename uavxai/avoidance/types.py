@@ -553,6 +553,8 @@ class Decision:
     # the search ranked its options by Q first (the best-value backup, SearchTree.by_value)
     by_value: bool = False
     d_min_m: float = 50.0  # the collision distance the planner worked with
+    # the rule a cornered decision chose by (`avoidance.mcts.cornered_rule`, lines.cornered_key)
+    cornered_rule: str = "latest"
     # (explanation, counterfactual) in words. Planners return evidence and leave this None;
     # the words are made on first use by the narrator uavxai.xai registers (set_narrator).
     words: tuple[str, str] | None = None
@@ -633,6 +635,9 @@ class Decision:
             "branch_min_separation_m": _finite(self.branch_min_separation_m),
             "branch_horizon_s": self.branch_horizon_s,
             "cornered": self.cornered,
+            # another rule than the default's, when it chose (files of "latest" stay as they were)
+            **({"cornered_rule": self.cornered_rule}
+               if self.cornered and self.cornered_rule != "latest" else {}),
             "route_kept": self.route_kept,
             "d_min_m": self.d_min_m,
             # the episode's time left that the search valued its lines against (None: no tree)
