@@ -292,6 +292,14 @@ CLAIMS = [
      r"(?: \(in (?P<t>\d+\.\d) s, the next in (?P<t2>\d+\.\d) s\)"
      r"| \(in (?P<t3>\d+\.\d) s, as another does\) and passes it widest "
      rf"\((?P<m>\d+\.\d) m against (?P<m2>\d+\.\d) m\)| and passes it widest, tied: {WHY})?"),
+    ("cornered: chose by the widest rule", "s",
+     r"every option meets an intruder, so it took the one that passes the traffic "
+     r"(?:widest \((?P<w>\d+\.\d) m from the nearest intruder against (?P<w2>\d+\.\d) m\)"
+     r"|at (?P<w0>\d+\.\d) m from the nearest intruder"
+     r"|as wide as another \((?:(?P<cap>\d+) m or more|(?P<weq>\d+\.\d) m)\) and meets its "
+     r"intruder (?:latest \(in (?P<t>\d+\.\d) s, the next in (?P<t2>\d+\.\d) s\)"
+     r"|as late, passing wider \((?P<s>\d+\.\d) m against (?P<s2>\d+\.\d) m\)"
+     rf"|as late, tied: {WHY}))"),
     ("orbit: where", "o", ORBIT_WHERE),
     ("orbit: intruder passes", "o", ORBIT_PASS),
     ("why not: a collision", "c", rf"(?P<opt>it) {MEETS}, a predicted collision"),
@@ -300,6 +308,9 @@ CLAIMS = [
      r"collision distance for what that intruder may do, which the search counts as a collision"),
     ("every option ends", "s", rf"every option (?P<how>{ENDS})"),
     ("why not: both conflict", "c", rf"(?P<opt>it) {MEETS} too;"),
+    ("cornered: why not, widest", "c",
+     rf"(?P<opt>it) {MEETS}, (?P<how>and comes nearer the traffic \((?P<n1>\d+\.\d) m from "
+     r"the nearest intruder against (?P<n2>\d+\.\d) m\)|as soon and nearer the traffic)"),
     ("cornered: why not", "c",
      rf"(?P<opt>it) {MEETS}, (?P<how>sooner|as soon and closer|the same; {WHY})"),
     ("meets k at N m", "sc", rf"(?P<opt>{OPT}|it) {MEETS}"),
@@ -503,8 +514,81 @@ def _rank(ctx: Ctx, k: dict) -> tuple:
         line = ctx.lines[k["action"]["index"]] if ctx.lines else None
         meets = line.meets if line else k["meets"] and tuple(k["meets"].values())
         when, miss = (round(meets[1], 6), meets[2]) if meets else (-math.inf, -math.inf)
+        if _widest(ctx):  # the planner's own order: staying in, width, meeting, miss
+            sep = _sep(k)
+            return (not _leaves(k), _width(ctx, k), when, sep, k["visits"], k["q"],
+                    -k["action"]["index"])  # fmt: skip
         return (when, miss, k["visits"], k["q"], -k["action"]["index"])
     return (k["visits"], k["q"], -k["action"]["index"])
+
+
+def _widest(ctx: Ctx) -> bool:
+    """Did a cornered decision choose by `avoidance.mcts.cornered_rule: widest`?"""
+    return ctx.record.get("cornered_rule") == "widest"
+
+
+def _sep(k: dict) -> float:
+    v = k["predicted_min_separation_m"]
+    return math.inf if v is None else float(v)
+
+
+def _leaves(k: dict) -> bool:
+    return k["outcome"] == "out_of_bounds" or bool(k.get("trapped"))
+
+
+def _width(ctx: Ctx, k: dict) -> float:
+    """The widest rule's pass width: the closest approach up to twice d_min (the audit's own
+    reading of the rule, docs/scenario.md)."""
+    return min(_sep(k), 2.0 * ctx.record["d_min_m"])
+
+
+def check_cornered_widest(ctx: Ctx, m: re.Match) -> bool:
+    kids = list(ctx.kids.values())
+    if not (ctx.record.get("cornered") and _widest(ctx) and all(ctx.conflicts(k) for k in kids)):
+        return False
+    if max(kids, key=lambda k: _rank(ctx, k)) is not ctx.chosen:  # the rule really chose it
+        return False
+    c = ctx.chosen["action"]["index"]
+    peers = [k for k in kids if ctx.flies[k["action"]["index"]] != ctx.flies[c]
+             and _leaves(k) == _leaves(ctx.chosen)]  # fmt: skip
+    mine = _sep(ctx.chosen)
+    if m["w0"] is not None:
+        return not peers and _near(mine, m["w0"], 0.05)
+    best = max(peers, key=lambda k: _rank(ctx, k)) if peers else None
+    if best is None:
+        return False
+    theirs = _sep(best)
+    if m["w"] is not None:
+        return (_near(mine, m["w"], 0.05) and _near(theirs, m["w2"], 0.05)
+                and _width(ctx, ctx.chosen) > _width(ctx, best))  # fmt: skip
+    if _width(ctx, ctx.chosen) != _width(ctx, best):
+        return False
+    if m["cap"] is not None and not (
+        float(m["cap"]) == 2.0 * ctx.record["d_min_m"] and mine >= float(m["cap"])
+    ):
+        return False
+    if m["weq"] is not None and not _near(mine, m["weq"], 0.05):
+        return False
+    t_mine, t_theirs = _meeting(ctx, ctx.chosen)[1], _meeting(ctx, best)[1]
+    if m["t"] is not None:
+        return (_near(t_mine, m["t"], 0.05) and _near(t_theirs, m["t2"], 0.05)
+                and t_mine > t_theirs)  # fmt: skip
+    if abs(t_mine - t_theirs) > 1e-9:
+        return False
+    if m["s"] is not None:
+        return _near(mine, m["s"], 0.05) and _near(theirs, m["s2"], 0.05) and mine > theirs
+    return mine == theirs and _why(ctx, m, best)
+
+
+def check_cornered_loser_widest(ctx: Ctx, m: re.Match) -> bool:
+    if not (check_meets(ctx, m) and ctx.record.get("cornered") and _widest(ctx)):
+        return False
+    runner, chosen = ctx.runner, ctx.chosen
+    if m["n1"] is not None:
+        return (_near(_sep(runner), m["n1"], 0.05) and _near(_sep(chosen), m["n2"], 0.05)
+                and _width(ctx, runner) < _width(ctx, chosen))  # fmt: skip
+    same_time = abs(_meeting(ctx, runner)[1] - _meeting(ctx, chosen)[1]) < 1e-9
+    return _width(ctx, runner) == _width(ctx, chosen) and same_time and _sep(runner) < _sep(chosen)
 
 
 def check_meets(ctx: Ctx, m: re.Match, c: dict | None = None) -> bool:
@@ -549,6 +633,13 @@ def check_cornered_loser(ctx: Ctx, m: re.Match) -> bool:
     if not (check_meets(ctx, m) and ctx.record.get("cornered")):
         return False
     mine, theirs = _meeting(ctx, ctx.chosen), _meeting(ctx, ctx.runner)
+    if _widest(ctx):  # the pass widths tie before the meeting or the rest can decide
+        if _width(ctx, ctx.runner) != _width(ctx, ctx.chosen) or m["how"] == "as soon and closer":
+            return False
+        if m["how"] == "sooner":
+            return theirs[1] < mine[1] - 1e-9
+        return (abs(theirs[1] - mine[1]) < 1e-9 and _sep(ctx.runner) == _sep(ctx.chosen)
+                and _why(ctx, m, ctx.runner))  # fmt: skip
     if m["how"] == "sooner":
         return theirs[1] < mine[1] - 1e-9
     if m["how"] == "as soon and closer":
@@ -851,6 +942,8 @@ CHECKS = {
     "verb": check_verb,
     "why not names the runner-up": check_runner,
     "cornered: chose by the stated rule": check_cornered,
+    "cornered: chose by the widest rule": check_cornered_widest,
+    "cornered: why not, widest": check_cornered_loser_widest,
     "why not: a collision": check_why_not_collision,
     "why not: both conflict": check_both_conflict,
     "cornered: why not": check_cornered_loser,
@@ -1074,6 +1167,14 @@ def fast_runs(tmp: Path) -> list[Run]:
             "mcts",
             tmp / "dense-collision",
         ),  # fmt: skip
+        # the same traffic, cornered decisions chosen by the widest pass (issue 31, a32)
+        fly_recorded(
+            scenario("manoeuvring", seed=6, intruders={"count": 40},
+                     avoidance={"max_steps": 60, "mcts": {"simulations": 100,
+                                "reach_horizon_s": 3.0, "cornered_rule": "widest"}}),
+            "mcts",
+            tmp / "dense-widest",
+        ),  # fmt: skip
         fly_recorded(
             scenario("crossing_swarm", avoidance={"max_steps": 60, **sims}),
             "mcts",
@@ -1098,7 +1199,8 @@ def fast_runs(tmp: Path) -> list[Run]:
 # The claim types the fast runs must exercise: an audit that never meets a claim proves nothing.
 MUST_SEE = (
     "verb", "why not names the runner-up", "cornered: chose by the stated rule",
-    "cornered: why not", "meets k at N m", "keeps N m from k", "Q lower", "Q tie says what decided",
+    "cornered: why not", "cornered: chose by the widest rule", "cornered: why not, widest",
+    "meets k at N m", "keeps N m from k", "Q lower", "Q tie says what decided",
     "Q comparison", "support", "tree: green node on the executed plan",
     "plan label: branch minimum and its intruder", "summary trust",
     "steered away from a predicted conflict", "alternative is another manoeuvre",

@@ -374,3 +374,90 @@ def test_a_record_holds_every_intruder_field_the_planner_read() -> None:
     decision = MCTSPlanner(PlannerConfig(seed=0)).plan(own, [seen], (1500.0, 1000.0, 120.0))
     record = json.loads(json.dumps(decision_record(0.0, own, [seen], decision)))
     assert [Intruder(**i) for i in record["state"]["intruders"]] == [seen]
+
+
+def _passing_child(action: int, q: float, when: float, miss: float, closest: float, **kw):
+    """A conflicting option meeting intruder 3 in ``when`` s at ``miss`` m that comes
+    ``closest`` m from the nearest intruder (another one) on its line."""
+    from dataclasses import replace
+
+    return replace(_meeting_child(action, 10, q, when, miss), predicted_min_separation_m=closest,
+                   **kw)  # fmt: skip
+
+
+def test_the_widest_cornered_rule_keeps_the_miss_not_the_latest_meeting():
+    """`avoidance.mcts.cornered_rule: widest` (issue 31, a32): every option conflicts; the one
+    passing the nearest intruder widest wins, whatever the intruder it meets first, and the
+    latest meeting decides only between lines passing 2 d_min or more (the a31 graze: the latest
+    meeting's rule took a line meeting intruder 39 at 78.8 m that passed intruder 35 at 28.6 m)."""
+    from dataclasses import replace
+
+    from uavxai.avoidance.lines import cornered_choice
+    from uavxai.avoidance.types import Decision
+
+    graze = _passing_child(0, 0.006, 2.0, 78.8, 28.6)  # the latest rule's pick: meets widest
+    wide = _passing_child(8, 0.006, 2.0, 49.7, 49.7)
+    kids = [graze, _passing_child(4, 0.006, 2.0, 43.9, 43.9), wide]
+    assert cornered_choice(kids).action == 0  # "latest": the met intruder's miss, 78.8 m
+    assert cornered_choice(kids, rule="widest", d_min_m=50.0).action == 8
+    d = Decision(0.0, 0.0, 8, kids, planner="mcts_sep", cornered=True, cornered_rule="widest")
+    assert ("every option meets an intruder, so it took the one that passes the traffic widest "
+            "(49.7 m from the nearest intruder against 43.9 m)") in d.explanation  # fmt: skip
+    assert d.counterfactual.endswith(
+        ", and comes nearer the traffic (43.9 m from the nearest intruder against 49.7 m)"
+    )
+    assert d.to_json()["cornered_rule"] == "widest"
+    assert "cornered_rule" not in replace(d, cornered_rule="latest").to_json()
+    # past twice d_min every line is as good: the latest meeting decides, and the words say so
+    far = _passing_child(0, 0.01, 2.0, 90.0, 180.0)
+    later = _passing_child(4, 0.01, 5.0, 90.0, 120.0)
+    assert cornered_choice([far, later], rule="widest", d_min_m=50.0).action == 4
+    d = Decision(0.0, 0.0, 4, [far, later], planner="mcts_sep", cornered=True,
+                 cornered_rule="widest")  # fmt: skip
+    assert ("passes the traffic as wide as another (100 m or more) and meets its intruder latest "
+            "(in 5.0 s, the next in 2.0 s)") in d.explanation  # fmt: skip
+    assert d.counterfactual.endswith(", sooner")
+    # as late too: the wider pass decides
+    same = _passing_child(0, 0.01, 5.0, 90.0, 180.0)
+    d = Decision(0.0, 0.0, 0, [same, later], planner="mcts_sep", cornered=True,
+                 cornered_rule="widest")  # fmt: skip
+    assert cornered_choice([same, later], rule="widest", d_min_m=50.0).action == 0
+    assert "meets its intruder as late, passing wider (180.0 m against 120.0 m)" in d.explanation
+    assert d.counterfactual.endswith(", as soon and nearer the traffic")
+
+
+def test_the_widest_cornered_rule_still_keeps_in_the_area_first():
+    from dataclasses import replace
+
+    from uavxai.avoidance.lines import cornered_choice
+    from uavxai.avoidance.types import Decision
+
+    inside = _passing_child(0, 0.01, 2.0, 60.0, 30.0)
+    out = replace(_passing_child(4, 0.01, 2.0, 60.0, 45.0), outcome="out_of_bounds")
+    trapped = replace(_passing_child(8, 0.01, 2.0, 60.0, 48.0), trapped=True)
+    kids = [inside, out, trapped]
+    assert cornered_choice(kids, rule="widest", d_min_m=50.0).action == 0
+    d = Decision(0.0, 0.0, 0, kids, planner="mcts_sep", cornered=True, cornered_rule="widest")
+    assert ("so it took the one that stays in the flight area (an option that passes wider or "
+            "meets later leaves it) and passes the traffic at 30.0 m from the nearest "
+            "intruder") in d.explanation  # fmt: skip
+    assert d.counterfactual.endswith("and can no longer turn away from the area's edge")
+
+
+def test_the_widest_rule_needs_the_collision_distance():
+    from uavxai.avoidance.lines import cornered_choice
+
+    kids = [_passing_child(0, 0.01, 2.0, 60.0, 30.0), _passing_child(4, 0.01, 2.0, 60.0, 45.0)]
+    with pytest.raises(ValueError, match="collision distance"):
+        cornered_choice(kids, rule="widest")
+
+
+def test_only_the_mcts_planners_take_the_cornered_rule():
+    """exhaustive (the reference) and mcts_daa (its judged figures) keep "latest"."""
+    from uavxai.avoidance.planners import make_planner
+    from uavxai.avoidance.types import PlannerConfig
+
+    cfg = PlannerConfig(cornered_rule="widest")
+    assert make_planner("mcts_sep", cfg).config.cornered_rule == "widest"
+    assert make_planner("exhaustive", cfg).config.cornered_rule == "latest"
+    assert make_planner("mcts_daa", cfg).inner.config.cornered_rule == "latest"

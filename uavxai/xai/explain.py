@@ -15,7 +15,14 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
-from uavxai.avoidance.lines import conflicts, cornered_key, leaves, search_key
+from uavxai.avoidance.lines import (
+    WIDE_ENOUGH,
+    conflicts,
+    cornered_key,
+    leaves,
+    pass_width,
+    search_key,
+)
 from uavxai.avoidance.types import ChildStats, Decision, Intruder, Ownship, set_narrator
 from uavxai.errors import UserError
 from uavxai.vocabulary import ACTIONS, HOLD
@@ -64,9 +71,7 @@ def counterfactual(decision: Decision) -> str:
     chosen = next((c for c in decision.children if c.action == decision.action), None)
     if chosen is None:
         return ""
-    runner = runner_up(
-        decision.children, chosen, cornered=decision.cornered, by_value=decision.by_value
-    )
+    runner = _runner(decision, chosen, cornered=decision.cornered)
     if runner is None:
         return ""
     head = f"why not {_short(runner.action)}{_flies_as(runner)}"
@@ -149,16 +154,27 @@ def runner_up(
     *,
     cornered: bool = False,
     by_value: bool = False,
+    rule: str = "latest",
+    d_min_m: float = math.nan,
 ) -> ChildStats | None:
     """The best option that flies another manoeuvre than ``chosen``: by the cornered rule
-    when the planner chose by it, else as the search ranks (:func:`search_key`; ``by_value``:
-    Q first, the best-value backup)."""
+    (``rule``, with the collision distance ``d_min_m`` it may weigh) when the planner chose by
+    it, else as the search ranks (:func:`search_key`; ``by_value``: Q first, the best-value
+    backup)."""
     others = [c for c in children if c.flies != chosen.flies]
     if not others:
         return None
     if cornered:
-        return max(others, key=lambda c: cornered_key(c, by_value))
+        return max(others, key=lambda c: cornered_key(c, by_value, rule, d_min_m))
     return max(others, key=lambda c: search_key(c, by_value))
+
+
+def _runner(decision: Decision, chosen: ChildStats, *, cornered: bool) -> ChildStats | None:
+    """:func:`runner_up` by the rules ``decision`` was made by."""
+    return runner_up(
+        decision.children, chosen, cornered=cornered, by_value=decision.by_value,
+        rule=decision.cornered_rule, d_min_m=decision.d_min_m,
+    )  # fmt: skip
 
 
 def is_avoidance(children: Sequence[ChildStats], action: int, d_min_m: float) -> bool:
@@ -224,12 +240,12 @@ def _cornered(chosen: ChildStats, decision: Decision) -> str:
     """Every option conflicts: which rule picked this one, against the best other."""
     head = "every option meets an intruder, so it took the one that "
     m = chosen.meets
+    if decision.cornered_rule == "widest":
+        return head + _widest(chosen, decision)
     later = [c for c in decision.children if leaves(c) and _later(c, m)]
     if not leaves(chosen) and later:
-        out = any(not c.trapped for c in later)
-        head += (f"stays in the flight area (an option that meets later "
-                 f"{'leaves it' if out else 'can no longer stay in it'}) and ")  # fmt: skip
-    runner = runner_up(decision.children, chosen, cornered=True, by_value=decision.by_value)
+        head += _stays_in(later)
+    runner = _runner(decision, chosen, cornered=True)
     if runner is None or m is None or runner.meets is None:
         return head + "meets its intruder latest"
     r = runner.meets
@@ -245,6 +261,49 @@ def _cornered(chosen: ChildStats, decision: Decision) -> str:
     return head + f"meets its intruder latest and passes it widest, tied: {tie}"
 
 
+def _stays_in(better: Sequence[ChildStats]) -> str:
+    """The words for keeping in the area against ``better`` options that leave it."""
+    out = any(not c.trapped for c in better)
+    return (f"stays in the flight area (an option that meets later "
+            f"{'leaves it' if out else 'can no longer stay in it'}) and ")  # fmt: skip
+
+
+def _widest(chosen: ChildStats, decision: Decision) -> str:
+    """The cornered rule "widest" in words: the widest pass (counted up to WIDE_ENOUGH d_min),
+    then the latest meeting, then the wider pass beyond that."""
+    d_min = decision.d_min_m
+    key = [cornered_key(c, decision.by_value, "widest", d_min)[1:] for c in decision.children]
+    mine = cornered_key(chosen, decision.by_value, "widest", d_min)[1:]
+    better_out = [c for c, k in zip(decision.children, key, strict=True) if leaves(c) and k > mine]
+    head = ""
+    if not leaves(chosen) and better_out:
+        out = any(not c.trapped for c in better_out)
+        head = (f"stays in the flight area (an option that passes wider or meets later "
+                f"{'leaves it' if out else 'can no longer stay in it'}) and ")  # fmt: skip
+    # against the best other that keeps in the area as this one does (the head says why a
+    # wider one that leaves lost)
+    stays = not leaves(chosen)
+    peers = [c for c in decision.children if c.flies != chosen.flies and stays != leaves(c)]
+    sep = chosen.predicted_min_separation_m
+    if not peers:
+        return head + f"passes the traffic at {sep:.1f} m from the nearest intruder"
+    runner = max(peers, key=lambda c: cornered_key(c, decision.by_value, "widest", d_min))
+    r_sep = runner.predicted_min_separation_m
+    if pass_width(chosen, d_min) != pass_width(runner, d_min):
+        return head + (f"passes the traffic widest ({sep:.1f} m from the nearest intruder "
+                       f"against {r_sep:.1f} m)")  # fmt: skip
+    wide = f"{WIDE_ENOUGH * d_min:.0f} m or more" if sep >= WIDE_ENOUGH * d_min else f"{sep:.1f} m"
+    head += f"passes the traffic as wide as another ({wide}) and "
+    m, r = chosen.meets, runner.meets
+    if m is not None and r is not None and round(m.time_s, 6) != round(r.time_s, 6):
+        t, t2 = m.time_s, r.time_s
+        return head + f"meets its intruder latest (in {t:.1f} s, the next in {t2:.1f} s)"
+    if sep != r_sep:
+        wider = f"{sep:.1f} m against {r_sep:.1f} m"
+        return head + f"meets its intruder as late, passing wider ({wider})"
+    return head + f"meets its intruder as late, tied: {_why_this_one(chosen, runner, decision)}"
+
+
 def _later(c: ChildStats, m) -> bool:
     """Does ``c``'s line meet its intruder later than meeting ``m`` (or not at all)?"""
     return c.meets is None or m is None or c.meets.time_s > m.time_s
@@ -258,9 +317,18 @@ def _cornered_loser(runner: ChildStats, chosen: ChildStats, decision: Decision) 
     m, r = chosen.meets, runner.meets
     if m is None or r is None:
         return f"it {_meets(runner)} too"
+    if decision.cornered_rule == "widest":
+        d_min, sep = decision.d_min_m, runner.predicted_min_separation_m
+        if pass_width(runner, d_min) != pass_width(chosen, d_min):
+            mine = chosen.predicted_min_separation_m
+            return (f"it {_meets(runner)}, and comes nearer the traffic ({sep:.1f} m from the "
+                    f"nearest intruder against {mine:.1f} m)")  # fmt: skip
     if round(m.time_s, 6) != round(r.time_s, 6):
         return f"it {_meets(runner)}, sooner"
-    if m.miss_m != r.miss_m:
+    if decision.cornered_rule == "widest":
+        if runner.predicted_min_separation_m != chosen.predicted_min_separation_m:
+            return f"it {_meets(runner)}, as soon and nearer the traffic"
+    elif m.miss_m != r.miss_m:
         return f"it {_meets(runner)}, as soon and closer"
     return f"it {_meets(runner)}, the same; {_why_this_one(chosen, runner, decision)}"
 
