@@ -288,17 +288,24 @@ CLAIMS = [
     ("why not names the runner-up", "c",
      rf"^why not (?P<opt>{OPT})(?: \(flies as (?P<as>{OPT}): (?P<lim>{LIMITS})\))?:"),
     ("cornered: chose by the stated rule", "s",
-     r"every option meets an intruder, so it took the one that meets its intruder latest"
+     r"every option meets an intruder, so it took the one that "
+     r"(?P<stay>stays in the flight area \(an option that "
+     r"(?:meets later|passes wider or meets later) "
+     r"(?P<out>leaves it|can no longer stay in it)\) and )?meets its intruder latest"
      r"(?: \(in (?P<t>\d+\.\d) s, the next in (?P<t2>\d+\.\d) s\)"
      r"| \(in (?P<t3>\d+\.\d) s, as another does\) and passes it widest "
      rf"\((?P<m>\d+\.\d) m against (?P<m2>\d+\.\d) m\)| and passes it widest, tied: {WHY})?"),
     ("cornered: chose by the widest rule", "s",
-     r"every option meets an intruder, so it took the one that passes the traffic "
-     r"(?:widest \((?P<w>\d+\.\d) m from the nearest intruder against (?P<w2>\d+\.\d) m\)"
+     r"every option meets an intruder, so it took the one that "
+     r"(?P<stay>stays in the flight area \(an option that "
+     r"(?:meets later|passes wider or meets later) "
+     r"(?P<out>leaves it|can no longer stay in it)\) and )?passes the traffic "
+     r"(?:widest(?P<among> of the options that stay in the area)? \((?P<w>\d+\.\d+) m from the "
+     r"nearest intruder against (?P<w2>\d+\.\d+) m\)"
      r"|at (?P<w0>\d+\.\d) m from the nearest intruder"
      r"|as wide as another \((?:(?P<cap>\d+) m or more|(?P<weq>\d+\.\d) m)\) and meets its "
      r"intruder (?:latest \(in (?P<t>\d+\.\d) s, the next in (?P<t2>\d+\.\d) s\)"
-     r"|as late, passing wider \((?P<s>\d+\.\d) m against (?P<s2>\d+\.\d) m\)"
+     r"|as late, passing wider \((?P<s>\d+\.\d+) m against (?P<s2>\d+\.\d+) m\)"
      rf"|as late, tied: {WHY}))"),
     ("orbit: where", "o", ORBIT_WHERE),
     ("orbit: intruder passes", "o", ORBIT_PASS),
@@ -309,8 +316,8 @@ CLAIMS = [
     ("every option ends", "s", rf"every option (?P<how>{ENDS})"),
     ("why not: both conflict", "c", rf"(?P<opt>it) {MEETS} too;"),
     ("cornered: why not, widest", "c",
-     rf"(?P<opt>it) {MEETS}, (?P<how>and comes nearer the traffic \((?P<n1>\d+\.\d) m from "
-     r"the nearest intruder against (?P<n2>\d+\.\d) m\)|as soon and nearer the traffic)"),
+     rf"(?P<opt>it) {MEETS}, (?P<how>and comes nearer the traffic \((?P<n1>\d+\.\d+) m from "
+     r"the nearest intruder against (?P<n2>\d+\.\d+) m\)|as soon and nearer the traffic)"),
     ("cornered: why not", "c",
      rf"(?P<opt>it) {MEETS}, (?P<how>sooner|as soon and closer|the same; {WHY})"),
     ("meets k at N m", "sc", rf"(?P<opt>{OPT}|it) {MEETS}"),
@@ -514,11 +521,15 @@ def _rank(ctx: Ctx, k: dict) -> tuple:
         line = ctx.lines[k["action"]["index"]] if ctx.lines else None
         meets = line.meets if line else k["meets"] and tuple(k["meets"].values())
         when, miss = (round(meets[1], 6), meets[2]) if meets else (-math.inf, -math.inf)
-        if _widest(ctx):  # the planner's own order: staying in, width, meeting, miss
-            sep = _sep(k)
-            return (not _leaves(k), _width(ctx, k), when, sep, k["visits"], k["q"],
-                    -k["action"]["index"])  # fmt: skip
-        return (when, miss, k["visits"], k["q"], -k["action"]["index"])
+        # the planner's own order (lines.cornered_key): staying in, then the rule's terms
+        # (widest: width, meeting, miss; latest: meeting, the met intruder's miss), then the
+        # search's (the best-value backup ranks by Q first)
+        search = (k["q"], k["visits"]) if ctx.cfg.backup == "best" else (k["visits"], k["q"])
+        if _widest(ctx):
+            terms: tuple = (_width(ctx, k), when, _sep(ctx, k))
+        else:
+            terms = (when, miss)
+        return (not _leaves(k), *terms, *search, -k["action"]["index"])
     return (k["visits"], k["q"], -k["action"]["index"])
 
 
@@ -527,9 +538,16 @@ def _widest(ctx: Ctx) -> bool:
     return ctx.record.get("cornered_rule") == "widest"
 
 
-def _sep(k: dict) -> float:
+def _sep(ctx: Ctx, k: dict) -> float:
+    """The option's predicted closest approach to any intruder: the audit's own re-flown line
+    when there is a tree (the record must hold the same number, or the claim is false: nan
+    then fails every comparison), else the record's."""
     v = k["predicted_min_separation_m"]
-    return math.inf if v is None else float(v)
+    recorded = math.inf if v is None else float(v)
+    if ctx.lines is None:
+        return recorded
+    own = ctx.lines[k["action"]["index"]].min_sep
+    return own if math.isclose(recorded, own, abs_tol=0.01) else math.nan
 
 
 def _leaves(k: dict) -> bool:
@@ -539,7 +557,30 @@ def _leaves(k: dict) -> bool:
 def _width(ctx: Ctx, k: dict) -> float:
     """The widest rule's pass width: the closest approach up to twice d_min (the audit's own
     reading of the rule, docs/scenario.md)."""
-    return min(_sep(k), 2.0 * ctx.record["d_min_m"])
+    return min(_sep(ctx, k), 2.0 * ctx.record["d_min_m"])
+
+
+def _stay_head_ok(ctx: Ctx, m: re.Match) -> bool:
+    """The "stays in the flight area (an option that ... leaves it) and" head is said exactly
+    when the chosen line stays in and an option that leaves is better by the rule's own terms
+    (latest: meets later or not at all; widest: wider, then later, then wider uncapped)."""
+    kids, chosen = list(ctx.kids.values()), ctx.chosen
+    if _widest(ctx):
+        def terms(k):  # the rule's own terms: width, meeting, miss
+            return _rank(ctx, k)[1:4]
+        better = [k for k in kids if _leaves(k) and terms(k) > terms(chosen)]
+    else:
+        mine = _meeting(ctx, chosen)
+        better = [k for k in kids if _leaves(k) and (
+            _meeting(ctx, k) is None or mine is None or _meeting(ctx, k)[1] > mine[1])]
+    said = m["stay"] is not None
+    if said != (not _leaves(chosen) and bool(better)):
+        return False
+    if not said:
+        return True
+    how = "passes wider or meets later" if _widest(ctx) else "meets later"
+    out = any(not k.get("trapped") for k in better)
+    return how in m["stay"] and m["out"] == ("leaves it" if out else "can no longer stay in it")
 
 
 def check_cornered_widest(ctx: Ctx, m: re.Match) -> bool:
@@ -548,16 +589,18 @@ def check_cornered_widest(ctx: Ctx, m: re.Match) -> bool:
         return False
     if max(kids, key=lambda k: _rank(ctx, k)) is not ctx.chosen:  # the rule really chose it
         return False
+    if not _stay_head_ok(ctx, m) or (m["among"] is not None) != (m["stay"] is not None):
+        return False
     c = ctx.chosen["action"]["index"]
     peers = [k for k in kids if ctx.flies[k["action"]["index"]] != ctx.flies[c]
              and _leaves(k) == _leaves(ctx.chosen)]  # fmt: skip
-    mine = _sep(ctx.chosen)
+    mine = _sep(ctx, ctx.chosen)
     if m["w0"] is not None:
         return not peers and _near(mine, m["w0"], 0.05)
     best = max(peers, key=lambda k: _rank(ctx, k)) if peers else None
     if best is None:
         return False
-    theirs = _sep(best)
+    theirs = _sep(ctx, best)
     if m["w"] is not None:
         return (_near(mine, m["w"], 0.05) and _near(theirs, m["w2"], 0.05)
                 and _width(ctx, ctx.chosen) > _width(ctx, best))  # fmt: skip
@@ -585,10 +628,11 @@ def check_cornered_loser_widest(ctx: Ctx, m: re.Match) -> bool:
         return False
     runner, chosen = ctx.runner, ctx.chosen
     if m["n1"] is not None:
-        return (_near(_sep(runner), m["n1"], 0.05) and _near(_sep(chosen), m["n2"], 0.05)
+        return (_near(_sep(ctx, runner), m["n1"], 0.05) and _near(_sep(ctx, chosen), m["n2"], 0.05)
                 and _width(ctx, runner) < _width(ctx, chosen))  # fmt: skip
     same_time = abs(_meeting(ctx, runner)[1] - _meeting(ctx, chosen)[1]) < 1e-9
-    return _width(ctx, runner) == _width(ctx, chosen) and same_time and _sep(runner) < _sep(chosen)
+    nearer = _sep(ctx, runner) < _sep(ctx, chosen)
+    return _width(ctx, runner) == _width(ctx, chosen) and same_time and nearer
 
 
 def check_meets(ctx: Ctx, m: re.Match, c: dict | None = None) -> bool:
@@ -638,7 +682,7 @@ def check_cornered_loser(ctx: Ctx, m: re.Match) -> bool:
             return False
         if m["how"] == "sooner":
             return theirs[1] < mine[1] - 1e-9
-        return (abs(theirs[1] - mine[1]) < 1e-9 and _sep(ctx.runner) == _sep(ctx.chosen)
+        return (abs(theirs[1] - mine[1]) < 1e-9 and _sep(ctx, ctx.runner) == _sep(ctx, ctx.chosen)
                 and _why(ctx, m, ctx.runner))  # fmt: skip
     if m["how"] == "sooner":
         return theirs[1] < mine[1] - 1e-9
@@ -656,6 +700,8 @@ def check_cornered(ctx: Ctx, m: re.Match) -> bool:
     if not (ctx.record.get("cornered") and all(ctx.conflicts(k) for k in kids)):
         return False
     if max(kids, key=lambda k: _rank(ctx, k)) is not ctx.chosen:  # the rule really chose it
+        return False
+    if not _stay_head_ok(ctx, m):
         return False
     c = ctx.chosen["action"]["index"]
     others = [k for k in kids if ctx.flies[k["action"]["index"]] != ctx.flies[c]]

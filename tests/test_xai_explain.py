@@ -461,3 +461,33 @@ def test_only_the_mcts_planners_take_the_cornered_rule():
     assert make_planner("mcts_sep", cfg).config.cornered_rule == "widest"
     assert make_planner("exhaustive", cfg).config.cornered_rule == "latest"
     assert make_planner("mcts_daa", cfg).inner.config.cornered_rule == "latest"
+
+
+def test_the_widest_rule_words_for_a_tie_below_the_cap_and_a_full_tie():
+    """The two remaining word forms of the widest rule: widths equal below 2 d_min (the latest
+    meeting decides), and equal in everything the rule weighs (the search decides, and says so).
+    Widths that differ by under 0.1 m are printed to the centimetre."""
+    from uavxai.avoidance.types import Decision
+
+    a, b = _passing_child(0, 0.01001, 5.0, 60.0, 70.0), _passing_child(4, 0.01, 2.0, 60.0, 70.0)
+    d = Decision(0.0, 0.0, 0, [a, b], planner="mcts", cornered=True, cornered_rule="widest")
+    assert ("passes the traffic as wide as another (70.0 m) and meets its intruder latest "
+            "(in 5.0 s, the next in 2.0 s)") in d.explanation  # fmt: skip
+    c = _passing_child(4, 0.01, 5.0, 60.0, 70.0)
+    d = Decision(0.0, 0.0, 0, [a, c], planner="mcts", cornered=True, cornered_rule="widest")
+    why = "as many simulations (10 each): a higher Q beyond 3 decimals"
+    assert f"meets its intruder as late, tied: {why}" in d.explanation
+    assert d.counterfactual.endswith(f", the same; {why}")
+    near, far = _passing_child(0, 0.01, 2.0, 60.0, 49.74), _passing_child(4, 0.01, 2.0, 60.0, 49.71)
+    d = Decision(0.0, 0.0, 0, [near, far], planner="mcts", cornered=True, cornered_rule="widest")
+    assert "(49.74 m from the nearest intruder against 49.71 m)" in d.explanation
+
+
+def test_a_cornered_rule_outside_the_list_is_refused_at_load(tmp_path, capsys):
+    from uavxai.cli import main
+
+    path = tmp_path / "s.yaml"
+    path.write_text("name: x\navoidance:\n  mcts:\n    cornered_rule: nearest\n")
+    assert main(["validate", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "cornered_rule" in err and "widest" in err

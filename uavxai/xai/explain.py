@@ -261,37 +261,46 @@ def _cornered(chosen: ChildStats, decision: Decision) -> str:
     return head + f"meets its intruder latest and passes it widest, tied: {tie}"
 
 
-def _stays_in(better: Sequence[ChildStats]) -> str:
-    """The words for keeping in the area against ``better`` options that leave it."""
+def _stays_in(better: Sequence[ChildStats], how: str = "meets later") -> str:
+    """The words for keeping in the area against ``better`` options that leave it (``how``:
+    what makes them better by the rule)."""
     out = any(not c.trapped for c in better)
-    return (f"stays in the flight area (an option that meets later "
+    return (f"stays in the flight area (an option that {how} "
             f"{'leaves it' if out else 'can no longer stay in it'}) and ")  # fmt: skip
+
+
+def _metres(a: float, b: float) -> tuple[str, str]:
+    """Two separations as words that tell them apart: one decimal, or two where one would
+    print them the same (a rule decided by under 0.1 m must not read "49.7 m against 49.7 m")."""
+    if f"{a:.1f}" != f"{b:.1f}":
+        return f"{a:.1f} m", f"{b:.1f} m"
+    return f"{a:.2f} m", f"{b:.2f} m"
 
 
 def _widest(chosen: ChildStats, decision: Decision) -> str:
     """The cornered rule "widest" in words: the widest pass (counted up to WIDE_ENOUGH d_min),
     then the latest meeting, then the wider pass beyond that."""
-    d_min = decision.d_min_m
-    key = [cornered_key(c, decision.by_value, "widest", d_min)[1:] for c in decision.children]
-    mine = cornered_key(chosen, decision.by_value, "widest", d_min)[1:]
-    better_out = [c for c, k in zip(decision.children, key, strict=True) if leaves(c) and k > mine]
-    head = ""
-    if not leaves(chosen) and better_out:
-        out = any(not c.trapped for c in better_out)
-        head = (f"stays in the flight area (an option that passes wider or meets later "
-                f"{'leaves it' if out else 'can no longer stay in it'}) and ")  # fmt: skip
+    d_min, by_value = decision.d_min_m, decision.by_value
+
+    def rule(c: ChildStats) -> tuple:  # the rule's own terms: width, meeting, miss
+        return cornered_key(c, by_value, "widest", d_min)[1:4]
+
+    better_out = [c for c in decision.children if leaves(c) and rule(c) > rule(chosen)]
+    stays = not leaves(chosen)
+    head = _stays_in(better_out, "passes wider or meets later") if stays and better_out else ""
+    among = " of the options that stay in the area" if head else ""
     # against the best other that keeps in the area as this one does (the head says why a
     # wider one that leaves lost)
-    stays = not leaves(chosen)
     peers = [c for c in decision.children if c.flies != chosen.flies and stays != leaves(c)]
     sep = chosen.predicted_min_separation_m
     if not peers:
         return head + f"passes the traffic at {sep:.1f} m from the nearest intruder"
-    runner = max(peers, key=lambda c: cornered_key(c, decision.by_value, "widest", d_min))
+    runner = max(peers, key=lambda c: cornered_key(c, by_value, "widest", d_min))
     r_sep = runner.predicted_min_separation_m
     if pass_width(chosen, d_min) != pass_width(runner, d_min):
-        return head + (f"passes the traffic widest ({sep:.1f} m from the nearest intruder "
-                       f"against {r_sep:.1f} m)")  # fmt: skip
+        mine, theirs = _metres(sep, r_sep)
+        return head + (f"passes the traffic widest{among} ({mine} from the nearest intruder "
+                       f"against {theirs})")  # fmt: skip
     wide = f"{WIDE_ENOUGH * d_min:.0f} m or more" if sep >= WIDE_ENOUGH * d_min else f"{sep:.1f} m"
     head += f"passes the traffic as wide as another ({wide}) and "
     m, r = chosen.meets, runner.meets
@@ -299,8 +308,8 @@ def _widest(chosen: ChildStats, decision: Decision) -> str:
         t, t2 = m.time_s, r.time_s
         return head + f"meets its intruder latest (in {t:.1f} s, the next in {t2:.1f} s)"
     if sep != r_sep:
-        wider = f"{sep:.1f} m against {r_sep:.1f} m"
-        return head + f"meets its intruder as late, passing wider ({wider})"
+        mine, theirs = _metres(sep, r_sep)
+        return head + f"meets its intruder as late, passing wider ({mine} against {theirs})"
     return head + f"meets its intruder as late, tied: {_why_this_one(chosen, runner, decision)}"
 
 
@@ -320,9 +329,9 @@ def _cornered_loser(runner: ChildStats, chosen: ChildStats, decision: Decision) 
     if decision.cornered_rule == "widest":
         d_min, sep = decision.d_min_m, runner.predicted_min_separation_m
         if pass_width(runner, d_min) != pass_width(chosen, d_min):
-            mine = chosen.predicted_min_separation_m
-            return (f"it {_meets(runner)}, and comes nearer the traffic ({sep:.1f} m from the "
-                    f"nearest intruder against {mine:.1f} m)")  # fmt: skip
+            theirs, mine = _metres(sep, chosen.predicted_min_separation_m)
+            return (f"it {_meets(runner)}, and comes nearer the traffic ({theirs} from the "
+                    f"nearest intruder against {mine})")  # fmt: skip
     if round(m.time_s, 6) != round(r.time_s, 6):
         return f"it {_meets(runner)}, sooner"
     if decision.cornered_rule == "widest":
