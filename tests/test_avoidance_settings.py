@@ -46,6 +46,7 @@ NON_DEFAULT: dict[str, Any] = {
     "avoidance.mcts.goal_height_scale": 8.0,
     "avoidance.mcts.pinned_slack_s": 3.0,
     "avoidance.mcts.goal_margin_m": 10.0,
+    "avoidance.mcts.cornered_rule": "widest",
     "avoidance.nmac.horizontal_m": 100.0,
     "avoidance.nmac.vertical_m": 20.0,
     "avoidance.well_clear.horizontal_m": 500.0,
