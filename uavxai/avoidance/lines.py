@@ -366,16 +366,25 @@ def cornered_key(
     then the latest meeting, then the widest approach; then the search's preference
     (:func:`search_key`)."""
     m = c.meets
-    when = -math.inf if m is None else round(m.time_s, 6)
     if rule == "widest":
-        sep = c.predicted_min_separation_m
-        return (not leaves(c), pass_width(c, d_min_m), when, sep, *search_key(c, by_value))
+        return (not leaves(c), *widest_terms(c, d_min_m), *search_key(c, by_value))
     return (
         not leaves(c),
-        when,
+        _meeting_time(c),
         -math.inf if m is None else m.miss_m,
         *search_key(c, by_value),
     )
+
+
+def _meeting_time(c: ChildStats) -> float:
+    """When the option's line first meets an intruder, to the microsecond (-inf: never)."""
+    return -math.inf if c.meets is None else round(c.meets.time_s, 6)
+
+
+def widest_terms(c: ChildStats, d_min_m: float) -> tuple[float, float, float]:
+    """The rule "widest"'s own terms for an option, best last: its pass width
+    (:func:`pass_width`), its meeting time, its uncapped closest approach."""
+    return (pass_width(c, d_min_m), _meeting_time(c), c.predicted_min_separation_m)
 
 
 # The cornered rule "widest" ranks lines by their closest approach up to this many times the

@@ -22,6 +22,7 @@ from uavxai.avoidance.lines import (
     leaves,
     pass_width,
     search_key,
+    widest_terms,
 )
 from uavxai.avoidance.types import ChildStats, Decision, Intruder, Ownship, set_narrator
 from uavxai.errors import UserError
@@ -281,11 +282,9 @@ def _widest(chosen: ChildStats, decision: Decision) -> str:
     """The cornered rule "widest" in words: the widest pass (counted up to WIDE_ENOUGH d_min),
     then the latest meeting, then the wider pass beyond that."""
     d_min, by_value = decision.d_min_m, decision.by_value
-
-    def rule(c: ChildStats) -> tuple:  # the rule's own terms: width, meeting, miss
-        return cornered_key(c, by_value, "widest", d_min)[1:4]
-
-    better_out = [c for c in decision.children if leaves(c) and rule(c) > rule(chosen)]
+    mine_terms = widest_terms(chosen, d_min)
+    better_out = [c for c in decision.children
+                  if leaves(c) and widest_terms(c, d_min) > mine_terms]  # fmt: skip
     stays = not leaves(chosen)
     head = _stays_in(better_out, "passes wider or meets later") if stays and better_out else ""
     among = " of the options that stay in the area" if head else ""
